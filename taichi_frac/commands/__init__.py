@@ -1,0 +1,1 @@
+"""One module per ``taichi-frac`` subcommand (see taichi_frac/cli.py)."""

@@ -1,0 +1,1 @@
+"""Geometry in numpy only: meshes in, checks, primitives, tetrahedralization, topology, mass."""

@@ -1,0 +1,43 @@
+"""Exact mass properties of tetrahedral solids (not of the particles).
+
+For a tet with vertices v_i (relative to an origin) and volume V, the second moment
+C = int x x^T dV = V/20 (sum_i v_i v_i^T + s s^T), s = sum_i v_i (Tonon, "Explicit exact
+formulas for the 3-D tetrahedron inertia tensor", J. Math. Stat. 1(1), 2004). The inertia
+tensor is I = rho (tr(C) Id - C), shifted to the centre of mass by the parallel-axis rule.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .topology import signed_volumes
+
+
+@dataclass(frozen=True)
+class MassProperties:
+    """mass [kg]; center_of_mass (3,) [m]; inertia (3,3) [kg m^2] about the centre of
+    mass in the mesh's axes; volume [m^3]."""
+
+    mass: float
+    center_of_mass: np.ndarray
+    inertia: np.ndarray
+    volume: float
+
+
+def tet_mass_properties(vertices: np.ndarray, tets: np.ndarray, density) -> MassProperties:
+    """Mass properties of a tet set. ``density`` is a scalar or per-tet (T,) [kg/m^3]."""
+    p = np.asarray(vertices, dtype=np.float64)[tets]  # (T,4,3)
+    vol = signed_volumes(np.asarray(vertices, dtype=np.float64), tets)
+    rho = np.broadcast_to(np.asarray(density, dtype=np.float64), vol.shape)
+    m = rho * vol
+    mass = float(m.sum())
+    centroids = p.mean(axis=1)
+    com = (m[:, None] * centroids).sum(axis=0) / mass
+    q = p - com  # about the centre of mass: no large parallel-axis cancellation
+    s = q.sum(axis=1)
+    cov = (np.einsum("tij,tik->tjk", q, q) + np.einsum("ti,tj->tij", s, s)) * (m / 20.0)[:, None, None]
+    c = cov.sum(axis=0)
+    inertia = np.trace(c) * np.eye(3) - c
+    return MassProperties(mass=mass, center_of_mass=com, inertia=0.5 * (inertia + inertia.T), volume=float(vol.sum()))

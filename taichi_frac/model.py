@@ -1,0 +1,258 @@
+"""The static two-scale particle model of one rigid solid (BRIEF.md steps 1-3).
+
+A :class:`BodyModel` is built once (for a scene object, or for a fragment when a body
+breaks) and is read-only afterwards. Everything is in the **body frame**: origin at the
+body's centre of mass, axes parallel to the source mesh's axes, metres.
+
+Layers:
+- physics particles: one per tet, at its centroid (stress analysis, fracture);
+- surface particles: the physics particles whose tet has a boundary face;
+- boundary particles: about ``boundary_group_size`` adjacent surface particles merged into
+  one coarser sphere (collision detection and response).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .geometry.mass import tet_mass_properties
+from .geometry.topology import (
+    bonds_from_neighbors,
+    boundary_faces,
+    compact_vertices,
+    orient_tets,
+    signed_volumes,
+    tet_neighbors,
+)
+
+
+@dataclass(frozen=True, eq=False)
+class BodyModel:
+    """Static data of one rigid body. Shapes: T tets, V vertices, B bonds, F boundary faces,
+    S surface particles, N boundary particles. Float arrays are float64, index arrays int32.
+
+    Attributes:
+        vertices: (V,3) [m] tet-mesh vertices, body frame.
+        tets: (T,4) vertex indices, positively oriented.
+        tet_volume: (T,) [m^3].
+        tet_neighbor: (T,4) tet across face k (opposite vertex k) or -1 on the boundary.
+        bonds: (B,2) face-sharing tet pairs i < j: the links a crack cuts.
+        particle_position: (T,3) [m] physics particles (tet centroids).
+        particle_mass: (T,) [kg] = density x tet volume.
+        particle_radius: (T,) [m] = (3V / 4 pi)^(1/3).
+        is_surface: (T,) bool, tet has a boundary face.
+        surface_particles: (S,) tet indices of the surface particles.
+        surface_faces: (F,3) boundary triangles (vertex indices, outward winding).
+        surface_face_tet: (F,) tet owning each boundary triangle.
+        surface_face_local: (F,) int8 local face index k within its tet.
+        boundary_position: (N,3) [m] centroid of each boundary particle's members.
+        boundary_mass: (N,) [kg] sum of its members' masses.
+        boundary_radius: (N,) [m] smallest radius about boundary_position enclosing every
+            member's sphere.
+        boundary_member_offsets: (N+1,) CSR offsets into boundary_members.
+        boundary_members: (M,) tet indices (surface particles) of each boundary particle.
+        dropped_surface_particles: (D,) surface particles in no boundary particle
+            (leftovers when keep_leftovers is False).
+        density: [kg/m^3].
+        mass: [kg], exact from the tets.
+        inertia: (3,3) [kg m^2] about the centre of mass, body axes, exact from the tets.
+        com_in_source: (3,) [m] where the body-frame origin lies in the source frame (the
+            input mesh's frame for a scene object, the parent's body frame for a fragment).
+        source_tet: (T,) index of each tet in the root solid's tet mesh (identity for a
+            root body): lets a fragment tell crack faces from original surface.
+        boundary_group_size: the n used to build the boundary layer.
+    """
+
+    vertices: np.ndarray
+    tets: np.ndarray
+    tet_volume: np.ndarray
+    tet_neighbor: np.ndarray
+    bonds: np.ndarray
+    particle_position: np.ndarray
+    particle_mass: np.ndarray
+    particle_radius: np.ndarray
+    is_surface: np.ndarray
+    surface_particles: np.ndarray
+    surface_faces: np.ndarray
+    surface_face_tet: np.ndarray
+    surface_face_local: np.ndarray
+    boundary_position: np.ndarray
+    boundary_mass: np.ndarray
+    boundary_radius: np.ndarray
+    boundary_member_offsets: np.ndarray
+    boundary_members: np.ndarray
+    dropped_surface_particles: np.ndarray
+    density: float
+    mass: float
+    inertia: np.ndarray
+    com_in_source: np.ndarray
+    source_tet: np.ndarray
+    boundary_group_size: int
+
+    @property
+    def tet_count(self) -> int:
+        return len(self.tets)
+
+    @property
+    def surface_particle_count(self) -> int:
+        return len(self.surface_particles)
+
+    @property
+    def boundary_particle_count(self) -> int:
+        return len(self.boundary_mass)
+
+    @property
+    def volume(self) -> float:
+        return float(self.tet_volume.sum())
+
+
+def group_surface_particles(
+    positions: np.ndarray,
+    surface: np.ndarray,
+    face_tet: np.ndarray,
+    faces: np.ndarray,
+    group_size: int,
+    keep_leftovers: bool = True,
+):
+    """Merge adjacent surface particles into groups of about ``group_size``.
+
+    Two surface particles are adjacent when their tets share a boundary vertex. Seeds are
+    taken in breadth-first order over that graph (so groups tile the surface without gaps);
+    each seed takes its nearest still-free neighbours, widening to neighbours of the group
+    when the seed's own ring runs out, until the group has ``group_size`` members. A group
+    that ends with one member is a leftover: kept as its own boundary particle or dropped.
+
+    Returns (groups: list of int arrays of tet indices, dropped: int array).
+    """
+    if group_size == 1:
+        return [np.array([s]) for s in surface], np.zeros(0, dtype=np.int32)
+    s_count = len(surface)
+    local = np.full(int(surface.max()) + 1 if s_count else 1, -1, dtype=np.int64)
+    local[surface] = np.arange(s_count)
+    # Incidence surface particle x boundary vertex, then particle adjacency.
+    rows = np.repeat(local[face_tet], 3)
+    cols = faces.reshape(-1)
+    inc = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(s_count, int(cols.max()) + 1))
+    adj = (inc @ inc.T).tocsr()
+    indptr, indices = adj.indptr, adj.indices
+    pos = positions[surface]
+    free = np.ones(s_count, dtype=bool)
+    groups, dropped = [], []
+    visited = np.zeros(s_count, dtype=bool)
+    for start in range(s_count):
+        if visited[start]:
+            continue
+        queue = [start]
+        visited[start] = True
+        head = 0
+        while head < len(queue):
+            seed = queue[head]
+            head += 1
+            nbrs = indices[indptr[seed]:indptr[seed + 1]]
+            fresh = nbrs[~visited[nbrs]]
+            visited[fresh] = True
+            queue.extend(fresh.tolist())
+            if not free[seed]:
+                continue
+            members = [seed]
+            free[seed] = False
+            frontier = nbrs
+            for _ in range(3):  # widen at most twice beyond the seed's own ring
+                cand = np.unique(frontier[free[frontier]])
+                if len(cand):
+                    d = np.linalg.norm(pos[cand] - pos[seed], axis=1)
+                    take = cand[np.argsort(d, kind="stable")[: group_size - len(members)]]
+                    free[take] = False
+                    members.extend(take.tolist())
+                if len(members) >= group_size:
+                    break
+                frontier = np.concatenate([indices[indptr[m]:indptr[m + 1]] for m in members])
+            if len(members) == 1 and not keep_leftovers:
+                dropped.append(seed)
+            else:
+                groups.append(surface[np.array(members)])
+    return groups, surface[np.array(dropped, dtype=np.int64)].astype(np.int32)
+
+
+def build_body_model(
+    vertices: np.ndarray,
+    tets: np.ndarray,
+    density: float,
+    *,
+    boundary_group_size: int = 4,
+    keep_leftovers: bool = True,
+    source_tet: np.ndarray | None = None,
+) -> BodyModel:
+    """Build the two-scale particle model of a tet set given in its source frame.
+
+    ``vertices`` (V,3) [m] and ``tets`` (T,4) may contain unused vertices and negatively
+    oriented tets; both are cleaned. The result is recentred on the exact centre of mass.
+    ``source_tet`` maps each tet to the root solid's tet mesh (for fragments).
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    tets = np.asarray(tets, dtype=np.int64)
+    if tets.ndim != 2 or tets.shape[1] != 4 or len(tets) == 0:
+        raise ValueError(f"need at least one tet as a (T, 4) index array, got shape {tets.shape}")
+    vertices, tets, _ = compact_vertices(vertices, tets)
+    tets = orient_tets(vertices, tets)
+    vol = signed_volumes(vertices, tets)
+    if np.any(vol <= 0):
+        raise ValueError(f"{int(np.sum(vol <= 0))} degenerate (zero-volume) tets")
+    props = tet_mass_properties(vertices, tets, density)
+    com = props.center_of_mass
+    vertices = vertices - com
+    neighbor = tet_neighbors(tets)
+    faces, face_tet, face_local = boundary_faces(tets, neighbor)
+    centroids = vertices[tets].mean(axis=1)
+    mass = density * vol
+    radius = np.cbrt(3.0 * vol / (4.0 * np.pi))
+    is_surface = np.zeros(len(tets), dtype=bool)
+    is_surface[face_tet] = True
+    surface = np.nonzero(is_surface)[0].astype(np.int32)
+
+    groups, dropped = group_surface_particles(
+        centroids, surface, face_tet, faces, boundary_group_size, keep_leftovers
+    )
+    sizes = np.array([len(g) for g in groups], dtype=np.int64)
+    offsets = np.zeros(len(groups) + 1, dtype=np.int64)
+    np.cumsum(sizes, out=offsets[1:])
+    members = np.concatenate(groups).astype(np.int32) if groups else np.zeros(0, np.int32)
+    owner = np.repeat(np.arange(len(groups)), sizes)
+    b_mass = np.bincount(owner, weights=mass[members], minlength=len(groups))
+    b_pos = np.stack(
+        [np.bincount(owner, weights=centroids[members, k], minlength=len(groups)) for k in range(3)], axis=1
+    ) / np.maximum(sizes, 1)[:, None]
+    reach = np.linalg.norm(centroids[members] - b_pos[owner], axis=1) + radius[members]
+    b_radius = np.zeros(len(groups))
+    np.maximum.at(b_radius, owner, reach)
+
+    return BodyModel(
+        vertices=vertices,
+        tets=tets.astype(np.int32),
+        tet_volume=vol,
+        tet_neighbor=neighbor,
+        bonds=bonds_from_neighbors(neighbor),
+        particle_position=centroids,
+        particle_mass=mass,
+        particle_radius=radius,
+        is_surface=is_surface,
+        surface_particles=surface,
+        surface_faces=faces,
+        surface_face_tet=face_tet,
+        surface_face_local=face_local,
+        boundary_position=b_pos,
+        boundary_mass=b_mass,
+        boundary_radius=b_radius,
+        boundary_member_offsets=offsets.astype(np.int32),
+        boundary_members=members,
+        dropped_surface_particles=dropped.astype(np.int32),
+        density=float(density),
+        mass=props.mass,
+        inertia=props.inertia,
+        com_in_source=com,
+        source_tet=(np.arange(len(tets)) if source_tet is None else np.asarray(source_tet)).astype(np.int32),
+        boundary_group_size=int(boundary_group_size),
+    )

@@ -1,0 +1,133 @@
+"""Options as plain data with SI units.
+
+Every option class is a frozen, keyword-only dataclass validated on construction: a bad
+value raises :class:`OptionError` naming the field, the value and the allowed range. Scene
+files (TOML) map onto these classes one to one (see ``taichi_frac.scenes``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+
+class OptionError(ValueError):
+    """A value out of range or of the wrong type. The message names the key and the range."""
+
+
+def check_range(owner: str, name: str, value, low=None, high=None, *, low_open=False, high_open=False):
+    """Raise OptionError unless ``low <= value <= high`` (open ends where asked)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise OptionError(f"{owner}.{name} must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise OptionError(f"{owner}.{name} must be finite, got {value!r}")
+    bad_low = low is not None and (value <= low if low_open else value < low)
+    bad_high = high is not None and (value >= high if high_open else value > high)
+    if bad_low or bad_high:
+        lo = "-inf" if low is None else f"{low:g}"
+        hi = "inf" if high is None else f"{high:g}"
+        rng = ("(" if low_open else "[") + f"{lo}, {hi}" + (")" if high_open else "]")
+        raise OptionError(f"{owner}.{name} = {value!r} is out of range: allowed {rng}")
+    return value
+
+
+@dataclass(frozen=True, kw_only=True)
+class Material:
+    """An isotropic, linear-elastic brittle material.
+
+    Attributes:
+        name: label shown in reports.
+        density: mass density [kg/m^3].
+        young_modulus: Young's modulus E [Pa].
+        poisson_ratio: Poisson's ratio nu [-], in [0, 0.5).
+        tensile_strength: Rankine threshold on the largest principal stress [Pa].
+    """
+
+    name: str = "custom"
+    density: float = 2400.0
+    young_modulus: float = 70.0e9
+    poisson_ratio: float = 0.2
+    tensile_strength: float = 35.0e6
+
+    def __post_init__(self):
+        check_range("material", "density", self.density, 0.0, None, low_open=True)
+        check_range("material", "young_modulus", self.young_modulus, 0.0, None, low_open=True)
+        check_range("material", "poisson_ratio", self.poisson_ratio, 0.0, 0.5, high_open=True)
+        check_range("material", "tensile_strength", self.tensile_strength, 0.0, None, low_open=True)
+
+    @property
+    def shear_modulus(self) -> float:
+        """G = E / (2 (1 + nu)) [Pa]."""
+        return self.young_modulus / (2.0 * (1.0 + self.poisson_ratio))
+
+    @property
+    def lame_lambda(self) -> float:
+        """lambda = E nu / ((1 + nu)(1 - 2 nu)) [Pa]."""
+        nu = self.poisson_ratio
+        return self.young_modulus * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+
+
+# Presets. Values are typical room-temperature figures; tensile strength of brittle solids
+# scatters widely with flaws, so these are starting points an artist is expected to tune.
+MATERIAL_PRESETS: dict[str, Material] = {
+    # Annealed soda-lime glass: E 72 GPa, nu 0.23, 2500 kg/m^3 (Shelby, "Introduction to
+    # Glass Science and Technology", 2nd ed., RSC 2005, ch. 8); practical tensile strength
+    # of annealed float glass about 40-50 MPa (EN 572-1 gives 45 MPa characteristic bending).
+    "soda_lime_glass": Material(
+        name="soda_lime_glass", density=2500.0, young_modulus=72.0e9, poisson_ratio=0.23,
+        tensile_strength=45.0e6,
+    ),
+    # Porcelain (triaxial whiteware): E 60-100 GPa, nu about 0.2, 2300-2500 kg/m^3, flexural
+    # strength 40-100 MPa, tensile lower (Carty & Senapati, J. Am. Ceram. Soc. 81(1), 1998).
+    "porcelain": Material(
+        name="porcelain", density=2400.0, young_modulus=70.0e9, poisson_ratio=0.2,
+        tensile_strength=35.0e6,
+    ),
+    # Normal-strength concrete C30/37: Ecm 33 GPa, fctm 2.9 MPa (EN 1992-1-1, Table 3.1),
+    # nu 0.2, about 2400 kg/m^3.
+    "concrete": Material(
+        name="concrete", density=2400.0, young_modulus=33.0e9, poisson_ratio=0.2,
+        tensile_strength=2.9e6,
+    ),
+}
+
+
+def material_preset(name: str) -> Material:
+    try:
+        return MATERIAL_PRESETS[name]
+    except KeyError:
+        raise OptionError(
+            f"unknown material preset {name!r}: use one of {', '.join(sorted(MATERIAL_PRESETS))} "
+            "or give density, young_modulus, poisson_ratio and tensile_strength"
+        ) from None
+
+
+@dataclass(frozen=True, kw_only=True)
+class ParticleOptions:
+    """How a breakable solid is discretised (BRIEF.md steps 1-3).
+
+    Attributes:
+        target_particles: wanted number of physics particles (= tets); the mesher gets a
+            maximum tet volume of mesh_volume / target_particles and lands near it.
+        boundary_group_size: n, the number of adjacent surface particles merged into one
+            boundary particle (paper: 4). 1 means single-scale (every surface particle
+            collides on its own).
+        keep_leftovers: surface particles that cannot be grouped become their own boundary
+            particle (True) or are dropped (False).
+        min_dihedral_deg: quality bound passed to the mesher [degrees].
+    """
+
+    target_particles: int = 5000
+    boundary_group_size: int = 4
+    keep_leftovers: bool = True
+    min_dihedral_deg: float = 10.0
+
+    def __post_init__(self):
+        check_range("particles", "target_particles", self.target_particles, 1, 5_000_000)
+        check_range("particles", "boundary_group_size", self.boundary_group_size, 1, 64)
+        check_range("particles", "min_dihedral_deg", self.min_dihedral_deg, 0.0, 30.0)
+
+
+def option_names(cls) -> list[str]:
+    """The field names of an option dataclass (for 'unknown key' messages)."""
+    return [f.name for f in fields(cls)]

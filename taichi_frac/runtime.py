@@ -1,0 +1,56 @@
+"""One place that initialises Taichi.
+
+Every module that launches kernels calls :func:`init` first; it is a no-op after the first
+call. Nothing else in the package (or in the tests) may call ``ti.init`` or ``ti.reset``:
+a second ``ti.init`` throws away every field and compiled kernel.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import taichi as ti
+
+_ARCHES = {"cpu": "cpu", "cuda": "cuda", "vulkan": "vulkan", "gpu": "gpu", "metal": "metal"}
+_initialised_arch: str | None = None
+
+
+def cache_dir() -> Path:
+    """Folder for taichi-frac's on-disk caches (Taichi's offline kernel cache, meshes)."""
+    root = os.environ.get("TAICHI_FRAC_CACHE") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "taichi-frac"
+    )
+    path = Path(root)
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def init(arch: str = "cpu", *, debug: bool = False) -> str:
+    """Initialise Taichi once per process and return the arch in use.
+
+    ``arch`` is one of cpu, cuda, vulkan, metal, gpu. Fields use float32 by default
+    (``default_fp``); accuracy-critical fracture kernels declare float64 explicitly.
+    Compiled kernels are kept in Taichi's offline cache under :func:`cache_dir`, so a second
+    process does not recompile them.
+    """
+    global _initialised_arch
+    if _initialised_arch is not None:
+        return _initialised_arch
+    if arch not in _ARCHES:
+        raise ValueError(f"unknown Taichi arch {arch!r}: use one of {', '.join(sorted(_ARCHES))}")
+    ti.init(
+        arch=getattr(ti, _ARCHES[arch]),
+        default_fp=ti.f32,
+        default_ip=ti.i32,
+        offline_cache=True,
+        offline_cache_file_path=str(cache_dir() / "ticache"),
+        debug=debug,
+        log_level=ti.WARN,
+    )
+    _initialised_arch = arch
+    return arch
+
+
+def is_initialised() -> bool:
+    return _initialised_arch is not None
