@@ -131,3 +131,117 @@ class ParticleOptions:
 def option_names(cls) -> list[str]:
     """The field names of an option dataclass (for 'unknown key' messages)."""
     return [f.name for f in fields(cls)]
+
+
+SMALL_FRAGMENT_POLICIES = ("merge", "debris", "drop")
+
+
+@dataclass(frozen=True, kw_only=True)
+class FractureOptions:
+    """The artist's controls over how a breakable body cracks (BRIEF.md steps 5-10).
+
+    Attributes:
+        crack_count: n, the number of neighbour groups at an analysis point; each group's
+            stress gives one crack direction. n = 1 is the physical answer.
+        seed: seed of every random choice (grouping start angle), so runs repeat exactly.
+        impact_force_threshold: contacts whose force |impulse| / dt is below this are not
+            analysed at all [N].
+        crack_length: how far a crack runs from its analysis point [m]; None means as far as
+            the stress along the crack plane exceeds the tensile strength.
+        min_fragment_particles: a piece with fewer physics particles is "small".
+        small_fragment_policy: what happens to small pieces: "merge" into the neighbouring
+            fragment they share most faces with, kept as unbreakable "debris", or "drop".
+        smoothing_length_factor: SPH smoothing length h = factor x mean particle spacing [-].
+        corrected_gradient: use the Bonet-Lok corrected kernel gradient (recommended; the
+            plain sum is biased near free surfaces).
+        contact_radius: radius of the regularised load patch [m]; None = the contact
+            particle's radius (a minimum distance of about one particle radius).
+        refracture: fragments may break again on later impacts.
+        max_generations: how many times a piece of a piece may break again (>= 0).
+    """
+
+    crack_count: int = 1
+    seed: int = 0
+    impact_force_threshold: float = 0.0
+    crack_length: float | None = None
+    min_fragment_particles: int = 8
+    small_fragment_policy: str = "merge"
+    smoothing_length_factor: float = 2.0
+    corrected_gradient: bool = True
+    contact_radius: float | None = None
+    refracture: bool = True
+    max_generations: int = 3
+
+    def __post_init__(self):
+        check_range("fracture", "crack_count", self.crack_count, 1, 64)
+        check_range("fracture", "seed", self.seed, 0, 2**31 - 1)
+        check_range("fracture", "impact_force_threshold", self.impact_force_threshold, 0.0, None)
+        if self.crack_length is not None:
+            check_range("fracture", "crack_length", self.crack_length, 0.0, None, low_open=True)
+        check_range("fracture", "min_fragment_particles", self.min_fragment_particles, 1, 1_000_000)
+        if self.small_fragment_policy not in SMALL_FRAGMENT_POLICIES:
+            raise OptionError(
+                f"fracture.small_fragment_policy = {self.small_fragment_policy!r}: use one of "
+                + ", ".join(SMALL_FRAGMENT_POLICIES)
+            )
+        check_range("fracture", "smoothing_length_factor", self.smoothing_length_factor, 1.0, 5.0)
+        if self.contact_radius is not None:
+            check_range("fracture", "contact_radius", self.contact_radius, 0.0, None, low_open=True)
+        check_range("fracture", "max_generations", self.max_generations, 0, 100)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimulationOptions:
+    """Time stepping and the rigid-body solver.
+
+    Attributes:
+        fps: output frames per second [1/s].
+        duration: simulated time [s].
+        substeps: solver substeps per frame (more are added automatically where a fast body
+            would move further than a boundary particle radius in one substep).
+        max_substeps: upper bound on substeps per frame after that refinement.
+        solver_iterations: contact impulse iterations per substep.
+        gravity: (3,) [m/s^2], world Z up.
+        single_scale: collide with every surface particle instead of the boundary layer
+            (the paper's "single-scale" column; for measurement).
+        sleep_linear_speed: a body slower than this ... [m/s]
+        sleep_angular_speed: ... and turning slower than this [rad/s] ...
+        sleep_time: ... for this long goes to sleep [s].
+        arch: Taichi backend: cpu, cuda, vulkan, metal or gpu.
+    """
+
+    fps: float = 50.0
+    duration: float = 3.0
+    substeps: int = 10
+    max_substeps: int = 200
+    solver_iterations: int = 10
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    single_scale: bool = False
+    sleep_linear_speed: float = 0.01
+    sleep_angular_speed: float = 0.05
+    sleep_time: float = 0.5
+    arch: str = "cpu"
+
+    def __post_init__(self):
+        check_range("simulation", "fps", self.fps, 1.0, 10_000.0)
+        check_range("simulation", "duration", self.duration, 0.0, 3600.0, low_open=True)
+        check_range("simulation", "substeps", self.substeps, 1, 10_000)
+        check_range("simulation", "max_substeps", self.max_substeps, self.substeps, 100_000)
+        check_range("simulation", "solver_iterations", self.solver_iterations, 1, 1000)
+        if len(self.gravity) != 3:
+            raise OptionError(f"simulation.gravity must have 3 components, got {self.gravity!r}")
+        for g in self.gravity:
+            check_range("simulation", "gravity", g, -1000.0, 1000.0)
+        check_range("simulation", "sleep_linear_speed", self.sleep_linear_speed, 0.0, None)
+        check_range("simulation", "sleep_angular_speed", self.sleep_angular_speed, 0.0, None)
+        check_range("simulation", "sleep_time", self.sleep_time, 0.0, None)
+        if self.arch not in ("cpu", "cuda", "vulkan", "metal", "gpu"):
+            raise OptionError(f"simulation.arch = {self.arch!r}: use cpu, cuda, vulkan, metal or gpu")
+
+    @property
+    def frame_dt(self) -> float:
+        return 1.0 / self.fps
+
+    @property
+    def frame_count(self) -> int:
+        return int(round(self.duration * self.fps))
