@@ -1,0 +1,149 @@
+"""Checks a surface mesh must pass before any meshing work (the issue's bad-input list).
+
+Each failure raises :class:`MeshError` whose message names the file, the problem, the
+numbers and what to do, e.g. ``'teapot.obj' is not closed: 4 boundary loops, 52 open
+edges``. Checks run cheapest first; the first failing one is reported.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.csgraph as csgraph
+import trimesh
+from scipy.spatial import cKDTree
+
+REPAIR_HINT = "pass repair=True (CLI: --repair) to try an automatic fix, or fix it in a modelling tool"
+
+
+class MeshError(ValueError):
+    """A mesh that cannot be simulated as it is. The message says which file, what is wrong
+    (with counts) and what to do."""
+
+
+def _edges(faces: np.ndarray):
+    """Unique undirected edges (E,2) and how many faces use each (E,)."""
+    e = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    unique, counts = np.unique(e, axis=0, return_counts=True)
+    return unique, counts
+
+
+def count_loops(edges: np.ndarray) -> int:
+    """Connected components of a set of edges (E,2): the number of boundary loops."""
+    if len(edges) == 0:
+        return 0
+    verts, inv = np.unique(edges, return_inverse=True)
+    inv = inv.reshape(-1, 2)
+    g = sp.coo_matrix((np.ones(len(inv)), (inv[:, 0], inv[:, 1])), shape=(len(verts), len(verts)))
+    return int(csgraph.connected_components(g, directed=False)[0])
+
+
+def degenerate_faces(mesh: trimesh.Trimesh) -> np.ndarray:
+    """Indices of faces with (near) zero area: below 1e-12 of the bounding-box diagonal squared,
+    or with a repeated vertex index."""
+    f = mesh.faces
+    repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
+    scale = float(np.linalg.norm(mesh.extents)) if len(mesh.vertices) else 1.0
+    tiny = mesh.area_faces <= 1e-12 * scale**2
+    return np.nonzero(repeated | tiny)[0]
+
+
+def self_intersections(vertices: np.ndarray, faces: np.ndarray, max_pairs: int = 50_000_000) -> np.ndarray:
+    """Pairs (K,2) of faces that cross each other (an edge of one passes through the other).
+
+    Broad phase: a k-d tree on face centroids with the largest face circumradius as reach,
+    then bounding-box overlap. Narrow phase: vectorised segment-triangle tests
+    (Moller-Trumbore). Faces sharing a vertex are skipped: neighbours always touch, and
+    folds between neighbours show up as inconsistent winding or degenerate faces instead.
+    Coplanar overlaps are not detected.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    tri = v[f]
+    centroid = tri.mean(axis=1)
+    reach = np.linalg.norm(tri - centroid[:, None], axis=2).max(axis=1)
+    tree = cKDTree(centroid)
+    pairs = tree.query_pairs(r=2.0 * float(reach.max()) * (1 + 1e-9), output_type="ndarray")
+    if len(pairs) > max_pairs:
+        raise MeshError(f"self-intersection check: {len(pairs)} candidate face pairs is too many")
+    lo, hi = tri.min(axis=1), tri.max(axis=1)
+    a, b = pairs[:, 0], pairs[:, 1]
+    overlap = np.all((lo[a] <= hi[b]) & (lo[b] <= hi[a]), axis=1)
+    share = (f[a][:, :, None] == f[b][:, None, :]).any(axis=(1, 2))
+    pairs = pairs[overlap & ~share]
+    if len(pairs) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    hit = np.zeros(len(pairs), dtype=bool)
+    for first, second in ((0, 1), (1, 0)):
+        t_idx, s_idx = pairs[:, first], pairs[:, second]
+        for i, j in ((0, 1), (1, 2), (2, 0)):
+            hit |= _segment_hits_triangle(tri[s_idx, i], tri[s_idx, j], tri[t_idx])
+    return pairs[hit]
+
+
+def _segment_hits_triangle(p0, p1, tri, eps=1e-12):
+    """Vectorised: does segment p0-p1 (K,3) cross triangle tri (K,3,3) in its interior?"""
+    d = p1 - p0
+    e1 = tri[:, 1] - tri[:, 0]
+    e2 = tri[:, 2] - tri[:, 0]
+    h = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, h)
+    scale = np.linalg.norm(d, axis=1) * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+    ok = np.abs(det) > 1e-9 * np.maximum(scale, 1e-300)  # not parallel (coplanar skipped)
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = p0 - tri[:, 0]
+    u = inv * np.einsum("ij,ij->i", s, h)
+    q = np.cross(s, e1)
+    w = inv * np.einsum("ij,ij->i", d, q)
+    t = inv * np.einsum("ij,ij->i", e2, q)
+    return ok & (u > eps) & (w > eps) & (u + w < 1 - eps) & (t > eps) & (t < 1 - eps)
+
+
+def validate_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, allow_multiple_shells: bool = False,
+                     check_self_intersection: bool = True) -> None:
+    """Raise :class:`MeshError` unless ``mesh`` is a closed, consistently wound, outward
+    oriented, non-self-intersecting single solid without degenerate faces.
+
+    ``name`` is what the messages call the mesh (usually the file name).
+    """
+    label = repr(name)
+    if len(mesh.faces) == 0 or len(mesh.vertices) == 0:
+        raise MeshError(f"{label} is empty: {len(mesh.vertices)} vertices, {len(mesh.faces)} faces; "
+                        "check the file exports geometry (not only a camera, light or point cloud)")
+    bad = degenerate_faces(mesh)
+    if len(bad):
+        raise MeshError(f"{label} has {len(bad)} degenerate faces (zero area or a repeated vertex) out of "
+                        f"{len(mesh.faces)}, e.g. face {int(bad[0])}; {REPAIR_HINT}")
+    edges, counts = _edges(mesh.faces)
+    open_edges = edges[counts == 1]
+    nonmanifold = int(np.sum(counts > 2))
+    if len(open_edges):
+        loops = count_loops(open_edges)
+        raise MeshError(f"{label} is not closed: {loops} boundary loop{'' if loops == 1 else 's'}, {len(open_edges)} "
+                        f"open edges; a breakable solid needs a watertight surface: {REPAIR_HINT}")
+    if nonmanifold:
+        raise MeshError(f"{label} is not manifold: {nonmanifold} edges are shared by more than two faces; "
+                        f"{REPAIR_HINT}")
+    if not mesh.is_winding_consistent:
+        # Count faces whose winding disagrees with a neighbour: directed edges used twice.
+        directed = mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+        _, dcounts = np.unique(directed, axis=0, return_counts=True)
+        raise MeshError(f"{label} has inconsistent winding: {int(np.sum(dcounts > 1))} edges are traversed in "
+                        "the same direction by both of their faces (some faces are flipped); "
+                        f"{REPAIR_HINT} (trimesh.repair.fix_winding also fixes this)")
+    if check_self_intersection:
+        hits = self_intersections(mesh.vertices, mesh.faces)
+        if len(hits):
+            n_faces = len(np.unique(hits))
+            raise MeshError(f"{label} self-intersects: {len(hits)} crossing face pairs ({n_faces} faces), e.g. "
+                            f"faces {int(hits[0, 0])} and {int(hits[0, 1])}; {REPAIR_HINT}")
+    shells = mesh.body_count
+    if shells > 1 and not allow_multiple_shells:
+        parts = sorted((len(p.faces) for p in mesh.split(only_watertight=False)), reverse=True)
+        raise MeshError(f"{label} has {shells} disconnected shells (faces per shell: "
+                        f"{', '.join(map(str, parts[:8]))}{', ...' if len(parts) > 8 else ''}); "
+                        "make one scene object per shell, or pass repair=True to keep the largest")
+    volume = float(mesh.volume)
+    if volume <= 0:
+        raise MeshError(f"{label} is inverted: enclosed volume {volume:.6g} m^3 is negative (normals point "
+                        "inward); flip the faces (trimesh: mesh.invert()) or pass repair=True")
