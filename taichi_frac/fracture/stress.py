@@ -1,0 +1,168 @@
+"""Strain, stress and principal stresses (BRIEF.md §1 steps 7-8, corrected eq. 4).
+
+- Strain: Green-Saint-Venant, E = 1/2 (F^T F - I) with F = I + grad u (the paper's eq. (4)
+  writes J = grad u^T, which gives -I/2 for zero displacement; BRIEF.md §2). Computed as
+  E = 1/2 (G + G^T + G^T G), G = grad u: the form 1/2 (F^T F - I) subtracts numbers near 1
+  and loses about half of the float64 digits when |G| ~ 1e-6, as it is for a brittle solid.
+- Stress: isotropic Hooke's law on that strain, S = lambda tr(E) I + 2 mu E (St Venant-
+  Kirchhoff; for the tiny strains here it equals the Cauchy stress to O(|G|)).
+- Principal stresses: eigenvalues of the symmetric stress, from ``ti.sym_eig`` (Kopp's
+  hybrid 3x3 solver) in a f64 kernel, sorted descending; the directions are the matching
+  columns, each signed so that its largest-magnitude component is positive.
+- Rankine: a crack forms where the largest principal stress exceeds the tensile strength;
+  its plane's normal is that principal direction (BRIEF.md §1 step 8).
+
+Units: stresses in Pa, gradients and strains dimensionless. Arrays float64.
+"""
+
+
+import numpy as np
+import taichi as ti
+
+from .. import runtime
+
+_vec3 = ti.types.vector(3, ti.f64)
+_mat3 = ti.types.matrix(3, 3, ti.f64)
+
+
+def lame_parameters(young_modulus, poisson_ratio):
+    """(lambda, mu) [Pa] from E [Pa] > 0 and nu in [0, 0.5)."""
+    e, nu = float(young_modulus), float(poisson_ratio)
+    if not (np.isfinite(e) and e > 0.0):
+        raise ValueError(f"young_modulus must be > 0, got {young_modulus!r}")
+    if not (0.0 <= nu < 0.5):
+        raise ValueError(f"poisson_ratio must be in [0, 0.5), got {poisson_ratio!r}")
+    return e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), e / (2.0 * (1.0 + nu))
+
+
+@ti.func
+def _load3(a: ti.template(), q):
+    m = _mat3(0.0)
+    for r, c in ti.static(ti.ndrange(3, 3)):
+        m[r, c] = a[q, r, c]
+    return m
+
+
+@ti.func
+def _green_strain(g):
+    # 1/2 (G + G^T + G^T G) == 1/2 (F^T F - I), F = I + G, without cancellation.
+    return 0.5 * (g + g.transpose() + g.transpose() @ g)
+
+
+@ti.kernel
+def _strain_kernel(grad: ti.types.ndarray(dtype=ti.f64, ndim=3),
+                   strain_out: ti.types.ndarray(dtype=ti.f64, ndim=3)):
+    for q in range(grad.shape[0]):
+        e = _green_strain(_load3(grad, q))
+        for r, c in ti.static(ti.ndrange(3, 3)):
+            strain_out[q, r, c] = e[r, c]
+
+
+@ti.kernel
+def _stress_kernel(
+    grad: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) [-] Data in
+    lame_lambda: ti.f64, shear_modulus: ti.f64,  # [Pa] Model
+    stress_out: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) [Pa] Data out
+):
+    for q in range(grad.shape[0]):
+        e = _green_strain(_load3(grad, q))
+        s = 2.0 * shear_modulus * e + lame_lambda * e.trace() * ti.Matrix.identity(ti.f64, 3)
+        for r, c in ti.static(ti.ndrange(3, 3)):
+            stress_out[q, r, c] = s[r, c]
+
+
+@ti.kernel
+def _principal_kernel(
+    stress: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) [Pa] Data in
+    values_out: ti.types.ndarray(dtype=ti.f64, ndim=2),  # (Q,3) [Pa] descending
+    directions_out: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) columns
+):
+    for q in range(stress.shape[0]):
+        s = _load3(stress, q)
+        s = 0.5 * (s + s.transpose())
+        # sym_eig3x3's tolerances are absolute: solve on the matrix scaled to unit max entry
+        # so 1e-6 N and 1e9 N impacts are treated alike.
+        scale = ti.cast(0.0, ti.f64)  # bare literals would be the default f32
+        for r, c in ti.static(ti.ndrange(3, 3)):
+            scale = ti.max(scale, ti.abs(s[r, c]))
+        values = _vec3(0.0)
+        vectors = ti.Matrix.identity(ti.f64, 3)
+        if scale > 0.0:
+            values, vectors = ti.sym_eig(s / scale, ti.f64)  # ascending
+            values *= scale
+        for e in ti.static(range(3)):
+            col = 2 - e  # descending order
+            v = _vec3(vectors[0, col], vectors[1, col], vectors[2, col])
+            v = v.normalized()
+            largest = ti.abs(v[0])
+            sign = ti.cast(1.0 if v[0] >= 0.0 else -1.0, ti.f64)
+            for k in ti.static(range(1, 3)):
+                if ti.abs(v[k]) > largest:
+                    largest = ti.abs(v[k])
+                    sign = ti.cast(1.0 if v[k] >= 0.0 else -1.0, ti.f64)
+            v *= sign
+            values_out[q, e] = values[col]
+            for k in ti.static(range(3)):
+                directions_out[q, k, e] = v[k]
+
+
+def _as_tensors(a, name) -> np.ndarray:
+    arr = np.ascontiguousarray(a, dtype=np.float64)
+    if arr.ndim != 3 or arr.shape[1:] != (3, 3):
+        raise ValueError(f"{name} must have shape (Q,3,3), got {arr.shape}")
+    return arr
+
+
+def green_strain(grad) -> np.ndarray:
+    """Green-Saint-Venant strain 1/2 (G + G^T + G^T G) [-], (Q,3,3) from grad u (Q,3,3)."""
+    runtime.init()
+    g = _as_tensors(grad, "grad")
+    out = np.zeros_like(g)
+    if len(g):
+        _strain_kernel(g, out)
+    return out
+
+
+def stress_from_gradient(grad, young_modulus, poisson_ratio) -> np.ndarray:
+    """Stress [Pa] (Q,3,3) = lambda tr(E) I + 2 mu E, E the Green-Saint-Venant strain of
+    F = I + grad (corrected eq. 4), grad (Q,3,3) [-] with grad_ab = d u_a / d x_b.
+
+    E [Pa] > 0, nu in [0, 0.5). Symmetric by construction. f64 Taichi kernel.
+    """
+    runtime.init()
+    g = _as_tensors(grad, "grad")
+    lam, mu = lame_parameters(young_modulus, poisson_ratio)
+    out = np.zeros_like(g)
+    if len(g):
+        _stress_kernel(g, lam, mu, out)
+    return out
+
+
+def principal_stresses(stress):
+    """Principal stresses of symmetric stresses (Q,3,3) [Pa] (``ti.sym_eig``, f64 kernel).
+
+    Returns:
+        values (Q,3) [Pa], descending (values[:, 0] is the largest, the Rankine one);
+        directions (Q,3,3), unit columns: directions[q, :, k] belongs to values[q, k], each
+        signed so that its largest-magnitude component is positive. A zero stress gives
+        zero values and the identity.
+    """
+    runtime.init()
+    s = _as_tensors(stress, "stress")
+    values = np.zeros((len(s), 3))
+    directions = np.zeros_like(s)
+    if len(s):
+        _principal_kernel(s, values, directions)
+    return values, directions
+
+
+def rankine_flags(principal_values, tensile_strength) -> np.ndarray:
+    """Rankine criterion: True where the largest principal stress exceeds the tensile
+    strength [Pa] (BRIEF.md §1 step 8). ``principal_values`` is (Q,3) (largest first, as
+    :func:`principal_stresses` returns) or (Q,) largest values. Returns (Q,) bool."""
+    values = np.asarray(principal_values, dtype=np.float64)
+    largest = values[:, 0] if values.ndim == 2 else values.reshape(-1)
+    strength = float(tensile_strength)
+    if not (np.isfinite(strength) and strength > 0.0):
+        raise ValueError(f"tensile_strength must be > 0, got {tensile_strength!r}")
+    return largest > strength
