@@ -1,0 +1,177 @@
+"""Tetrahedralization of closed surfaces, behind swappable backends.
+
+``tetrahedralize(mesh, target_tets=..., backend="tetgen")`` returns a :class:`TetMesh`.
+Backends are plain functions ``(vertices, faces, max_volume, min_dihedral_deg) ->
+(vertices, tets)`` registered in :data:`BACKENDS`; add one with :func:`register_backend`.
+
+- ``tetgen`` (default; TetGen 1.6 via the ``tetgen`` package, AGPL engine): constrained
+  Delaunay, keeps the input surface exactly (tet volume = mesh volume to round-off, any
+  genus, sharp features kept), ~0.1 s for 5,000 tets. Its quality refinement overshoots a
+  volume bound (``maxvolume`` needs ``fixedvolume=True``), so :func:`tetrahedralize`
+  calibrates: it starts from an empirical ratio and, if the count misses the target by more
+  than ``tolerance``, re-runs once with the bound scaled by the miss (count ~ 1/max_volume).
+- ``wildmeshing`` (fTetWild, MPL-2.0, optional): robust to dirty input, but ~50x slower
+  and it approximates the surface within an envelope (volume off by ~0.2 %).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from .topology import compact_vertices, dihedral_angles_deg, orient_tets, signed_volumes
+from .validate import MeshError
+
+
+@dataclass(frozen=True)
+class TetMesh:
+    """A tet mesh of a closed surface.
+
+    Attributes:
+        vertices: (V,3) float64 [m].
+        tets: (T,4) int32, positively oriented.
+        backend: mesher used.
+        max_volume: volume bound passed in the final run [m^3] (None: unbounded).
+        surface_volume: enclosed volume of the input surface [m^3].
+        volume_error: (sum of tet volumes - surface volume) / surface volume [-].
+        min_dihedral_deg: smallest dihedral angle over all tets [degrees].
+        sliver_count: tets with a dihedral angle below 5 degrees.
+        runs: mesher runs made (calibration).
+        seconds: wall time of all runs [s].
+    """
+
+    vertices: np.ndarray
+    tets: np.ndarray
+    backend: str
+    max_volume: float | None
+    surface_volume: float
+    volume_error: float
+    min_dihedral_deg: float
+    sliver_count: int
+    runs: int
+    seconds: float
+
+    @property
+    def tet_count(self) -> int:
+        return len(self.tets)
+
+
+def _tetgen(vertices, faces, max_volume, min_dihedral_deg):
+    import tetgen
+
+    # The optimisation settings (flips + smoothing, dihedral target 165 deg) halve the
+    # slivers left by plain quality refinement at no measurable cost (measured on tori).
+    kwargs = dict(quality=True, minratio=1.5, mindihedral=min_dihedral_deg, verbose=0, opt_scheme=7,
+                  opt_max_flip_level=5, opt_iterations=20, optmaxdihedral=165.0)
+    if max_volume is not None:
+        kwargs.update(fixedvolume=True, maxvolume=float(max_volume))
+    try:
+        out = tetgen.TetGen(vertices, faces).tetrahedralize(**kwargs)
+    except RuntimeError as exc:  # tetgen reports self-intersections and bad PLCs this way
+        raise MeshError(f"tetgen failed: {exc}; try repair=True or backend='wildmeshing'") from exc
+    return np.asarray(out[0], dtype=np.float64), np.asarray(out[1], dtype=np.int64)
+
+
+def _wildmeshing(vertices, faces, max_volume, min_dihedral_deg):
+    try:
+        import wildmeshing
+    except ImportError:
+        raise MeshError("backend 'wildmeshing' needs the wildmeshing package: pip install wildmeshing") from None
+    diag = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    # fTetWild sizes by ideal edge length relative to the bounding-box diagonal; a regular
+    # tet of volume v has edge (6 sqrt(2) v)^(1/3). Its tets average ~1/2 the ideal volume.
+    edge = (6.0 * math.sqrt(2.0) * 2.0 * max_volume) ** (1 / 3) if max_volume else 0.05 * diag
+    mesher = wildmeshing.Tetrahedralizer(stop_quality=10, max_its=80, epsilon=1e-3,
+                                         edge_length_r=min(max(edge / diag, 1e-4), 1.0))
+    mesher.set_mesh(np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int32))
+    mesher.tetrahedralize()
+    result = mesher.get_tet_mesh()  # (vertices, tets, per-tet attribute)
+    return np.asarray(result[0], dtype=np.float64), np.asarray(result[1], dtype=np.int64)
+
+
+BACKENDS = {"tetgen": _tetgen, "wildmeshing": _wildmeshing}
+
+#: Tets per (volume / max_volume) that tetgen's quality refinement produces on typical
+#: closed meshes; measured 2.0-2.1 on tori, boxes and spheres (benchmarks/bench_prepare.py).
+_TETGEN_OVERSHOOT = 2.0
+
+
+def register_backend(name: str, function) -> None:
+    """Add a mesher: ``function(vertices (V,3), faces (F,3), max_volume or None,
+    min_dihedral_deg) -> (vertices (V',3), tets (T,4))``."""
+    BACKENDS[name] = function
+
+
+def regular_tet_edge(volume: float) -> float:
+    """Edge length [m] of a regular tet of ``volume`` [m^3]: (6 sqrt(2) V)^(1/3)."""
+    return (6.0 * math.sqrt(2.0) * volume) ** (1.0 / 3.0)
+
+
+def tetrahedralize(
+    mesh: trimesh.Trimesh,
+    *,
+    target_tets: int | None = None,
+    max_volume: float | None = None,
+    backend: str = "tetgen",
+    min_dihedral_deg: float = 10.0,
+    tolerance: float = 0.1,
+) -> TetMesh:
+    """Fill the closed surface ``mesh`` [m] with tets.
+
+    Give ``target_tets`` (calibrated to land within ``tolerance`` where one re-run can do
+    it) or ``max_volume`` [m^3] (used as is), or neither (the mesher's coarsest quality
+    mesh). ``min_dihedral_deg`` is the quality bound handed to the mesher; the result
+    reports the angle actually reached.
+    """
+    if backend not in BACKENDS:
+        raise MeshError(f"unknown mesher backend {backend!r}: use one of {', '.join(BACKENDS)}")
+    if target_tets is not None and max_volume is not None:
+        raise ValueError("give target_tets or max_volume, not both")
+    run = BACKENDS[backend]
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    volume = float(mesh.volume)
+    start = time.perf_counter()
+    runs = 0
+
+    def mesh_once(bound):
+        nonlocal runs
+        runs += 1
+        v, t = run(vertices, faces, bound, min_dihedral_deg)
+        if len(t) == 0:
+            raise MeshError(f"mesher {backend!r} produced no tets (is the surface closed?)")
+        v, t, _ = compact_vertices(v, t)
+        return v, orient_tets(v, t)
+
+    if target_tets is None:
+        bound = max_volume
+        v, t = mesh_once(bound)
+    else:
+        overshoot = _TETGEN_OVERSHOOT if backend == "tetgen" else 1.0
+        bound = overshoot * volume / target_tets
+        v, t = mesh_once(bound)
+        miss = len(t) / target_tets
+        if abs(miss - 1.0) > tolerance:
+            # Count ~ 1/bound away from the surface-resolution floor: one proportional step.
+            retry_bound = bound * miss
+            v2, t2 = mesh_once(retry_bound)
+            if abs(len(t2) / target_tets - 1.0) < abs(miss - 1.0):
+                v, t, bound = v2, t2, retry_bound
+    tet_volume = signed_volumes(v, t)
+    dihedral = dihedral_angles_deg(v, t).min(axis=1)
+    return TetMesh(
+        vertices=v,
+        tets=t.astype(np.int32),
+        backend=backend,
+        max_volume=bound,
+        surface_volume=volume,
+        volume_error=float(tet_volume.sum() / volume - 1.0),
+        min_dihedral_deg=float(dihedral.min()),
+        sliver_count=int(np.sum(dihedral < 5.0)),
+        runs=runs,
+        seconds=time.perf_counter() - start,
+    )
