@@ -20,6 +20,7 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
+from .stress import sym_eig3_f64
 
 _vec3 = ti.types.vector(3, ti.f64)
 _mat3 = ti.types.matrix(3, 3, ti.f64)
@@ -258,13 +259,12 @@ def _gradient_kernel(
             # so grad u = (sum V (u_j - u_i) (x) grad W) L^T = G M^-1, exact for linear u.
             # M is symmetric PSD (grad W is parallel to x_j - x_i): invert by eigenvalues.
             # M is symmetric PSD (grad W is parallel to x_j - x_i); its eigenvalue ratio
-            # guards the inverse (ti.sym_eig is accurate enough for a guard; the inverse
-            # itself is the f64 cofactor formula).
+            # guards the inverse (f64 cofactor formula).
             scale = moment.trace()
             fallback = 1
             if scale > 0.0:
-                values, vectors = ti.sym_eig(moment / scale, ti.f64)
-                if values[0] > min_eigen_ratio * values[2]:
+                values, _vectors = sym_eig3_f64(moment / scale)
+                if values.min() > min_eigen_ratio * values.max():
                     grad = grad @ moment.inverse()
                     fallback = 0
         fallback_out[q] = fallback

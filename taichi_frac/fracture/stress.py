@@ -6,9 +6,13 @@
   and loses about half of the float64 digits when |G| ~ 1e-6, as it is for a brittle solid.
 - Stress: isotropic Hooke's law on that strain, S = lambda tr(E) I + 2 mu E (St Venant-
   Kirchhoff; for the tiny strains here it equals the Cauchy stress to O(|G|)).
-- Principal stresses: eigenvalues of the symmetric stress, from ``ti.sym_eig`` (Kopp's
-  hybrid 3x3 solver) in a f64 kernel, sorted descending; the directions are the matching
-  columns, each signed so that its largest-magnitude component is positive.
+- Principal stresses: eigenvalues of the symmetric stress by cyclic Jacobi rotations in
+  f64 (:func:`sym_eig3_f64`), sorted descending; the directions are the matching columns,
+  each signed so that its largest-magnitude component is positive. Why not ``ti.sym_eig``:
+  Taichi 1.7.4's 3x3 solver (``taichi/_funcs.py``, Kopp's hybrid method) declares its
+  temporaries with bare literals, which take the runtime's ``default_fp`` -- f32 here -- even
+  with ``dt=ti.f64``; measured on 20,000 random symmetric matrices its eigenvector residual
+  |A v - lambda v| reached 5e-3 x max|A| (Jacobi below: < 1e-14).
 - Rankine: a crack forms where the largest principal stress exceeds the tensile strength;
   its plane's normal is that principal direction (BRIEF.md §1 step 8).
 
@@ -41,6 +45,53 @@ def _load3(a: ti.template(), q):
     for r, c in ti.static(ti.ndrange(3, 3)):
         m[r, c] = a[q, r, c]
     return m
+
+
+# Cyclic Jacobi sweeps for a 3x3 symmetric matrix: quadratic convergence, so 8 sweeps are far
+# more than the 4-5 that reach f64 rounding for any input scaled to unit max entry.
+_JACOBI_SWEEPS = 8
+
+
+@ti.func
+def sym_eig3_f64(a):
+    """Eigen-decomposition of a symmetric f64 3x3 matrix by cyclic Jacobi rotations
+    (Golub & Van Loan, "Matrix Computations", 4th ed., §8.5). Returns (values, vectors):
+    an unsorted f64 3-vector and a matrix whose column k is the unit eigenvector of
+    values[k]. Scale the input to unit max entry first: the skip test is absolute."""
+    a = a * 1.0  # work on a local copy
+    v = ti.Matrix.identity(ti.f64, 3)
+    for _sweep in range(_JACOBI_SWEEPS):
+        for p, q in ti.static([(0, 1), (0, 2), (1, 2)]):
+            if ti.abs(a[p, q]) > 1.0e-300:
+                # Rotation annihilating a[p, q] (Numerical Recipes §11.1, eqs. 11.1.8-11.1.10).
+                theta = (a[q, q] - a[p, p]) / (2.0 * a[p, q])
+                t = 1.0 / (ti.abs(theta) + ti.sqrt(theta * theta + 1.0))
+                if theta < 0.0:
+                    t = -t
+                c = 1.0 / ti.sqrt(t * t + 1.0)
+                s = t * c
+                rot = ti.Matrix.identity(ti.f64, 3)
+                rot[p, p] = c
+                rot[q, q] = c
+                rot[p, q] = s
+                rot[q, p] = -s
+                a = rot.transpose() @ a @ rot
+                a[p, q] = 0.0
+                a[q, p] = 0.0
+                v = v @ rot
+    return ti.Vector([a[0, 0], a[1, 1], a[2, 2]], dt=ti.f64), v
+
+
+@ti.kernel
+def _sym_eig_kernel(matrices: ti.types.ndarray(dtype=ti.f64, ndim=3),
+                    values_out: ti.types.ndarray(dtype=ti.f64, ndim=2),
+                    vectors_out: ti.types.ndarray(dtype=ti.f64, ndim=3)):
+    for q in range(matrices.shape[0]):
+        values, vectors = sym_eig3_f64(_load3(matrices, q))
+        for r in ti.static(range(3)):
+            values_out[q, r] = values[r]
+            for c in ti.static(range(3)):
+                vectors_out[q, r, c] = vectors[r, c]
 
 
 @ti.func
@@ -88,10 +139,18 @@ def _principal_kernel(
         values = _vec3(0.0)
         vectors = ti.Matrix.identity(ti.f64, 3)
         if scale > 0.0:
-            values, vectors = ti.sym_eig(s / scale, ti.f64)  # ascending
+            values, vectors = sym_eig3_f64(s / scale)
             values *= scale
+        # Sort descending: order[e] = column of the e-th largest value.
+        order = ti.Vector([0, 1, 2])
+        for _pass in ti.static(range(2)):
+            for k in ti.static(range(2)):
+                if values[order[k]] < values[order[k + 1]]:
+                    tmp = order[k]
+                    order[k] = order[k + 1]
+                    order[k + 1] = tmp
         for e in ti.static(range(3)):
-            col = 2 - e  # descending order
+            col = order[e]
             v = _vec3(vectors[0, col], vectors[1, col], vectors[2, col])
             v = v.normalized()
             largest = ti.abs(v[0])
