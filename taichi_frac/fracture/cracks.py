@@ -1,0 +1,333 @@
+"""Controllable cracks at an impact (BRIEF.md steps 8-9, and the decisions of section 3).
+
+Everything here is in the body frame of the struck body (``BodyModel``): the stress field
+of a contact never needs the body's world pose.
+
+Decisions (the paper leaves them open; docs/readme/fracture.md explains them for artists):
+
+- **Analysis point**: for each contact, the physics particle of largest principal stress
+  within 2 smoothing lengths (kernel support radii) of the contact point (the "maximum only" choice: under a point
+  load the material right below the load is in compression; the tension that cracks a
+  brittle solid peaks beside it, at about the contact-patch scale). The full stress field (every particle, every neighbour) is also computed: it sets the crack
+  extent when ``crack_length`` is None and the per-fragment peak stress.
+- **Several contacts in one step** are analysed together: linear elasticity superposes, so
+  the displacement field is the sum of every contact's Boussinesq-Cerruti field; each
+  contact then gets its own analysis point and its own cracks (the union is cut).
+- **Grouping (step 9)**: the analysis point's SPH neighbours are split into n =
+  ``crack_count`` sectors by their azimuth around the contact normal, measured from a
+  start angle drawn from ``seed`` (and the contact's index, so two contacts of one step do
+  not share it). Sector k holds the neighbours with azimuth in
+  [theta0 + 2 pi k / n, theta0 + 2 pi (k+1) / n). Each sector's neighbours alone give a
+  displacement gradient, a stress and principal stresses at the analysis point; n = 1 uses
+  every neighbour and is the physical answer. Azimuthal sectors are used because a point
+  load's surface stresses vary around the normal (radial tension), so sectors see different
+  stress states and give different directions, and the groups depend on nothing but the
+  geometry and the seed.
+  Groups use the plain kernel sum of BRIEF.md eq. 7 (n = 1 follows
+  ``options.corrected_gradient``): the Bonet-Lok correction recovers a smooth field's
+  gradient from any non-degenerate subset, so corrected sectors give n noisy copies of one
+  direction, while the plain sum over a one-sided sector leans toward that sector and the
+  n cracks fan out around the contact -- which is what step 9 asks for.
+- **Rankine (step 8)** decides *whether*: a contact cracks only if the largest principal
+  stress of the full field at its analysis point exceeds ``material.tensile_strength``
+  (the physical stress, every neighbour). The groups decide *where*: each non-empty group
+  then gives one crack, its plane through the analysis point with normal = the group's
+  largest principal direction. So an artist asking for n cracks gets n (or fewer if a
+  sector is empty) whenever the impact is strong enough.
+- **Crack extent**: a crack is a disc of radius ``extent`` about the analysis point in its
+  plane. ``extent = options.crack_length`` if given; otherwise the distance to the farthest
+  over-threshold particle (full field) lying within one smoothing length of the plane, and
+  at least one smoothing length (the crack must at least cross the analysis point's own
+  bonds).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model import BodyModel
+from ..options import FractureOptions, Material
+from .field import point_load_displacement
+from .sph import default_smoothing_length, displacement_gradient, neighbor_lists
+from .stress import principal_stresses, stress_from_gradient
+
+# Analysis points are sought within this many smoothing lengths (kernel support radii,
+# fracture/sph.py) of the contact point.
+ANALYSIS_RADIUS_FACTOR = 2.0
+
+
+@dataclass(frozen=True)
+class CrackPlane:
+    """One planar crack, body frame.
+
+    Attributes:
+        point: (3,) [m] a point of the plane (the analysis point).
+        normal: (3,) unit normal (the largest principal stress direction).
+        extent: [m] radius of the crack disc about ``point``.
+        peak_stress: [Pa] the group's largest principal stress.
+        impact_index: which contact of the analysis produced it.
+        group_index: which neighbour group (0 .. crack_count - 1).
+    """
+
+    point: np.ndarray
+    normal: np.ndarray
+    extent: float
+    peak_stress: float
+    impact_index: int = 0
+    group_index: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class ImpactAnalysis:
+    """The stress analysis of one body's contacts in one step, body frame. K analysed
+    contacts (those over ``impact_force_threshold``), n = crack_count groups, T particles.
+
+    Attributes:
+        contact_point: (K,3) [m]; normal_in: (K,3) unit, into the body; force: (K,3) [N] on
+            the body.
+        analysis_particle: (K,) int, each contact's analysis point (largest principal stress
+            within 2 h of the contact point).
+        analysis_point: (K,3) [m] its position.
+        smoothing_length: h [m], the SPH kernel's support radius (fracture/sph.py).
+        contact_radius: (K,) [m] regularisation radius used for each contact.
+        particle_stress: (T,3,3) [Pa] full-field stress (every neighbour); zeros if K = 0.
+        particle_principal_stress: (T,) [Pa] its largest principal value.
+        group_neighbor_count: (K,n) neighbours in each group.
+        group_stress: (K,n,3,3) [Pa] each group's stress at its analysis point.
+        group_principal_values: (K,n,3) [Pa] descending.
+        group_principal_directions: (K,n,3,3) unit columns matching the values.
+        cracks: the crack planes (union over contacts), in (contact, group) order.
+        tensile_strength: [Pa] the Rankine threshold used.
+    """
+
+    contact_point: np.ndarray
+    normal_in: np.ndarray
+    force: np.ndarray
+    analysis_particle: np.ndarray
+    analysis_point: np.ndarray
+    smoothing_length: float
+    contact_radius: np.ndarray
+    particle_stress: np.ndarray
+    particle_principal_stress: np.ndarray
+    group_neighbor_count: np.ndarray
+    group_stress: np.ndarray
+    group_principal_values: np.ndarray
+    group_principal_directions: np.ndarray
+    cracks: tuple
+    tensile_strength: float
+
+    @property
+    def any_crack(self) -> bool:
+        return len(self.cracks) > 0
+
+    @property
+    def peak_principal_stress(self) -> float:
+        """[Pa] largest principal stress seen anywhere (full field and every group)."""
+        peaks = [0.0]
+        if self.particle_principal_stress.size:
+            peaks.append(float(self.particle_principal_stress.max()))
+        if self.group_principal_values.size:
+            peaks.append(float(self.group_principal_values[..., 0].max()))
+        return max(peaks)
+
+
+def tangent_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors (e1, e2) with (e1, e2, normal) right-handed, chosen deterministically
+    from the normal alone (e1 = normal x the coordinate axis least aligned with it)."""
+    axis = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    e1 = np.cross(normal, axis)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(normal, e1)
+
+
+def start_angle(seed: int, impact_index: int) -> float:
+    """The seeded azimuth [rad] where the first neighbour sector begins."""
+    return float(np.random.default_rng([seed, impact_index]).uniform(0.0, 2.0 * np.pi))
+
+
+def group_neighbors(
+    positions: np.ndarray, neighbors: np.ndarray, center: np.ndarray, normal: np.ndarray,
+    group_count: int, theta0: float,
+) -> np.ndarray:
+    """Sector index (M,) in [0, group_count) of each neighbour: its azimuth about the axis
+    through ``center`` (the analysis point) along the contact normal, measured from
+    ``theta0`` in the (e1, e2) tangent frame."""
+    e1, e2 = tangent_frame(normal)
+    d = positions[neighbors] - center
+    azimuth = np.arctan2(d @ e2, d @ e1)
+    turn = np.mod(azimuth - theta0, 2.0 * np.pi)
+    return np.minimum((turn * group_count / (2.0 * np.pi)).astype(np.int64), group_count - 1)
+
+
+def _as_rows(a, name: str) -> np.ndarray:
+    a = np.asarray(a, dtype=np.float64)
+    if a.ndim == 1:
+        a = a[None, :]
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"{name} must be (3,) or (K,3), got shape {a.shape}")
+    return a
+
+
+def analyze_impact(
+    model: BodyModel,
+    contact_point_body,
+    normal_in_body,
+    force_body,
+    material: Material,
+    options: FractureOptions,
+) -> ImpactAnalysis:
+    """Stress and crack planes of one body's contacts in one step (body frame).
+
+    ``contact_point_body``, ``normal_in_body`` (into the body) and ``force_body`` (on the
+    body, [N]) are (3,) for one contact or (K,3) for several analysed together. Contacts
+    with |force| below ``options.impact_force_threshold`` are ignored.
+    """
+    points = model.particle_position
+    volumes = model.tet_volume
+    t_count = model.tet_count
+    n_groups = options.crack_count
+    contact = _as_rows(contact_point_body, "contact_point_body")
+    normal = _as_rows(normal_in_body, "normal_in_body")
+    force = _as_rows(force_body, "force_body")
+    if not (len(contact) == len(normal) == len(force)):
+        raise ValueError("contact points, normals and forces must have the same length")
+    normal = normal / np.linalg.norm(normal, axis=1, keepdims=True)
+    keep = np.linalg.norm(force, axis=1) >= options.impact_force_threshold
+    keep &= np.linalg.norm(force, axis=1) > 0.0
+    contact, normal, force = contact[keep], normal[keep], force[keep]
+    k_count = len(contact)
+    h = default_smoothing_length(volumes, options.smoothing_length_factor)  # support radius
+
+    # Load-patch radius: given, or the radius of the particle nearest the contact.
+    d2 = ((points[None, :, :] - contact[:, None, :]) ** 2).sum(axis=2)  # (K,T)
+    nearest = np.argmin(d2, axis=1) if k_count else np.zeros(0, dtype=np.int64)
+    if options.contact_radius is not None:
+        radius = np.full(k_count, options.contact_radius)
+    else:
+        radius = model.particle_radius[nearest].astype(np.float64)
+    analysis = nearest
+
+    empty = ImpactAnalysis(
+        contact_point=contact, normal_in=normal, force=force, analysis_particle=analysis,
+        analysis_point=points[analysis], smoothing_length=h, contact_radius=radius,
+        particle_stress=np.zeros((t_count, 3, 3)), particle_principal_stress=np.zeros(t_count),
+        group_neighbor_count=np.zeros((0, n_groups), dtype=np.int64),
+        group_stress=np.zeros((0, n_groups, 3, 3)), group_principal_values=np.zeros((0, n_groups, 3)),
+        group_principal_directions=np.zeros((0, n_groups, 3, 3)), cracks=(),
+        tensile_strength=material.tensile_strength,
+    )
+    if k_count == 0:
+        return empty
+
+    # Step 5: superposed half-space displacement of every contact.
+    displacement = np.zeros((t_count, 3))
+    for k in range(k_count):  # loop over contacts (a handful), not particles
+        displacement += point_load_displacement(
+            points, contact[k], normal[k], force[k], material.shear_modulus, material.poisson_ratio,
+            contact_radius=float(radius[k]),
+        )
+
+    # Steps 6-7 on the full field (every neighbour of every particle).
+    offsets, indices = neighbor_lists(points, h)
+    offsets = np.asarray(offsets, dtype=np.int64)
+    indices = np.asarray(indices, dtype=np.int64)
+    grad = displacement_gradient(points, volumes, displacement, offsets, indices, h,
+                                 corrected=options.corrected_gradient)
+    stress = stress_from_gradient(grad, material.young_modulus, material.poisson_ratio)
+    values, _ = principal_stresses(stress)
+    particle_peak = np.asarray(values)[:, 0]
+
+    # Analysis point of each contact: the particle of largest principal stress within
+    # ANALYSIS_RADIUS_FACTOR h of it (right under a point load the stress is compressive;
+    # the tension that cracks brittle solids peaks beside the load, BRIEF.md section 2).
+    in_reach = d2 <= (ANALYSIS_RADIUS_FACTOR * h) ** 2
+    in_reach[np.arange(k_count), nearest] = True
+    analysis = np.argmax(np.where(in_reach, particle_peak[None, :], -np.inf), axis=1)
+
+    # Step 9: each contact's neighbours in n azimuthal sectors, one stress per sector.
+    group_rows, query, counts = [], [], np.zeros((k_count, n_groups), dtype=np.int64)
+    for k in range(k_count):
+        i = int(analysis[k])
+        nbrs = indices[offsets[i]:offsets[i + 1]]
+        sector = group_neighbors(points, nbrs, points[i], normal[k], n_groups,
+                                 start_angle(options.seed, k))
+        order = np.argsort(sector, kind="stable")
+        counts[k] = np.bincount(sector, minlength=n_groups)
+        group_rows.append(nbrs[order])
+        query.extend([i] * n_groups)
+    group_offsets = np.zeros(k_count * n_groups + 1, dtype=np.int64)
+    np.cumsum(counts.reshape(-1), out=group_offsets[1:])
+    group_indices = np.concatenate(group_rows)
+    # n > 1: the plain kernel sum (BRIEF.md eq. 7). The Bonet-Lok correction reproduces a
+    # smooth field's gradient from any non-degenerate subset, so corrected sectors would give
+    # n noisy copies of one direction; the plain sum over a one-sided sector leans toward the
+    # sector, which is what fans the n cracks out (module docstring).
+    group_corrected = options.corrected_gradient if n_groups == 1 else False
+    group_grad = displacement_gradient(points, volumes, displacement, group_offsets, group_indices, h,
+                                       corrected=group_corrected,
+                                       query=np.asarray(query, dtype=np.int64))
+    group_stress = np.asarray(stress_from_gradient(group_grad, material.young_modulus, material.poisson_ratio))
+    g_values, g_dirs = principal_stresses(group_stress)
+    g_values = np.asarray(g_values).reshape(k_count, n_groups, 3)
+    g_dirs = np.asarray(g_dirs).reshape(k_count, n_groups, 3, 3)
+    group_stress = group_stress.reshape(k_count, n_groups, 3, 3)
+
+    # Step 8 (Rankine) and the extent of each crack.
+    over = particle_peak > material.tensile_strength
+    cracks = []
+    for k in range(k_count):
+        origin = points[analysis[k]]
+        if not particle_peak[analysis[k]] > material.tensile_strength:
+            continue  # Rankine: the physical (full-neighbourhood) stress decides whether
+        for g in range(n_groups):
+            peak = float(g_values[k, g, 0])
+            if not np.all(np.isfinite(g_dirs[k, g])) or counts[k, g] == 0:
+                continue
+            crack_normal = g_dirs[k, g, :, 0]
+            crack_normal = crack_normal / np.linalg.norm(crack_normal)
+            if options.crack_length is not None:
+                extent = float(options.crack_length)
+            else:
+                rel = points[over] - origin
+                near_plane = np.abs(rel @ crack_normal) <= h
+                reach = np.linalg.norm(rel[near_plane], axis=1)
+                extent = max(h, float(reach.max()) if reach.size else 0.0)
+            cracks.append(CrackPlane(point=origin.copy(), normal=crack_normal, extent=extent,
+                                     peak_stress=peak, impact_index=k, group_index=g))
+
+    return ImpactAnalysis(
+        contact_point=contact, normal_in=normal, force=force, analysis_particle=analysis,
+        analysis_point=points[analysis].copy(), smoothing_length=h, contact_radius=radius,
+        particle_stress=stress, particle_principal_stress=particle_peak,
+        group_neighbor_count=counts, group_stress=group_stress, group_principal_values=g_values,
+        group_principal_directions=g_dirs, cracks=tuple(cracks),
+        tensile_strength=material.tensile_strength,
+    )
+
+
+def cut_bonds(model: BodyModel, cracks) -> np.ndarray:
+    """Which bonds the cracks cut: (B,) bool.
+
+    A crack cuts bond (i, j) when the segment between the two tets' centroids crosses the
+    crack plane (the centroids lie strictly on opposite sides, or one on it) and the
+    crossing point lies within ``extent`` of the crack's point. Vectorised over cracks x bonds.
+    """
+    bonds = model.bonds
+    cut = np.zeros(len(bonds), dtype=bool)
+    if not len(cracks) or not len(bonds):
+        return cut
+    xi = model.particle_position[bonds[:, 0]]
+    xj = model.particle_position[bonds[:, 1]]
+    p = np.stack([c.point for c in cracks])  # (C,3)
+    nrm = np.stack([c.normal for c in cracks])  # (C,3)
+    ext = np.array([c.extent for c in cracks])  # (C,)
+    di = xi @ nrm.T - (p * nrm).sum(axis=1)  # (B,C) signed distances
+    dj = xj @ nrm.T - (p * nrm).sum(axis=1)
+    crosses = (di >= 0.0) != (dj >= 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(crosses, di / (di - dj), 0.0)
+    hit = xi[:, None, :] + t[:, :, None] * (xj - xi)[:, None, :]  # (B,C,3)
+    within = ((hit - p[None]) ** 2).sum(axis=2) <= ext[None, :] ** 2
+    return np.any(crosses & within, axis=1)
