@@ -1,0 +1,176 @@
+"""Fragments (BRIEF.md step 10): conservation at every split, small-fragment policies,
+a one-tet fragment, refracture with composed source_tet."""
+
+import numpy as np
+import pytest
+
+from _fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL, ring_model
+from taichi_frac.fracture.cracks import CrackPlane, analyze_impact
+from taichi_frac.fracture.fragments import make_fragments, quaternion_matrix, split_body
+from taichi_frac.geometry.mass import tet_mass_properties
+from taichi_frac.geometry.topology import TET_FACES
+from taichi_frac.options import FractureOptions, Material, ParticleOptions
+
+MATERIAL = Material(name="ring", density=2400.0, young_modulus=70e9, poisson_ratio=0.2, tensile_strength=1.0e6)
+PARTICLES = ParticleOptions(boundary_group_size=4)
+POSE = dict(position=np.array([0.3, -0.2, 1.1]), orientation_wxyz=np.array([0.8, 0.2, -0.4, 0.4]),
+            linear_velocity=np.array([1.5, -0.4, -3.0]), angular_velocity=np.array([4.0, -7.0, 2.5]))
+ORIGIN = np.array([-1.0, 2.0, 0.5])  # fixed world point for angular momentum [m]
+TOL = 1e-6
+
+
+def rigid_totals(vertices, tets, density, position, rot, velocity, omega):
+    """Mass, linear momentum and angular momentum about ORIGIN of a rigid tet set whose
+    vertices are given in a frame placed at ``position`` with rotation ``rot``: integrated
+    here from the tets (geometry.mass), not read from any BodyModel."""
+    props = tet_mass_properties(vertices, tets, density)
+    com_world = position + rot @ props.center_of_mass
+    v_com = velocity + np.cross(omega, rot @ props.center_of_mass)
+    inertia_world = rot @ props.inertia @ rot.T
+    angular = props.mass * np.cross(com_world - ORIGIN, v_com) + inertia_world @ omega
+    return props.mass, props.mass * v_com, angular
+
+
+def fragment_totals(frags):
+    mass, linear, angular = 0.0, np.zeros(3), np.zeros(3)
+    for f in frags:
+        rot = quaternion_matrix(f.orientation)
+        m = f.model
+        # Each fragment integrated from its own tets in its own body frame.
+        fm, fp, fl = rigid_totals(m.vertices, m.tets, m.density, f.position, rot, f.linear_velocity,
+                                  f.angular_velocity)
+        assert fm == pytest.approx(m.mass, rel=1e-12)
+        mass, linear, angular = mass + fm, linear + fp, angular + fl
+    return mass, linear, angular
+
+
+def assert_conserved(parent, frags, pose, dropped_mass=0.0):
+    rot = quaternion_matrix(pose["orientation_wxyz"])
+    pm, pp, pl = rigid_totals(parent.vertices, parent.tets, parent.density, pose["position"], rot,
+                              pose["linear_velocity"], pose["angular_velocity"])
+    fm, fp, fl = fragment_totals(frags)
+    assert abs(fm + dropped_mass - pm) <= TOL * pm
+    if dropped_mass == 0.0:
+        assert np.linalg.norm(fp - pp) <= TOL * np.linalg.norm(pp)
+        assert np.linalg.norm(fl - pl) <= TOL * np.linalg.norm(pl)
+
+
+@pytest.fixture(scope="module")
+def ring_split():
+    model = ring_model()
+    opts = FractureOptions(crack_count=3, crack_length=0.3, seed=0)
+    analysis = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, MATERIAL, opts)
+    split = split_body(model, analysis, opts)
+    frags = make_fragments(model, split, **POSE, material=MATERIAL, particle_options=PARTICLES, options=opts,
+                           analysis=analysis, birth_frame=17, parent=4)
+    return model, opts, analysis, split, frags
+
+
+def test_ring_split_conserves_mass_and_momenta(ring_split):
+    model, _, analysis, split, frags = ring_split
+    assert len(frags) == split.fragment_count >= 2
+    assert_conserved(model, frags, POSE)
+    # Every parent tet in exactly one fragment; fragments follow the parent's velocity field.
+    np.testing.assert_array_equal(np.sort(np.concatenate([f.parent_tets for f in frags])), np.arange(model.tet_count))
+    rot = quaternion_matrix(POSE["orientation_wxyz"])
+    for f in frags:
+        c = f.model.com_in_source
+        np.testing.assert_allclose(f.position, POSE["position"] + rot @ c, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(f.linear_velocity, POSE["linear_velocity"]
+                                   + np.cross(POSE["angular_velocity"], rot @ c), rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(f.source_tets, model.source_tet[f.parent_tets])
+        assert f.birth_frame == 17 and f.parent == 4 and f.generation == 1 and f.breakable
+        assert f.peak_principal_stress == pytest.approx(analysis.particle_principal_stress[f.parent_tets].max())
+        np.testing.assert_allclose(f.impact.point, POSE["position"] + rot @ RING_CONTACT, atol=1e-12)
+        np.testing.assert_allclose(f.impact.force, rot @ RING_FORCE, atol=1e-9)
+        # Crack faces are new surface: more surface particles than the parent had there.
+        assert f.model.surface_particle_count > np.count_nonzero(model.is_surface[f.parent_tets])
+
+
+def test_refracture_composes_source_tets(ring_split):
+    model, opts, _, _, frags = ring_split
+    piece = max(frags, key=lambda f: f.model.tet_count)
+    pose = dict(position=piece.position, orientation_wxyz=piece.orientation,
+                linear_velocity=piece.linear_velocity, angular_velocity=piece.angular_velocity)
+    # Hit the piece on its particle farthest from its centre, pushing toward the centre.
+    x = piece.model.particle_position
+    far = x[np.argmax(np.linalg.norm(x, axis=1))]
+    normal = -far / np.linalg.norm(far)
+    again_opts = FractureOptions(crack_count=2, crack_length=0.3, seed=1)
+    a = analyze_impact(piece.model, far, normal, 1e4 * normal, MATERIAL, again_opts)
+    split = split_body(piece.model, a, again_opts)
+    assert a.any_crack and split.fragment_count >= 2
+    kids = make_fragments(piece.model, split, **pose, material=MATERIAL, particle_options=PARTICLES,
+                          options=again_opts, analysis=a, parent_generation=piece.generation)
+    assert_conserved(piece.model, kids, pose)
+    root_volume = model.tet_volume
+    for k in kids:
+        assert k.generation == 2
+        # source_tet indexes the ROOT mesh: the same tets, so the same volumes.
+        assert np.isin(k.source_tets, piece.source_tets).all()
+        np.testing.assert_allclose(k.model.tet_volume, root_volume[k.source_tets], rtol=1e-9)
+    np.testing.assert_array_equal(np.sort(np.concatenate([k.source_tets for k in kids])), np.sort(piece.source_tets))
+    last = make_fragments(piece.model, split, **pose, material=MATERIAL, particle_options=PARTICLES,
+                          options=FractureOptions(max_generations=1), parent_generation=1)
+    assert not any(f.breakable for f in last)  # generation 2 > max_generations 1
+
+
+def corner_cracks(model, tet):
+    """Crack discs on the faces of ``tet`` shared with neighbours: isolates it (and maybe a
+    few tets beside it)."""
+    cracks = []
+    p = model.vertices[model.tets[tet]]
+    for k in range(4):
+        if model.tet_neighbor[tet, k] < 0:
+            continue
+        face = p[TET_FACES[k]]
+        n = np.cross(face[1] - face[0], face[2] - face[0])
+        centre = face.mean(axis=0)
+        reach = np.linalg.norm(face - centre, axis=1).max()
+        cracks.append(CrackPlane(point=centre, normal=n / np.linalg.norm(n), extent=0.5 * reach, peak_stress=2e6))
+    return cracks
+
+
+@pytest.mark.parametrize("policy", ["merge", "debris", "drop"])
+def test_small_fragment_policies(policy):
+    model = ring_model()
+    tet = int(model.surface_particles[0])
+    cracks = corner_cracks(model, tet)
+    opts = FractureOptions(min_fragment_particles=8, small_fragment_policy=policy)
+    split = split_body(model, cracks, opts)
+    assert split.component_count >= 2
+    frags = make_fragments(model, split, **POSE, material=MATERIAL, particle_options=PARTICLES, options=opts)
+    sizes = np.array([len(t) for t in split.fragment_tets])
+    tet_mass = model.density * model.tet_volume
+    if policy == "merge":
+        assert split.fragment_count == 1 and sizes[0] == model.tet_count and not split.broke
+        assert_conserved(model, frags, POSE)
+    elif policy == "debris":
+        assert split.fragment_count == split.component_count
+        np.testing.assert_array_equal(split.fragment_is_debris, sizes < 8)
+        assert split.fragment_is_debris.any()
+        assert [f.breakable for f in frags] == [not d for d in split.fragment_is_debris]
+        assert_conserved(model, frags, POSE)
+    else:
+        assert split.fragment_count == 1 and len(split.dropped_tets) > 0 and split.broke
+        assert split.dropped_mass == pytest.approx(tet_mass[split.dropped_tets].sum(), rel=1e-12)
+        assert_conserved(model, frags, POSE, dropped_mass=split.dropped_mass)
+
+
+def test_one_tet_fragment_is_a_valid_body():
+    model = ring_model()
+    tet = int(model.surface_particles[0])
+    opts = FractureOptions(min_fragment_particles=1)
+    split = split_body(model, corner_cracks(model, tet), opts)
+    frags = make_fragments(model, split, **POSE, material=MATERIAL, particle_options=PARTICLES, options=opts)
+    single = [f for f in frags if f.model.tet_count == 1]
+    assert single and tet in [int(f.parent_tets[0]) for f in single]
+    for f in frags:
+        m = f.model
+        assert np.isfinite(m.inertia).all() and np.all(np.linalg.eigvalsh(m.inertia) > 0)
+        assert m.boundary_particle_count >= 1 and np.isfinite(f.position).all()
+        assert np.isfinite(f.linear_velocity).all()
+    one = next(f for f in single if int(f.parent_tets[0]) == tet)
+    assert one.model.mass == pytest.approx(model.particle_mass[tet], rel=1e-12)
+    assert one.model.surface_particle_count == 1 and len(one.model.surface_faces) == 4
+    assert_conserved(model, frags, POSE)
