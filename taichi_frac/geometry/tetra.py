@@ -17,6 +17,8 @@ Backends are plain functions ``(vertices, faces, max_volume, min_dihedral_deg) -
 from __future__ import annotations
 
 import math
+import os
+import tempfile
 import time
 from dataclasses import dataclass
 
@@ -88,7 +90,14 @@ def _wildmeshing(vertices, faces, max_volume, min_dihedral_deg):
     mesher = wildmeshing.Tetrahedralizer(stop_quality=10, max_its=80, epsilon=1e-3,
                                          edge_length_r=min(max(edge / diag, 1e-4), 1.0))
     mesher.set_mesh(np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int32))
-    mesher.tetrahedralize()
+    # fTetWild writes a scratch file "__tracked_surface.stl" into the working directory.
+    cwd = os.getcwd()
+    with tempfile.TemporaryDirectory() as scratch:
+        os.chdir(scratch)
+        try:
+            mesher.tetrahedralize()
+        finally:
+            os.chdir(cwd)
     result = mesher.get_tet_mesh()  # (vertices, tets, per-tet attribute)
     return np.asarray(result[0], dtype=np.float64), np.asarray(result[1], dtype=np.int64)
 

@@ -1,0 +1,277 @@
+"""A scene as plain data: breakable and rigid objects, static colliders, simulation and
+output settings. The same structure comes from a TOML file (``load_scene``) or is written
+directly in Python:
+
+    from taichi_frac.scenes import Scene, SceneObject, Collider
+    scene = Scene(
+        name="drop",
+        objects=[SceneObject(name="ring", primitive="torus", material="porcelain",
+                             position=(0, 0, 1.0), euler_deg=(90, 0, 0))],
+        colliders=[Collider.ground()],
+    )
+
+Every field maps one to one onto a TOML key of the same name (see docs/readme/foundation.md).
+World frame: Z up, metres, seconds; quaternions (w, x, y, z).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..geometry.meshio_in import UNITS
+from ..geometry.primitives import parse_primitive_spec
+from ..options import (
+    FractureOptions,
+    Material,
+    OptionError,
+    ParticleOptions,
+    SimulationOptions,
+    check_range,
+    material_preset,
+)
+
+#: The scene file's [simulation] table is exactly :class:`SimulationOptions`.
+SimulationSettings = SimulationOptions
+
+
+def euler_deg_to_quaternion(euler_deg) -> tuple[float, float, float, float]:
+    """Extrinsic X, then Y, then Z rotations [degrees] (Blender's "XYZ Euler") -> (w,x,y,z).
+
+    R = Rz(c) Ry(b) Rx(a), i.e. q = qz * qy * qx.
+    """
+    a, b, c = (math.radians(float(x)) / 2.0 for x in euler_deg)
+    qx = np.array([math.cos(a), math.sin(a), 0.0, 0.0])
+    qy = np.array([math.cos(b), 0.0, math.sin(b), 0.0])
+    qz = np.array([math.cos(c), 0.0, 0.0, math.sin(c)])
+    return tuple(float(v) for v in _qmul(qz, _qmul(qy, qx)))
+
+
+def _qmul(p, q):
+    w1, x1, y1, z1 = p
+    w2, x2, y2, z2 = q
+    return np.array([
+        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+    ])
+
+
+def _vec3(owner, name, value) -> tuple[float, float, float]:
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 3:
+        raise OptionError(f"{owner}.{name} must be a list of 3 numbers, got {value!r}")
+    for v in value:
+        check_range(owner, name, v)
+    return tuple(float(v) for v in value)
+
+
+def _unit_quaternion(owner, value) -> tuple[float, float, float, float]:
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 4:
+        raise OptionError(f"{owner}.orientation must be a quaternion [w, x, y, z] (4 numbers), got {value!r}")
+    for v in value:
+        check_range(owner, "orientation", v)
+    q = np.asarray(value, dtype=np.float64)
+    norm = float(np.linalg.norm(q))
+    if norm < 1e-9:
+        raise OptionError(f"{owner}.orientation = {list(value)!r} has zero length: use [1, 0, 0, 0] for no rotation")
+    return tuple(float(v) for v in q / norm)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SceneObject:
+    """One solid in the scene.
+
+    Attributes:
+        name: unique label (USD prim name of its fragments).
+        mesh: surface or tet-mesh file (relative paths are relative to the scene file).
+        primitive: or a primitive spec, e.g. "torus" or "box:x=1,y=1,z=0.01" (metres).
+        scale: multiplies the mesh's coordinates [-].
+        units: unit of the mesh file's coordinates: "m", "cm" or "mm".
+        repair: repair the mesh before meshing (holes, flips, self-intersections).
+        material: a preset name ("porcelain", "soda_lime_glass", "concrete") or a Material.
+        breakable: False for rigid props (a projectile); they never fracture.
+        position: (3,) [m] world position of the body-frame origin = the centre of mass.
+        orientation: (w,x,y,z) unit quaternion, body -> world. Normalised on construction.
+        euler_deg: alternative to orientation: (3,) extrinsic XYZ angles [degrees].
+        linear_velocity: (3,) [m/s] initial velocity of the centre of mass.
+        angular_velocity: (3,) [rad/s] initial angular velocity, world frame.
+        friction: Coulomb friction coefficient [-], >= 0.
+        restitution: coefficient of restitution [-], in [0, 1].
+        particles: discretisation (ParticleOptions).
+        fracture: crack controls (FractureOptions).
+
+    Note on position: the source mesh's origin is generally not its centre of mass; the
+    body is placed so its centre of mass is at ``position`` (the body frame is COM-centred).
+    """
+
+    name: str
+    mesh: str | None = None
+    primitive: str | None = None
+    scale: float = 1.0
+    units: str = "m"
+    repair: bool = False
+    material: Material | str = "porcelain"
+    breakable: bool = True
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    orientation: tuple[float, float, float, float] | None = None
+    euler_deg: tuple[float, float, float] | None = None
+    linear_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    angular_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    friction: float = 0.5
+    restitution: float = 0.2
+    particles: ParticleOptions = field(default_factory=ParticleOptions)
+    fracture: FractureOptions = field(default_factory=FractureOptions)
+
+    def __post_init__(self):
+        owner = f"objects[{self.name!r}]"
+        if not isinstance(self.name, str) or not self.name:
+            raise OptionError(f"every object needs a non-empty name, got {self.name!r}")
+        if (self.mesh is None) == (self.primitive is None):
+            raise OptionError(f"{owner}: give exactly one of mesh = \"file\" or primitive = \"torus\"")
+        if self.primitive is not None and parse_primitive_spec(self.primitive) is None:
+            raise OptionError(f"{owner}.primitive = {self.primitive!r}: use torus, ring, box, sphere or cylinder, "
+                              "optionally with parameters, e.g. \"torus:major=0.1,minor=0.025\"")
+        check_range(owner, "scale", self.scale, 0.0, None, low_open=True)
+        if self.units not in UNITS:
+            raise OptionError(f"{owner}.units = {self.units!r}: use one of {', '.join(UNITS)}")
+        if isinstance(self.material, str):
+            object.__setattr__(self, "material", material_preset(self.material))
+        elif not isinstance(self.material, Material):
+            raise OptionError(f"{owner}.material must be a preset name or a Material, got {self.material!r}")
+        object.__setattr__(self, "position", _vec3(owner, "position", self.position))
+        object.__setattr__(self, "linear_velocity", _vec3(owner, "linear_velocity", self.linear_velocity))
+        object.__setattr__(self, "angular_velocity", _vec3(owner, "angular_velocity", self.angular_velocity))
+        if self.orientation is not None and self.euler_deg is not None:
+            raise OptionError(f"{owner}: give orientation (quaternion w,x,y,z) or euler_deg, not both")
+        if self.euler_deg is not None:
+            euler = _vec3(owner, "euler_deg", self.euler_deg)
+            object.__setattr__(self, "euler_deg", euler)
+            object.__setattr__(self, "orientation", euler_deg_to_quaternion(euler))
+        else:
+            object.__setattr__(self, "orientation", _unit_quaternion(owner, self.orientation or (1.0, 0.0, 0.0, 0.0)))
+        check_range(owner, "friction", self.friction, 0.0, 10.0)
+        check_range(owner, "restitution", self.restitution, 0.0, 1.0)
+        for key, cls in (("particles", ParticleOptions), ("fracture", FractureOptions)):
+            if not isinstance(getattr(self, key), cls):
+                raise OptionError(f"{owner}.{key} must be a {cls.__name__}")
+
+    @property
+    def source(self) -> str:
+        """What ``geometry.prepare.prepare_body`` takes: the mesh path or the primitive spec."""
+        return self.mesh if self.mesh is not None else self.primitive
+
+    def prepare(self, *, use_cache: bool = True, backend: str = "tetgen"):
+        """Mesh and model this object: ``(BodyModel, PrepareReport)`` (see prepare_body)."""
+        from ..geometry.prepare import prepare_body
+
+        return prepare_body(self.source, scale=self.scale, units=self.units, material=self.material,
+                            particles=self.particles, repair=self.repair, backend=backend, use_cache=use_cache)
+
+
+COLLIDER_TYPES = ("ground", "box")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Collider:
+    """A static collider: an infinite ground plane z = height, or an oriented box.
+
+    Attributes:
+        type: "ground" or "box".
+        height: ground plane height [m] (ground only).
+        center: (3,) [m] box centre (box only).
+        half_extents: (3,) [m] box half side lengths, > 0 (box only).
+        orientation: (w,x,y,z) box rotation (box only); or euler_deg (3,) [degrees].
+        friction: [-] >= 0.  restitution: [-] in [0, 1].
+    """
+
+    type: str = "ground"
+    height: float = 0.0
+    center: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    half_extents: tuple[float, float, float] = (0.5, 0.5, 0.5)
+    orientation: tuple[float, float, float, float] | None = None
+    euler_deg: tuple[float, float, float] | None = None
+    friction: float = 0.5
+    restitution: float = 0.2
+
+    def __post_init__(self):
+        owner = f"colliders[{self.type!r}]"
+        if self.type not in COLLIDER_TYPES:
+            raise OptionError(f"collider type = {self.type!r}: use one of {', '.join(COLLIDER_TYPES)}")
+        check_range(owner, "height", self.height)
+        object.__setattr__(self, "center", _vec3(owner, "center", self.center))
+        half = _vec3(owner, "half_extents", self.half_extents)
+        for h in half:
+            check_range(owner, "half_extents", h, 0.0, None, low_open=True)
+        object.__setattr__(self, "half_extents", half)
+        if self.orientation is not None and self.euler_deg is not None:
+            raise OptionError(f"{owner}: give orientation or euler_deg, not both")
+        if self.euler_deg is not None:
+            object.__setattr__(self, "orientation", euler_deg_to_quaternion(_vec3(owner, "euler_deg", self.euler_deg)))
+        else:
+            object.__setattr__(self, "orientation", _unit_quaternion(owner, self.orientation or (1.0, 0.0, 0.0, 0.0)))
+        check_range(owner, "friction", self.friction, 0.0, 10.0)
+        check_range(owner, "restitution", self.restitution, 0.0, 1.0)
+
+    @classmethod
+    def ground(cls, height: float = 0.0, **kwargs) -> "Collider":
+        return cls(type="ground", height=height, **kwargs)
+
+    @classmethod
+    def box(cls, center, half_extents, **kwargs) -> "Collider":
+        return cls(type="box", center=center, half_extents=half_extents, **kwargs)
+
+
+@dataclass(frozen=True, kw_only=True)
+class OutputSettings:
+    """Where and how the cache is written.
+
+    Attributes:
+        path: the .usdc (or .usda) file; relative paths are relative to the scene file.
+        checkpoint_every: also flush the file every this many frames (0: only at the end).
+    """
+
+    path: str = "out.usdc"
+    checkpoint_every: int = 0
+
+    def __post_init__(self):
+        if not isinstance(self.path, str) or not self.path.lower().endswith((".usdc", ".usda", ".usd")):
+            raise OptionError(f"output.path = {self.path!r}: must be a .usdc, .usda or .usd file name")
+        check_range("output", "checkpoint_every", self.checkpoint_every, 0, 1_000_000)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Scene:
+    """A whole scene. ``source_path`` is the TOML file it came from (None from Python)."""
+
+    name: str = "scene"
+    objects: list[SceneObject] = field(default_factory=list)
+    colliders: list[Collider] = field(default_factory=list)
+    simulation: SimulationOptions = field(default_factory=SimulationOptions)
+    output: OutputSettings = field(default_factory=OutputSettings)
+    source_path: Path | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "objects", list(self.objects))
+        object.__setattr__(self, "colliders", list(self.colliders))
+        if not self.objects:
+            raise OptionError(f"scene {self.name!r} has no objects: add at least one [[objects]] table")
+        names = [o.name for o in self.objects]
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        if dupes:
+            raise OptionError(f"scene {self.name!r}: object names must be unique, repeated: {', '.join(dupes)}")
+
+    @property
+    def output_path(self) -> Path:
+        """The output file, resolved against the scene file's folder."""
+        p = Path(self.output.path)
+        if not p.is_absolute() and self.source_path is not None:
+            p = Path(self.source_path).parent / p
+        return p
+
+    @property
+    def breakable_objects(self) -> list[SceneObject]:
+        return [o for o in self.objects if o.breakable]

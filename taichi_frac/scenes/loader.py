@@ -1,0 +1,162 @@
+"""Scene files (TOML) -> :class:`Scene`.
+
+Keys map one to one onto the dataclass fields of ``scenes.description`` and
+``taichi_frac.options``. Unknown keys, wrong types and out-of-range values raise
+``OptionError`` messages that name the file, the key path (``objects[2].particles.foo``)
+and what is allowed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import tomllib
+import typing
+from pathlib import Path
+
+from ..options import (
+    FractureOptions,
+    Material,
+    MATERIAL_PRESETS,
+    OptionError,
+    ParticleOptions,
+    SimulationOptions,
+)
+from .description import Collider, OutputSettings, Scene, SceneObject
+
+# TOML value types accepted for each annotated field type (bool is not a number here).
+_SCALARS = {"int": (int,), "float": (int, float), "bool": (bool,), "str": (str,)}
+
+
+def _type_ok(annotation: str, value) -> bool:
+    """Does TOML ``value`` fit the (string) annotation of an options field?"""
+    for alt in (a.strip() for a in annotation.split("|")):
+        if alt == "None":
+            continue
+        if alt in _SCALARS:
+            if isinstance(value, bool) and alt != "bool":
+                continue
+            if isinstance(value, _SCALARS[alt]):
+                return True
+        elif alt.startswith("tuple") and isinstance(value, list):
+            inner = alt[alt.index("[") + 1: -1].split(",")
+            if len(value) == len(inner) and all(_type_ok(t.strip(), v) for t, v in zip(inner, value)):
+                return True
+        elif alt.startswith(("Material", "ParticleOptions", "FractureOptions", "list")):
+            continue  # handled by the caller
+    return False
+
+
+def _build(cls, table, where: str, *, skip=(), extra=None):
+    """Construct option dataclass ``cls`` from TOML ``table``: unknown keys and wrong types
+    raise OptionError naming ``where``.key; range errors come from the class itself."""
+    if not isinstance(table, dict):
+        raise OptionError(f"{where} must be a table ({{...}} or [section]), got {table!r}")
+    hints = {f.name: f.type if isinstance(f.type, str) else typing.get_type_hints(cls)[f.name]
+             for f in dataclasses.fields(cls) if f.init}
+    allowed = [k for k in hints if k not in ("source_path",)]
+    kwargs = {}
+    for key, value in table.items():
+        if key not in allowed:
+            raise OptionError(f"{where}: unknown key {key!r}; allowed keys: {', '.join(allowed)}")
+        if key in skip:
+            continue
+        annotation = str(hints[key])
+        if not _type_ok(annotation, value):
+            raise OptionError(f"{where}.{key} = {value!r} has the wrong type: expected {annotation.replace('tuple', 'list')}")
+        kwargs[key] = tuple(value) if isinstance(value, list) else value
+    if extra:
+        kwargs.update(extra)
+    try:
+        return cls(**kwargs)
+    except OptionError as exc:
+        raise OptionError(f"{where}: {exc}") from None
+    except TypeError as exc:  # a missing required key
+        raise OptionError(f"{where}: {exc}") from None
+
+
+def _material(value, where: str) -> Material:
+    """A preset name, or a table of Material fields, optionally starting from ``preset``."""
+    if isinstance(value, str):
+        if value not in MATERIAL_PRESETS:
+            raise OptionError(f"{where} = {value!r}: unknown preset; use one of {', '.join(sorted(MATERIAL_PRESETS))} "
+                              "or a table {density = ..., young_modulus = ..., poisson_ratio = ..., tensile_strength = ...}")
+        return MATERIAL_PRESETS[value]
+    if not isinstance(value, dict):
+        raise OptionError(f"{where} must be a preset name or a table, got {value!r}")
+    table = dict(value)
+    preset = table.pop("preset", None)
+    if preset is not None:
+        base = _material(preset, f"{where}.preset")
+        merged = dataclasses.asdict(base)
+        merged.update(table)
+        table = merged
+    return _build(Material, table, where)
+
+
+def _object(table, index: int, base_dir: Path | None, where_file: str) -> SceneObject:
+    name = table.get("name", f"object{index}") if isinstance(table, dict) else None
+    where = f"{where_file}: objects[{index}]"
+    if not isinstance(table, dict):
+        raise OptionError(f"{where} must be a table ([[objects]]), got {table!r}")
+    extra = {}
+    if "material" in table:
+        extra["material"] = _material(table["material"], f"{where}.material")
+    if "particles" in table:
+        extra["particles"] = _build(ParticleOptions, table["particles"], f"{where}.particles")
+    if "fracture" in table:
+        extra["fracture"] = _build(FractureOptions, table["fracture"], f"{where}.fracture")
+    mesh = table.get("mesh")
+    if isinstance(mesh, str):
+        path = Path(mesh).expanduser()
+        if not path.is_absolute() and base_dir is not None:
+            path = base_dir / path
+        if not path.exists():
+            raise OptionError(f"{where}.mesh = {mesh!r}: file not found (looked at {str(path)!r})")
+        extra["mesh"] = str(path)
+    extra.setdefault("name", name)
+    return _build(SceneObject, table, where, skip=("material", "particles", "fracture", "mesh"), extra=extra)
+
+
+def scene_from_dict(data: dict, *, where: str = "scene", base_dir: str | os.PathLike | None = None,
+                    source_path: Path | None = None) -> Scene:
+    """Build a Scene from the parsed TOML structure (``where`` names it in errors)."""
+    top = ("name", "objects", "colliders", "simulation", "output")
+    for key in data:
+        if key not in top:
+            raise OptionError(f"{where}: unknown top-level key {key!r}; allowed: {', '.join(top)}")
+    base = Path(base_dir) if base_dir is not None else None
+    objects = data.get("objects", [])
+    if not isinstance(objects, list):
+        raise OptionError(f"{where}: objects must be an array of tables ([[objects]])")
+    colliders = data.get("colliders", [])
+    if not isinstance(colliders, list):
+        raise OptionError(f"{where}: colliders must be an array of tables ([[colliders]])")
+    name = data.get("name", Path(where).stem if source_path else "scene")
+    if not isinstance(name, str):
+        raise OptionError(f"{where}: name must be a string, got {name!r}")
+    try:
+        return Scene(
+            name=name,
+            objects=[_object(t, i, base, where) for i, t in enumerate(objects)],
+            colliders=[_build(Collider, t, f"{where}: colliders[{i}]") for i, t in enumerate(colliders)],
+            simulation=_build(SimulationOptions, data.get("simulation", {}), f"{where}: simulation"),
+            output=_build(OutputSettings, data.get("output", {"path": f"{name}.usdc"}), f"{where}: output"),
+            source_path=source_path,
+        )
+    except OptionError as exc:
+        msg = str(exc)
+        raise OptionError(msg if msg.startswith(where) else f"{where}: {msg}") from None
+
+
+def load_scene(path: str | os.PathLike) -> Scene:
+    """Read a scene TOML file. Raises OptionError (bad content) or FileNotFoundError."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"scene file {str(path)!r} does not exist")
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise OptionError(f"{path.name}: not valid TOML: {exc}") from None
+    return scene_from_dict(data, where=path.name, base_dir=path.parent, source_path=path.resolve())
