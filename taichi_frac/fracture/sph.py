@@ -16,6 +16,8 @@ per process whatever the array sizes.
 """
 
 
+import math
+
 import numpy as np
 import taichi as ti
 
@@ -48,7 +50,8 @@ def default_smoothing_length(volumes, factor: float = 2.0) -> float:
 def cubic_spline_dwdr(r: ti.f64, h: ti.f64) -> ti.f64:
     """dW/dr of the cubic spline with support h [1/m^4]; 0 outside (0, h)."""
     q = r / h
-    k = 8.0 / (ti.math.pi * h * h * h * h)  # 8 / (pi h^3), times 1/h for d/dr
+    # ti.f64(pi): bare float literals in kernels are f32 constants (runtime default_fp).
+    k = 8.0 / (ti.f64(math.pi) * h * h * h * h)  # 8 / (pi h^3), times 1/h for d/dr
     result = ti.cast(0.0, ti.f64)  # a bare literal would be the default f32
     if q <= 0.5:
         result = k * (18.0 * q * q - 12.0 * q)
@@ -61,7 +64,7 @@ def cubic_spline_dwdr(r: ti.f64, h: ti.f64) -> ti.f64:
 def cubic_spline_w(r: ti.f64, h: ti.f64) -> ti.f64:
     """W(r, h) of the cubic spline with support h [1/m^3]; integrates to 1 over R^3."""
     q = r / h
-    k = 8.0 / (ti.math.pi * h * h * h)
+    k = 8.0 / (ti.f64(math.pi) * h * h * h)
     result = ti.cast(0.0, ti.f64)  # a bare literal would be the default f32
     if q <= 0.5:
         result = k * (6.0 * q * q * q - 6.0 * q * q + 1.0)

@@ -62,7 +62,7 @@ def sym_eig3_f64(a):
     v = ti.Matrix.identity(ti.f64, 3)
     for _sweep in range(_JACOBI_SWEEPS):
         for p, q in ti.static([(0, 1), (0, 2), (1, 2)]):
-            if ti.abs(a[p, q]) > 1.0e-300:
+            if a[p, q] != 0.0:  # tiny a[p,q]: theta -> inf, t -> 0, no NaN
                 # Rotation annihilating a[p, q] (Numerical Recipes §11.1, eqs. 11.1.8-11.1.10).
                 theta = (a[q, q] - a[p, p]) / (2.0 * a[p, q])
                 t = 1.0 / (ti.abs(theta) + ti.sqrt(theta * theta + 1.0))
