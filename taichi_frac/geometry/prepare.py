@@ -9,8 +9,10 @@ density and grouping options that change more often than the shape.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,7 +20,6 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from .. import runtime
 from ..model import BodyModel, build_body_model
 from ..options import Material, ParticleOptions, material_preset
 from .meshio_in import is_tet_file, load_surface, load_tet_mesh, unit_scale
@@ -101,10 +102,18 @@ def _cache_key(mesh: trimesh.Trimesh, backend: str, target: int | None, max_volu
     return h.hexdigest()
 
 
+def _cache_root() -> Path:
+    """``runtime.cache_dir()``; importing runtime imports Taichi, whose banner goes to stdout
+    and would corrupt ``info --json``, so it is sent to stderr."""
+    with contextlib.redirect_stdout(sys.stderr):
+        from .. import runtime
+    return runtime.cache_dir()
+
+
 def _cached_tetrahedralize(mesh, *, backend, target, max_volume, min_dihedral, use_cache):
     """Returns (TetMesh, cache_hit)."""
     key = _cache_key(mesh, backend, target, max_volume, min_dihedral)
-    path = runtime.cache_dir() / "tets" / f"{key}.npz"
+    path = _cache_root() / "tets" / f"{key}.npz"
     if use_cache and path.exists():
         try:
             with np.load(path) as data:
