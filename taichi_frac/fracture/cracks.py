@@ -6,15 +6,17 @@ of a contact never needs the body's world pose.
 Decisions (the paper leaves them open; docs/readme/fracture.md explains them for artists):
 
 - **Analysis point**: for each contact, the physics particle of largest principal stress
-  within 2 smoothing lengths (kernel support radii) of the contact point (the "maximum only" choice: under a point
-  load the material right below the load is in compression; the tension that cracks a
-  brittle solid peaks beside it, at about the contact-patch scale). The full stress field (every particle, every neighbour) is also computed: it sets the crack
-  extent when ``crack_length`` is None and the per-fragment peak stress.
+  within 2 smoothing lengths (kernel support radii) of the contact point (the "maximum
+  only" choice: under a point load the material right below the load is in compression;
+  the tension that cracks a brittle solid peaks beside it). The full stress field (every
+  particle, every neighbour) is also computed: it sets the crack extent when
+  ``crack_length`` is None and the per-fragment peak stress.
 - **Several contacts in one step** are analysed together: linear elasticity superposes, so
   the displacement field is the sum of every contact's Boussinesq-Cerruti field; each
   contact then gets its own analysis point and its own cracks (the union is cut).
 - **Grouping (step 9)**: the analysis point's SPH neighbours are split into n =
-  ``crack_count`` sectors by their azimuth around the contact normal, measured from a
+  ``crack_count`` sectors by their azimuth around the contact-normal axis through the
+  analysis point, measured from a
   start angle drawn from ``seed`` (and the contact's index, so two contacts of one step do
   not share it). Sector k holds the neighbours with azimuth in
   [theta0 + 2 pi k / n, theta0 + 2 pi (k+1) / n). Each sector's neighbours alone give a
