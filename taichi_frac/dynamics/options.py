@@ -1,0 +1,124 @@
+"""Capacities and solver options of the rigid-body world (plain data, SI units)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..options import OptionError, SimulationOptions, check_range
+
+
+class CapacityError(RuntimeError):
+    """A fixed capacity of the world is exhausted. The message names it and how to raise it."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class WorldCapacity:
+    """Sizes of the Taichi fields, allocated once when the World is built.
+
+    Attributes:
+        max_bodies: body slots (removed bodies free their slot for reuse).
+        max_boundary_particles: collision particle slots over all bodies (boundary layer,
+            or surface particles for single-scale bodies); a body's particles take one
+            contiguous range, freed ranges are reused (first fit).
+        max_contacts: particle contacts per substep; more are counted in
+            ``stats.contact_overflows`` and reported, never silently dropped.
+        max_impacts: impact rows kept per ``advance`` (one per body pair per substep above
+            ``record_force_threshold``); more are counted in ``stats.impact_overflows``.
+        max_static_boxes: static boxes (walls, inclines).
+        max_planes: ground planes.
+    """
+
+    max_bodies: int = 1024
+    max_boundary_particles: int = 65536
+    max_contacts: int = 131072
+    max_impacts: int = 16384
+    max_static_boxes: int = 64
+    max_planes: int = 4
+
+    def __post_init__(self):
+        check_range("capacity", "max_bodies", self.max_bodies, 1, 10_000_000)
+        check_range("capacity", "max_boundary_particles", self.max_boundary_particles, 1, 100_000_000)
+        check_range("capacity", "max_contacts", self.max_contacts, 1, 100_000_000)
+        check_range("capacity", "max_impacts", self.max_impacts, 1, 100_000_000)
+        check_range("capacity", "max_static_boxes", self.max_static_boxes, 1, 100_000)
+        check_range("capacity", "max_planes", self.max_planes, 1, 1000)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DynamicsOptions:
+    """The rigid-body solver's settings.
+
+    Attributes:
+        solver_iterations: sequential-impulse sweeps over the contacts per substep.
+        restitution_iterations: extra sweeps that only apply restitution (after the main
+            sweeps, Box2D v3 style), so a bounce is the asked fraction of the approach.
+        gravity: (3,) [m/s^2].
+        max_substeps: cap on substeps per frame after the anti-tunnelling refinement; when
+            hit, ``stats.substep_limit_hits`` counts it.
+        substep_motion_fraction: a substep is shortened until no body point moves further
+            than this fraction of the body's smallest particle radius [-].
+        contact_margin: speculative contact distance as a fraction of the mean radius of the
+            two spheres [-]; contacts are made this far before touching, so a body moving
+            less than that per substep cannot tunnel.
+        position_correction: split-impulse factor beta: a fraction of the penetration
+            removed per substep through pseudo-velocities that do not add kinetic energy [-].
+        allowed_penetration: penetration left alone (slop), fraction of particle radius [-].
+        max_correction_speed: cap on the split-impulse push-out speed [m/s] (deeply
+            overlapped bodies separate gently instead of exploding).
+        restitution_threshold: approach speeds below this do not bounce [m/s].
+        single_scale: default of ``add_body(single_scale=None)``: collide with the physics
+            surface particles instead of the boundary layer.
+        sleep_linear_speed, sleep_angular_speed, sleep_time: a body slower than both for
+            sleep_time [s] sleeps (velocity zeroed, no integration) until woken.
+        record_force_threshold: impact rows are kept when |impulse| / dt exceeds this [N].
+        stage_timing: synchronise the device after each stage so ``stats.seconds`` is exact.
+    """
+
+    solver_iterations: int = 10
+    restitution_iterations: int = 4
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    max_substeps: int = 200
+    substep_motion_fraction: float = 0.5
+    contact_margin: float = 0.5
+    position_correction: float = 0.2
+    allowed_penetration: float = 0.01
+    max_correction_speed: float = 1.0
+    restitution_threshold: float = 0.2
+    single_scale: bool = False
+    sleep_linear_speed: float = 0.01
+    sleep_angular_speed: float = 0.05
+    sleep_time: float = 0.5
+    record_force_threshold: float = 0.0
+    stage_timing: bool = True
+
+    def __post_init__(self):
+        check_range("dynamics", "solver_iterations", self.solver_iterations, 1, 1000)
+        check_range("dynamics", "restitution_iterations", self.restitution_iterations, 0, 1000)
+        if len(self.gravity) != 3:
+            raise OptionError(f"dynamics.gravity must have 3 components, got {self.gravity!r}")
+        check_range("dynamics", "max_substeps", self.max_substeps, 1, 1_000_000)
+        check_range("dynamics", "substep_motion_fraction", self.substep_motion_fraction, 0.0, 10.0, low_open=True)
+        check_range("dynamics", "contact_margin", self.contact_margin, 0.0, 4.0)
+        check_range("dynamics", "position_correction", self.position_correction, 0.0, 1.0)
+        check_range("dynamics", "allowed_penetration", self.allowed_penetration, 0.0, 1.0)
+        check_range("dynamics", "max_correction_speed", self.max_correction_speed, 0.0, None, low_open=True)
+        check_range("dynamics", "restitution_threshold", self.restitution_threshold, 0.0, None)
+        check_range("dynamics", "sleep_linear_speed", self.sleep_linear_speed, 0.0, None)
+        check_range("dynamics", "sleep_angular_speed", self.sleep_angular_speed, 0.0, None)
+        check_range("dynamics", "sleep_time", self.sleep_time, 0.0, None)
+        check_range("dynamics", "record_force_threshold", self.record_force_threshold, 0.0, None)
+
+    @classmethod
+    def from_simulation(cls, sim: SimulationOptions, **overrides) -> "DynamicsOptions":
+        """The solver settings a scene's ``SimulationOptions`` implies (plus overrides)."""
+        values = dict(
+            solver_iterations=sim.solver_iterations,
+            gravity=tuple(sim.gravity),
+            max_substeps=sim.max_substeps,
+            single_scale=sim.single_scale,
+            sleep_linear_speed=sim.sleep_linear_speed,
+            sleep_angular_speed=sim.sleep_angular_speed,
+            sleep_time=sim.sleep_time,
+        )
+        values.update(overrides)
+        return cls(**values)

@@ -1,0 +1,124 @@
+"""Preallocated Taichi fields of the rigid-body world (allocated once, slots reused).
+
+Containers only: kernels live in ``collision/`` and ``dynamics/{integrate,solver}.py`` and
+take these objects as ``ti.template()`` arguments (always the same objects, so every kernel
+compiles once). Floats are the runtime default (f32); indices i32. "Writer" names the stage
+that writes each array.
+"""
+
+
+import taichi as ti
+
+vec3 = ti.math.vec3
+vec4 = ti.math.vec4
+mat3 = ti.math.mat3
+
+
+@ti.data_oriented
+class Bodies:
+    """Per-body state, shape (max_bodies,). A slot with ``active == 0`` is free.
+
+    Fields:
+        position: vec3 [m] world position of the centre of mass. Writer: add_body, integrate.
+        orientation: vec4 (w, x, y, z) unit, body -> world. Writer: add_body, integrate.
+        linear_velocity: vec3 [m/s]. Writer: add_body, integrate_velocities, solver.
+        angular_velocity: vec3 [rad/s], world frame. Writer: same.
+        pseudo_linear_velocity, pseudo_angular_velocity: vec3 split-impulse velocities
+            (penetration push-out, never kinetic energy). Writer: solver; cleared by integrate.
+        inverse_mass: [1/kg], 0 for fixed bodies. Writer: add_body.
+        inertia_body: mat3 [kg m^2] about the COM, body axes. Writer: add_body.
+        inverse_inertia_body: mat3 [1/(kg m^2)], body axes, 0 for fixed bodies. Writer: add_body.
+        solver_inverse_mass: [1/kg], this substep (0 when sleeping or fixed).
+            Writer: integrate_velocities.
+        solver_inverse_inertia: mat3 world-frame inverse inertia this substep (0 when
+            sleeping or fixed). Writer: integrate_velocities.
+        friction: Coulomb coefficient [-]. restitution: [-]. Writer: add_body.
+        active: i32 1 = slot in use. fixed: i32 1 = never moves. Writer: add_body/remove_body.
+        sleeping: i32 1 = asleep. sleep_timer: [s] time spent slow. Writer: integrate, wake.
+        wake_request: i32 set by the narrowphase when an awake moving body touches a
+            sleeping one; applied by integrate_velocities.
+        bounding_radius: [m] max |offset| + radius over the body's particles.
+        min_particle_radius: [m] smallest collision particle (substep refinement).
+        particle_start, particle_count: i32 its contiguous range of particle slots.
+        near_body, near_static: i32 culling flags (bounding spheres overlap another body /
+            a static collider). Writer: body_cull (broadphase).
+    """
+
+    def __init__(self, capacity: int):
+        self.capacity = capacity
+        self.position = vec3.field(shape=capacity)
+        self.orientation = vec4.field(shape=capacity)
+        self.linear_velocity = vec3.field(shape=capacity)
+        self.angular_velocity = vec3.field(shape=capacity)
+        self.pseudo_linear_velocity = vec3.field(shape=capacity)
+        self.pseudo_angular_velocity = vec3.field(shape=capacity)
+        self.inverse_mass = ti.field(ti.f32, shape=capacity)
+        self.inertia_body = mat3.field(shape=capacity)
+        self.inverse_inertia_body = mat3.field(shape=capacity)
+        self.solver_inverse_mass = ti.field(ti.f32, shape=capacity)
+        self.solver_inverse_inertia = mat3.field(shape=capacity)
+        self.friction = ti.field(ti.f32, shape=capacity)
+        self.restitution = ti.field(ti.f32, shape=capacity)
+        self.active = ti.field(ti.i32, shape=capacity)
+        self.fixed = ti.field(ti.i32, shape=capacity)
+        self.sleeping = ti.field(ti.i32, shape=capacity)
+        self.sleep_timer = ti.field(ti.f32, shape=capacity)
+        self.wake_request = ti.field(ti.i32, shape=capacity)
+        self.bounding_radius = ti.field(ti.f32, shape=capacity)
+        self.min_particle_radius = ti.field(ti.f32, shape=capacity)
+        self.particle_start = ti.field(ti.i32, shape=capacity)
+        self.particle_count = ti.field(ti.i32, shape=capacity)
+        self.near_body = ti.field(ti.i32, shape=capacity)
+        self.near_static = ti.field(ti.i32, shape=capacity)
+        # Scalars: one past the highest slot in use (loops run to it), and a reduction cell.
+        self.slot_end = ti.field(ti.i32, shape=())
+        self.max_motion_ratio = ti.field(ti.f32, shape=())
+
+
+@ti.data_oriented
+class Particles:
+    """Collision spheres, shape (max_boundary_particles,). ``body == -1``: free slot.
+
+    Fields:
+        body: i32 owning body slot. Writer: add_body / remove_body.
+        offset: vec3 [m] centre in the body frame. radius: [m]. Writer: add_body.
+        world_position: vec3 [m]. Writer: broadphase (particle_cells), for bodies that are
+            near something this substep.
+        cell: ivec3 grid cell of world_position. Writer: broadphase.
+        slot_end: one past the highest slot in use.
+    """
+
+    def __init__(self, capacity: int):
+        self.capacity = capacity
+        self.body = ti.field(ti.i32, shape=capacity)
+        self.offset = vec3.field(shape=capacity)
+        self.radius = ti.field(ti.f32, shape=capacity)
+        self.world_position = vec3.field(shape=capacity)
+        self.cell = ti.math.ivec3.field(shape=capacity)
+        self.slot_end = ti.field(ti.i32, shape=())
+
+
+@ti.data_oriented
+class Statics:
+    """Static colliders: ground planes and oriented boxes.
+
+    Fields:
+        plane_height: [m] z of each horizontal ground plane; plane_friction,
+            plane_restitution [-]. plane_count: scalar.
+        box_center: vec3 [m]; box_rotation: mat3 box -> world; box_half_extents: vec3 [m];
+            box_friction, box_restitution [-]. box_count: scalar. Writer: add_ground/add_static_box.
+    """
+
+    def __init__(self, max_planes: int, max_boxes: int):
+        self.max_planes = max_planes
+        self.max_boxes = max_boxes
+        self.plane_height = ti.field(ti.f32, shape=max_planes)
+        self.plane_friction = ti.field(ti.f32, shape=max_planes)
+        self.plane_restitution = ti.field(ti.f32, shape=max_planes)
+        self.plane_count = ti.field(ti.i32, shape=())
+        self.box_center = vec3.field(shape=max_boxes)
+        self.box_rotation = mat3.field(shape=max_boxes)
+        self.box_half_extents = vec3.field(shape=max_boxes)
+        self.box_friction = ti.field(ti.f32, shape=max_boxes)
+        self.box_restitution = ti.field(ti.f32, shape=max_boxes)
+        self.box_count = ti.field(ti.i32, shape=())

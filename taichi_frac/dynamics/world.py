@@ -1,0 +1,431 @@
+"""The rigid-body world: fixed-capacity Taichi fields, bodies added and removed at run time
+(fragments) by writing into them, and the substep loop that sequences the kernels.
+
+The host only loops over substeps and stages; every pass over particles, contacts or
+bodies is a kernel (``collision/``, ``integrate.py``, ``solver.py``, ``impacts.py``).
+"""
+
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import taichi as ti
+
+from .. import runtime
+from ..collision import grid as grid_kernels
+from ..collision import narrowphase
+from ..model import BodyModel
+from . import impacts as impact_kernels
+from . import integrate, stages
+from .options import CapacityError, DynamicsOptions, WorldCapacity
+from .state import Bodies, Particles, Statics
+
+STAGES = ("broadphase", "narrowphase", "solve", "integrate")
+
+
+@dataclass
+class WorldStats:
+    """Counters of a World.
+
+    Attributes:
+        contacts: contacts in the last substep of the last advance.
+        peak_contacts: most contacts in one substep of the last advance.
+        contact_overflows: contacts lost to ``max_contacts`` during the last advance
+            (also summed into ``total_contact_overflows``); a warning is printed when > 0.
+        impact_overflows: impact rows lost to ``max_impacts`` during the last advance.
+        substeps: substeps taken by the last advance; total_substeps: since creation.
+        substep_limit_hits: advances that wanted more than ``max_substeps``.
+        frames: advances so far.
+        seconds: wall time per stage summed since creation [s] (exact when
+            ``options.stage_timing``).
+        last_frame_seconds: wall time of the last advance [s].
+    """
+
+    contacts: int = 0
+    peak_contacts: int = 0
+    contact_overflows: int = 0
+    total_contact_overflows: int = 0
+    impact_overflows: int = 0
+    substeps: int = 0
+    total_substeps: int = 0
+    substep_limit_hits: int = 0
+    frames: int = 0
+    seconds: dict = field(default_factory=lambda: {s: 0.0 for s in STAGES})
+    last_frame_seconds: float = 0.0
+
+
+@ti.kernel
+def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32,
+                pose: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                inertia: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                inverse_inertia: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                inverse_mass: ti.f32, friction: ti.f32, restitution: ti.f32, fixed: ti.i32,
+                start: ti.i32, offsets: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                radii: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+    """Fill one body slot and its particle range. ``pose``: (13,) position, orientation
+    wxyz, linear velocity, angular velocity."""
+    for _ in range(1):
+        bodies.position[slot] = ti.math.vec3(pose[0], pose[1], pose[2])
+        bodies.orientation[slot] = ti.math.vec4(pose[3], pose[4], pose[5], pose[6]).normalized()
+        bodies.linear_velocity[slot] = ti.math.vec3(pose[7], pose[8], pose[9])
+        bodies.angular_velocity[slot] = ti.math.vec3(pose[10], pose[11], pose[12])
+        bodies.pseudo_linear_velocity[slot] = ti.math.vec3(0.0)
+        bodies.pseudo_angular_velocity[slot] = ti.math.vec3(0.0)
+        for r, c in ti.static(ti.ndrange(3, 3)):
+            bodies.inertia_body[slot][r, c] = inertia[r, c]
+            bodies.inverse_inertia_body[slot][r, c] = inverse_inertia[r, c]
+        bodies.inverse_mass[slot] = inverse_mass
+        bodies.friction[slot] = friction
+        bodies.restitution[slot] = restitution
+        bodies.fixed[slot] = fixed
+        bodies.sleeping[slot] = 0
+        bodies.sleep_timer[slot] = 0.0
+        bodies.wake_request[slot] = 0
+        bodies.particle_start[slot] = start
+        bodies.particle_count[slot] = radii.shape[0]
+        bodies.active[slot] = 1
+        bounding = 0.0
+        smallest = 1e30
+        for k in range(radii.shape[0]):
+            offset = ti.math.vec3(offsets[k, 0], offsets[k, 1], offsets[k, 2])
+            bounding = ti.max(bounding, offset.norm() + radii[k])
+            smallest = ti.min(smallest, radii[k])
+        bodies.bounding_radius[slot] = bounding
+        bodies.min_particle_radius[slot] = smallest
+    for k in range(radii.shape[0]):
+        p = start + k
+        particles.body[p] = slot
+        particles.offset[p] = ti.math.vec3(offsets[k, 0], offsets[k, 1], offsets[k, 2])
+        particles.radius[p] = radii[k]
+
+
+@ti.kernel
+def _clear_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32, start: ti.i32, count: ti.i32):
+    bodies.active[slot] = 0
+    bodies.near_body[slot] = 0
+    bodies.near_static[slot] = 0
+    for k in range(count):
+        particles.body[start + k] = -1
+
+
+@ti.kernel
+def _set_velocity(bodies: ti.template(), slot: ti.i32, v: ti.types.vector(3, ti.f32), w: ti.types.vector(3, ti.f32)):
+    bodies.linear_velocity[slot] = v
+    bodies.angular_velocity[slot] = w
+    bodies.sleeping[slot] = 0
+    bodies.sleep_timer[slot] = 0.0
+
+
+@ti.kernel
+def _wake(bodies: ti.template(), slot: ti.i32):
+    bodies.sleeping[slot] = 0
+    bodies.sleep_timer[slot] = 0.0
+
+
+@ti.kernel
+def _reset_advance_counters(contacts: ti.template(), impacts: ti.template()):
+    contacts.overflow[None] = 0
+    contacts.peak[None] = 0
+    impacts.count[None] = 0
+    impacts.overflow[None] = 0
+
+
+def _quat_to_matrix(q) -> np.ndarray:
+    w, x, y, z = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+class World:
+    """Rigid bodies colliding through their particle layers (see docs/ARCHITECTURE.md).
+
+    All Taichi fields are allocated here once (``capacity``); adding or removing bodies
+    writes into them through kernels that take numpy arrays (``ti.types.ndarray``), so no
+    kernel is recompiled at run time.
+    """
+
+    def __init__(self, capacity: WorldCapacity | None = None, options: DynamicsOptions | None = None,
+                 arch: str = "cpu"):
+        runtime.init(arch)
+        self.capacity = capacity or WorldCapacity()
+        self.options = options or DynamicsOptions()
+        cap = self.capacity
+        self.bodies = Bodies(cap.max_bodies)
+        self.particles = Particles(cap.max_boundary_particles)
+        self.statics = Statics(cap.max_planes, cap.max_static_boxes)
+        self.grid = grid_kernels.HashGrid(cap.max_boundary_particles)
+        self.contacts = narrowphase.Contacts(cap.max_contacts)
+        self.impact_buffer = impact_kernels.Impacts(cap.max_impacts, cap.max_contacts)
+        self.particles.body.fill(-1)
+        self._gravity = ti.Vector(list(map(float, self.options.gravity)))
+        self.stats = WorldStats()
+        self._free_body_slots: list[int] = []
+        self._body_slot_end = 0
+        self._free_ranges: list[tuple[int, int]] = [(0, cap.max_boundary_particles)]  # (start, count)
+        self._body_range: dict[int, tuple[int, int]] = {}
+        self._particles_in_use = 0
+        self._particle_slot_end = 0
+        self._max_radius = 0.0
+        self._plane_count = 0
+        self._box_count = 0
+        self._substep_counter = 0
+
+    # ---------------------------------------------------------------- bodies
+
+    def add_body(self, model: BodyModel, position=(0.0, 0.0, 0.0), orientation_wxyz=(1.0, 0.0, 0.0, 0.0),
+                 linear_velocity=(0.0, 0.0, 0.0), angular_velocity=(0.0, 0.0, 0.0), *, friction: float = 0.5,
+                 restitution: float = 0.2, single_scale: bool | None = None, fixed: bool = False,
+                 breakable: bool = True) -> int:
+        """Add a body (its COM at ``position`` [m], world velocities [m/s], [rad/s]) and
+        return its slot id. ``single_scale`` (default ``options.single_scale``) collides with
+        the physics surface particles instead of the boundary layer. ``breakable`` is
+        bookkeeping for the fracture stage (kept in ``self.breakable``)."""
+        single = self.options.single_scale if single_scale is None else bool(single_scale)
+        if single:
+            offsets = model.particle_position[model.surface_particles]
+            radii = model.particle_radius[model.surface_particles]
+        else:
+            offsets = model.boundary_position
+            radii = model.boundary_radius
+        count = len(radii)
+        if count == 0:
+            raise ValueError("the body has no collision particles (empty boundary layer)")
+        slot = self._allocate_body_slot()
+        start = self._allocate_particles(count, slot_for_error=slot)
+        inertia = np.asarray(model.inertia, dtype=np.float64)
+        if fixed:
+            inverse_mass, inverse_inertia = 0.0, np.zeros((3, 3))
+        else:
+            inverse_mass, inverse_inertia = 1.0 / model.mass, np.linalg.inv(inertia)
+        pose = np.concatenate([position, orientation_wxyz, linear_velocity, angular_velocity]).astype(np.float32)
+        if pose.shape != (13,):
+            raise ValueError("position, velocities need 3 components and orientation_wxyz 4")
+        _write_body(self.bodies, self.particles, slot, pose, inertia.astype(np.float32),
+                    inverse_inertia.astype(np.float32), float(inverse_mass), float(friction),
+                    float(restitution), int(fixed), start, np.ascontiguousarray(offsets, dtype=np.float32),
+                    np.ascontiguousarray(radii, dtype=np.float32))
+        self._body_range[slot] = (start, count)
+        self.breakable = getattr(self, "breakable", {})
+        self.breakable[slot] = bool(breakable)
+        self._particles_in_use += count
+        self._particle_slot_end = max(self._particle_slot_end, start + count)
+        self.particles.slot_end[None] = self._particle_slot_end
+        self.bodies.slot_end[None] = self._body_slot_end
+        if float(radii.max()) > self._max_radius:
+            self._max_radius = float(radii.max())
+        self._update_grid_size()
+        return slot
+
+    def remove_body(self, body: int) -> None:
+        """Free a body's slot and particle range (a parent replaced by its fragments)."""
+        if body not in self._body_range:
+            raise KeyError(f"body {body} is not in the world")
+        start, count = self._body_range.pop(body)
+        _clear_body(self.bodies, self.particles, body, start, count)
+        self._free_body_slots.append(body)
+        self._release_particles(start, count)
+        self._particles_in_use -= count
+        self._update_grid_size()
+
+    def add_ground(self, height: float = 0.0, friction: float = 0.5, restitution: float = 0.2) -> int:
+        """A horizontal ground plane z = height [m] (normal +Z); returns its index."""
+        if self._plane_count >= self.capacity.max_planes:
+            raise CapacityError(f"more than max_planes={self.capacity.max_planes} ground planes: "
+                                "raise WorldCapacity(max_planes=...)")
+        k = self._plane_count
+        self.statics.plane_height[k] = height
+        self.statics.plane_friction[k] = friction
+        self.statics.plane_restitution[k] = restitution
+        self._plane_count += 1
+        self.statics.plane_count[None] = self._plane_count
+        return k
+
+    def add_static_box(self, center, half_extents, orientation=(1.0, 0.0, 0.0, 0.0), friction: float = 0.5,
+                       restitution: float = 0.2) -> int:
+        """A static oriented box (walls, inclines): centre [m], half extents [m],
+        orientation wxyz box -> world. Returns its index."""
+        if self._box_count >= self.capacity.max_static_boxes:
+            raise CapacityError(f"more than max_static_boxes={self.capacity.max_static_boxes} static boxes: "
+                                "raise WorldCapacity(max_static_boxes=...)")
+        k = self._box_count
+        q = np.asarray(orientation, dtype=np.float64)
+        q = q / np.linalg.norm(q)
+        self.statics.box_center[k] = np.asarray(center, dtype=np.float32)
+        self.statics.box_half_extents[k] = np.asarray(half_extents, dtype=np.float32)
+        self.statics.box_rotation[k] = _quat_to_matrix(q).astype(np.float32)
+        self.statics.box_friction[k] = friction
+        self.statics.box_restitution[k] = restitution
+        self._box_count += 1
+        self.statics.box_count[None] = self._box_count
+        return k
+
+    def set_body_velocity(self, body: int, linear_velocity, angular_velocity) -> None:
+        """Set a body's world velocities [m/s], [rad/s] and wake it."""
+        self._check_body(body)
+        _set_velocity(self.bodies, body, ti.Vector(list(map(float, linear_velocity))),
+                      ti.Vector(list(map(float, angular_velocity))))
+
+    def wake(self, body: int) -> None:
+        self._check_body(body)
+        _wake(self.bodies, body)
+
+    @property
+    def body_ids(self) -> list[int]:
+        return sorted(self._body_range)
+
+    # ---------------------------------------------------------------- stepping
+
+    def advance(self, frame_dt: float, substeps: int = 10) -> None:
+        """Advance one frame of ``frame_dt`` [s] in at least ``substeps`` substeps; more are
+        taken when a body would otherwise move further than ``substep_motion_fraction`` of
+        its smallest particle radius in one (no tunnelling), up to ``max_substeps``."""
+        t_frame = time.perf_counter()
+        opt = self.options
+        _reset_advance_counters(self.contacts, self.impact_buffer)
+        ratio = integrate.motion_ratio(self.bodies)
+        count = 0
+        if ratio >= 0.0:  # someone is awake
+            count = max(int(substeps), int(math.ceil(frame_dt * ratio / opt.substep_motion_fraction)))
+            if count > opt.max_substeps:
+                self.stats.substep_limit_hits += 1
+                count = opt.max_substeps
+            dt = frame_dt / count
+            for k in range(count):
+                self._substep(dt, k)
+        self.stats.substeps = count
+        self.stats.total_substeps += count
+        self.stats.frames += 1
+        self.stats.contacts = int(self.contacts.count[None]) if count else 0
+        self.stats.peak_contacts = max(int(self.contacts.peak[None]), self.stats.contacts)
+        overflow = int(self.contacts.overflow[None])
+        self.stats.contact_overflows = overflow
+        self.stats.total_contact_overflows += overflow
+        self.stats.impact_overflows = int(self.impact_buffer.overflow[None])
+        if overflow:
+            print(f"taichi-frac dynamics: {overflow} contacts lost in this frame: more than "
+                  f"max_contacts={self.capacity.max_contacts} in a substep; raise WorldCapacity(max_contacts=...)")
+        self.stats.last_frame_seconds = time.perf_counter() - t_frame
+
+    def _substep(self, dt: float, index: int) -> None:
+        opt = self.options
+        b, p, g, c = self.bodies, self.particles, self.grid, self.contacts
+        clock = self._clock()
+        stages.broadphase(b, self.statics, p, g, opt.contact_margin)
+        clock("broadphase")
+        stages.narrow(b, self.statics, p, g, c, opt.contact_margin)
+        clock("narrowphase")
+        stages.solve(b, c, self.impact_buffer, self._gravity, dt, opt.solver_iterations,
+                     opt.restitution_iterations, opt.position_correction, opt.allowed_penetration,
+                     opt.max_correction_speed, opt.restitution_threshold, index, opt.record_force_threshold)
+        clock("solve")
+        stages.integrate_positions(b, dt, opt.sleep_linear_speed, opt.sleep_angular_speed, opt.sleep_time)
+        clock("integrate")
+
+    def _clock(self):
+        last = [time.perf_counter()]
+        seconds = self.stats.seconds
+        sync = self.options.stage_timing
+
+        def tick(stage: str):
+            if sync:
+                ti.sync()
+            now = time.perf_counter()
+            seconds[stage] += now - last[0]
+            last[0] = now
+
+        return tick
+
+    # ---------------------------------------------------------------- read back
+
+    def body_state(self, ids=None) -> dict:
+        """World state of bodies ``ids`` (default: all in the world, sorted): position (K,3)
+        [m], orientation (K,4) wxyz, linear_velocity (K,3) [m/s], angular_velocity (K,3)
+        [rad/s], active (K,) bool, sleeping (K,) bool. float64 copies."""
+        ids = np.asarray(self.body_ids if ids is None else ids, dtype=np.int64)
+        b = self.bodies
+        return dict(
+            id=ids,
+            position=b.position.to_numpy()[ids].astype(np.float64),
+            orientation=b.orientation.to_numpy()[ids].astype(np.float64),
+            linear_velocity=b.linear_velocity.to_numpy()[ids].astype(np.float64),
+            angular_velocity=b.angular_velocity.to_numpy()[ids].astype(np.float64),
+            active=b.active.to_numpy()[ids].astype(bool),
+            sleeping=b.sleeping.to_numpy()[ids].astype(bool),
+        )
+
+    def impacts(self) -> dict:
+        """Impact rows of the last advance (see docs/ARCHITECTURE.md): body (K,), other (K,)
+        (-1 ground, -2 static box), point (K,3) [m], normal (K,3) unit into body, impulse
+        (K,3) [N s] on body, dt (K,) [s], substep (K,)."""
+        n = min(int(self.impact_buffer.count[None]), self.capacity.max_impacts)
+        ib = self.impact_buffer
+        return dict(
+            body=ib.body.to_numpy()[:n], other=ib.other.to_numpy()[:n],
+            point=ib.point.to_numpy()[:n].astype(np.float64), normal=ib.normal.to_numpy()[:n].astype(np.float64),
+            impulse=ib.impulse.to_numpy()[:n].astype(np.float64), dt=ib.dt.to_numpy()[:n].astype(np.float64),
+            substep=ib.substep.to_numpy()[:n],
+        )
+
+    def particle_state(self, body: int) -> dict:
+        """World positions (K,3) [m] and radii (K,) [m] of one body's collision particles
+        (tests, diagnostics; computed from the pose, not the broadphase buffer)."""
+        start, count = self._body_range[body]
+        offsets = self.particles.offset.to_numpy()[start:start + count].astype(np.float64)
+        radii = self.particles.radius.to_numpy()[start:start + count].astype(np.float64)
+        state = self.body_state([body])
+        rot = _quat_to_matrix(state["orientation"][0])
+        return dict(position=state["position"][0] + offsets @ rot.T, radius=radii)
+
+    # ---------------------------------------------------------------- slots
+
+    def _check_body(self, body: int) -> None:
+        if body not in self._body_range:
+            raise KeyError(f"body {body} is not in the world")
+
+    def _allocate_body_slot(self) -> int:
+        if self._free_body_slots:
+            return self._free_body_slots.pop(0)
+        if self._body_slot_end >= self.capacity.max_bodies:
+            raise CapacityError(f"more than max_bodies={self.capacity.max_bodies} bodies: "
+                                "raise WorldCapacity(max_bodies=...)")
+        self._body_slot_end += 1
+        return self._body_slot_end - 1
+
+    def _allocate_particles(self, count: int, slot_for_error: int) -> int:
+        for k, (start, free) in enumerate(self._free_ranges):
+            if free >= count:
+                if free == count:
+                    self._free_ranges.pop(k)
+                else:
+                    self._free_ranges[k] = (start + count, free - count)
+                return start
+        self._free_body_slots.insert(0, slot_for_error)
+        raise CapacityError(
+            f"no room for {count} more collision particles: {self._particles_in_use} of "
+            f"max_boundary_particles={self.capacity.max_boundary_particles} in use "
+            f"(largest free range {max((f for _, f in self._free_ranges), default=0)}): "
+            "raise WorldCapacity(max_boundary_particles=...)")
+
+    def _release_particles(self, start: int, count: int) -> None:
+        ranges = sorted(self._free_ranges + [(start, count)])
+        merged: list[tuple[int, int]] = []
+        for s, n in ranges:
+            if merged and merged[-1][0] + merged[-1][1] == s:
+                merged[-1] = (merged[-1][0], merged[-1][1] + n)
+            else:
+                merged.append((s, n))
+        self._free_ranges = merged
+
+    def _update_grid_size(self) -> None:
+        # A pair interacts when its gap < margin x mean radius, so centres lie within
+        # 2 r_max (1 + margin / 2): with cells that large, 27 cells cover every partner.
+        self.grid.cell_size[None] = max(2.0 * self._max_radius * (1.0 + 0.5 * self.options.contact_margin), 1e-6)
+        size = 1
+        while size < 2 * max(self._particles_in_use, 1) and size < self.grid.table_capacity:
+            size *= 2
+        self.grid.table_size[None] = size
