@@ -1,0 +1,426 @@
+"""The USD fracture cache: one Mesh per fragment in its body frame, posed per frame.
+
+The stage lives in memory and is written to disk every ``checkpoint_every`` frames and on
+``close()``: exported to a temporary file beside the target, flushed to disk, then moved over
+it with ``os.replace`` (atomic on POSIX and Windows). A run that crashes or is killed leaves the
+last checkpoint: a complete, valid cache of every frame up to ``lastFrame`` in its layer data,
+with ``complete`` False. Rewriting the whole layer costs O(frames so far) per checkpoint; a
+cache is a few MB at most, so that is milliseconds, and it keeps one file that any USD reader
+opens (no sublayers to stitch).
+
+Names, units and the layout are in ``schema.py``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, Vt
+
+from .. import __version__
+from . import schema
+
+# Body-frame data is Z-up; a Y-up stage turns the world by -90 degrees about X:
+# (x, y, z) -> (x, z, -y). As a quaternion (w, x, y, z):
+_Z_TO_Y_UP = np.array([np.sqrt(0.5), -np.sqrt(0.5), 0.0, 0.0])
+_Z_TO_Y_UP_MATRIX = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+# Preview colours (linear sRGB) and roughness of the two materials; artists replace them.
+_MATERIALS = {
+    schema.OUTER_SUBSET: ((0.80, 0.78, 0.72), 0.30),
+    schema.INNER_SUBSET: ((0.62, 0.47, 0.35), 0.85),
+}
+
+
+def _quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of (w, x, y, z) quaternions; a (4,), b (K,4)."""
+    aw, av = a[0], a[1:]
+    bw, bv = b[:, 0], b[:, 1:]
+    w = aw * bw - bv @ av
+    v = aw * bv + bw[:, None] * av + np.cross(np.broadcast_to(av, bv.shape), bv)
+    return np.concatenate([w[:, None], v], axis=1)
+
+
+def _per_corner(values: np.ndarray | None, faces: np.ndarray, vertex_count: int, width: int, what: str):
+    """(F*3, width) per face corner from per-vertex (V, width) or per-corner (F, 3, width) data;
+    None when absent. NaN rows mean 'no value for this corner'."""
+    if values is None:
+        return None
+    values = np.asarray(values, dtype=np.float64)
+    if values.shape == (vertex_count, width):
+        return values[faces.reshape(-1)]
+    if values.shape == (len(faces), 3, width):
+        return values.reshape(-1, width)
+    raise ValueError(
+        f"{what} must be per vertex ({vertex_count}, {width}) or per face corner "
+        f"({len(faces)}, 3, {width}), got {values.shape}"
+    )
+
+
+def _impact_fields(impact):
+    """(point (3,), force (3,)) from a mapping with 'point'/'force', an object with those
+    attributes, or a (point, force) pair."""
+    if isinstance(impact, dict):
+        point, force = impact["point"], impact["force"]
+    elif hasattr(impact, "point") and hasattr(impact, "force"):
+        point, force = impact.point, impact.force
+    else:
+        point, force = impact
+    point, force = np.asarray(point, dtype=np.float64), np.asarray(force, dtype=np.float64)
+    if point.shape != (3,) or force.shape != (3,):
+        raise ValueError(f"impact point and force must be 3-vectors, got {point.shape} and {force.shape}")
+    return point, force
+
+
+class _Fragment:
+    __slots__ = ("prim_path", "translate", "orient", "visibility", "death", "birth")
+
+    def __init__(self, prim_path, translate, orient, visibility, birth):
+        self.prim_path = prim_path
+        self.translate = translate
+        self.orient = orient
+        self.visibility = visibility
+        self.birth = birth
+        self.death = None
+
+
+class CacheWriter:
+    """Writes a taichi-frac USD cache (``.usdc``, ``.usda`` or ``.usd``).
+
+    Args:
+        path: target file; replaced atomically at every checkpoint.
+        fps: frames per second (``timeCodesPerSecond``); time code = frame number.
+        start_frame: first frame of the animation (``startTimeCode``).
+        up_axis: "Z" (the simulation's world) or "Y" (the stage is turned; poses converted).
+        meters_per_unit: stage unit [m]; lengths are divided by it on output.
+        checkpoint_every: write the file every this many ``write_frame`` calls.
+
+    Positions, vertices and impact points given to the writer are always in the simulation's
+    units and frame: metres, Z up, quaternions (w, x, y, z) body -> world.
+    """
+
+    def __init__(
+        self,
+        path,
+        fps: float,
+        start_frame: int = 0,
+        up_axis: str = "Z",
+        meters_per_unit: float = 1.0,
+        checkpoint_every: int = 10,
+    ):
+        self.path = Path(path)
+        if self.path.suffix not in (".usd", ".usdc", ".usda"):
+            raise ValueError(f"cache path must end in .usd, .usdc or .usda: {self.path}")
+        if not fps > 0:
+            raise ValueError(f"fps must be > 0, got {fps}")
+        if up_axis not in ("Z", "Y"):
+            raise ValueError(f"up_axis must be 'Z' or 'Y', got {up_axis!r}")
+        if not meters_per_unit > 0:
+            raise ValueError(f"meters_per_unit must be > 0, got {meters_per_unit}")
+        if int(checkpoint_every) < 1:
+            raise ValueError(f"checkpoint_every must be >= 1, got {checkpoint_every}")
+        self.fps = float(fps)
+        self.start_frame = int(start_frame)
+        self.up_axis = up_axis
+        self.meters_per_unit = float(meters_per_unit)
+        self.checkpoint_every = int(checkpoint_every)
+        self._fragments: list[_Fragment] = []
+        self._names: set[str] = set()
+        self._last_frame: int | None = None
+        self._frames_since_checkpoint = 0
+        self._closed = False
+
+        stage = Usd.Stage.CreateInMemory("taichi_frac_cache" + self.path.suffix)
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z if up_axis == "Z" else UsdGeom.Tokens.y)
+        UsdGeom.SetStageMetersPerUnit(stage, self.meters_per_unit)
+        stage.SetTimeCodesPerSecond(self.fps)
+        stage.SetFramesPerSecond(self.fps)
+        stage.SetStartTimeCode(self.start_frame)
+        stage.SetEndTimeCode(self.start_frame)
+        root = UsdGeom.Xform.Define(stage, schema.ROOT_PRIM)
+        stage.SetDefaultPrim(root.GetPrim())
+        UsdGeom.Scope.Define(stage, schema.MATERIALS_SCOPE)
+        UsdGeom.Scope.Define(stage, schema.FRAGMENTS_SCOPE)
+        self._materials = {name: self._define_material(stage, name, *look) for name, look in _MATERIALS.items()}
+        self._stage = stage
+        self._set_layer_data(complete=False)
+
+    # ----------------------------------------------------------------- set-up
+    @staticmethod
+    def _define_material(stage, name, color, roughness):
+        material = UsdShade.Material.Define(stage, f"{schema.MATERIALS_SCOPE}/{name}")
+        shader = UsdShade.Shader.Define(stage, f"{schema.MATERIALS_SCOPE}/{name}/PreviewSurface")
+        shader.CreateIdAttr("UsdPreviewSurface")
+        shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*color))
+        shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(float(roughness))
+        shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
+        material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+        return material
+
+    def _unique_prim_name(self, name: str) -> str:
+        base = Tf.MakeValidIdentifier(str(name) or "fragment")
+        candidate, k = base, 1
+        while candidate in self._names:
+            candidate = f"{base}_{k}"
+            k += 1
+        self._names.add(candidate)
+        return candidate
+
+    def _set_layer_data(self, complete: bool):
+        layer = self._stage.GetRootLayer()
+        data = dict(layer.customLayerData)
+        data[schema.LAYER_DATA_KEY] = {
+            schema.KEY_VERSION: schema.SCHEMA_VERSION,
+            schema.KEY_COMPLETE: bool(complete),
+            schema.KEY_LAST_FRAME: int(self._last_frame if self._last_frame is not None else self.start_frame - 1),
+            schema.KEY_GENERATOR: f"taichi-frac {__version__}",
+        }
+        layer.customLayerData = data
+
+    # ------------------------------------------------------------- fragments
+    def add_fragment(
+        self,
+        name: str,
+        vertices,
+        faces,
+        face_is_inner,
+        birth_frame: int,
+        parent: int | None = None,
+        impact=None,
+        peak_principal_stress: float = 0.0,
+        face_peak_stress=None,
+        normals=None,
+        uvs=None,
+    ) -> int:
+        """Add a fragment (or a whole unbroken body) and return its id for ``write_frame``.
+
+        vertices (V,3) [m] body frame; faces (F,3) vertex indices, outward winding;
+        face_is_inner (F,) bool, True for crack faces; birth_frame: first visible frame;
+        parent: id of the fragment it broke from; impact: (point (3,) world [m], force (3,) [N])
+        of the impact that made it (mapping, object with .point/.force, or pair);
+        peak_principal_stress [Pa]; face_peak_stress (F,) [Pa]; normals (V,3) or (F,3,3) and
+        uvs (V,2) or (F,3,2) of the input mesh, used on outer faces only (NaN = none there).
+        Crack faces, and outer faces without input normals, get their flat face normal; faces
+        without input UVs get a box projection of the body-frame position [m].
+        """
+        self._check_open()
+        vertices = np.asarray(vertices, dtype=np.float64)
+        faces = np.asarray(faces, dtype=np.int64)
+        inner = np.asarray(face_is_inner, dtype=bool)
+        if vertices.ndim != 2 or vertices.shape[1] != 3:
+            raise ValueError(f"vertices must be (V, 3), got {vertices.shape}")
+        if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+            raise ValueError(f"faces must be a non-empty (F, 3) array, got {faces.shape}")
+        if faces.min() < 0 or faces.max() >= len(vertices):
+            raise ValueError("faces index vertices out of range")
+        if inner.shape != (len(faces),):
+            raise ValueError(f"face_is_inner must be ({len(faces)},), got {inner.shape}")
+        if parent is not None and not 0 <= int(parent) < len(self._fragments):
+            raise ValueError(f"unknown parent fragment id {parent}")
+        face_stress = np.zeros(len(faces)) if face_peak_stress is None else np.asarray(face_peak_stress, np.float64)
+        if face_stress.shape != (len(faces),):
+            raise ValueError(f"face_peak_stress must be ({len(faces)},), got {face_stress.shape}")
+        corner_normals = _per_corner(normals, faces, len(vertices), 3, "normals")
+        corner_uvs = _per_corner(uvs, faces, len(vertices), 2, "uvs")
+
+        # Keep only the vertices the surface uses (a tet mesh's interior ones are not drawn).
+        used, faces = np.unique(faces.reshape(-1), return_inverse=True)
+        faces = faces.reshape(-1, 3)
+        points = vertices[used]
+
+        tri = points[faces]
+        face_normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        face_normal /= np.maximum(np.linalg.norm(face_normal, axis=1, keepdims=True), 1e-300)
+        flat = np.repeat(face_normal, 3, axis=0)
+        corner_inner = np.repeat(inner, 3)
+        if corner_normals is None:
+            corner_normals = flat
+        else:
+            missing = corner_inner | ~np.all(np.isfinite(corner_normals), axis=1)
+            corner_normals = np.where(missing[:, None], flat, corner_normals)
+            corner_normals /= np.maximum(np.linalg.norm(corner_normals, axis=1, keepdims=True), 1e-300)
+        projected = _box_projection(tri.reshape(-1, 3), flat)
+        if corner_uvs is None:
+            corner_uvs = projected
+        else:
+            missing = corner_inner | ~np.all(np.isfinite(corner_uvs), axis=1)
+            corner_uvs = np.where(missing[:, None], projected, corner_uvs)
+
+        stage = self._stage
+        prim_path = f"{schema.FRAGMENTS_SCOPE}/{self._unique_prim_name(name)}"
+        mesh = UsdGeom.Mesh.Define(stage, prim_path)
+        scale = 1.0 / self.meters_per_unit
+        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy((points * scale).astype(np.float32)))
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(faces), 3, dtype=np.int32)))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(faces.reshape(-1).astype(np.int32)))
+        mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy((np.stack([points.min(0), points.max(0)]) * scale).astype(np.float32)))
+        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(corner_normals.astype(np.float32)))
+        mesh.SetNormalsInterpolation(UsdGeom.Tokens.faceVarying)
+        primvars = UsdGeom.PrimvarsAPI(mesh)
+        primvars.CreatePrimvar(schema.PRIMVAR_UV, Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying).Set(
+            Vt.Vec2fArray.FromNumpy(corner_uvs.astype(np.float32))
+        )
+        primvars.CreatePrimvar(schema.PRIMVAR_FACE_STRESS, Sdf.ValueTypeNames.FloatArray, UsdGeom.Tokens.uniform).Set(
+            Vt.FloatArray.FromNumpy(face_stress.astype(np.float32))
+        )
+
+        binding = UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim())
+        for subset_name, faces_in in ((schema.OUTER_SUBSET, ~inner), (schema.INNER_SUBSET, inner)):
+            subset = binding.CreateMaterialBindSubset(
+                subset_name, Vt.IntArray.FromNumpy(np.nonzero(faces_in)[0].astype(np.int32)), UsdGeom.Tokens.face
+            )
+            UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(self._materials[subset_name])
+        binding.SetMaterialBindSubsetsFamilyType(UsdGeom.Tokens.partition)
+
+        prim = mesh.GetPrim()
+        birth_frame = int(birth_frame)
+        prim.CreateAttribute(schema.ATTR_BIRTH_FRAME, Sdf.ValueTypeNames.Int, custom=True).Set(birth_frame)
+        prim.CreateAttribute(schema.ATTR_DEATH_FRAME, Sdf.ValueTypeNames.Int, custom=True).Set(-1)
+        prim.CreateAttribute(schema.ATTR_PEAK_STRESS, Sdf.ValueTypeNames.Double, custom=True).Set(
+            float(peak_principal_stress)
+        )
+        if parent is not None:
+            prim.CreateRelationship(schema.ATTR_PARENT, custom=True).SetTargets(
+                [Sdf.Path(self._fragments[int(parent)].prim_path)]
+            )
+        if impact is not None:
+            point, force = _impact_fields(impact)
+            point, force = self._to_stage_vectors(point[None], force[None])
+            prim.CreateAttribute(schema.ATTR_IMPACT_POINT, Sdf.ValueTypeNames.Point3d, custom=True).Set(
+                Gf.Vec3d(*point[0])
+            )
+            prim.CreateAttribute(schema.ATTR_IMPACT_FORCE, Sdf.ValueTypeNames.Vector3d, custom=True).Set(
+                Gf.Vec3d(*force[0])
+            )
+
+        translate = mesh.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble)
+        orient = mesh.AddOrientOp(UsdGeom.XformOp.PrecisionDouble)
+        visibility = mesh.CreateVisibilityAttr()
+        # Visibility is held between samples: invisible up to birth, then inherited.
+        if birth_frame > self.start_frame:
+            visibility.Set(UsdGeom.Tokens.invisible, Usd.TimeCode(self.start_frame))
+        visibility.Set(UsdGeom.Tokens.inherited, Usd.TimeCode(birth_frame))
+        self._fragments.append(_Fragment(prim_path, translate.GetAttr(), orient.GetAttr(), visibility, birth_frame))
+        return len(self._fragments) - 1
+
+    def _to_stage_vectors(self, points: np.ndarray, vectors: np.ndarray | None = None):
+        """World points [m] (K,3) -> stage frame and units; free vectors only turned."""
+        if self.up_axis == "Y":
+            points = points @ _Z_TO_Y_UP_MATRIX.T
+            vectors = None if vectors is None else vectors @ _Z_TO_Y_UP_MATRIX.T
+        return points / self.meters_per_unit, vectors
+
+    # ------------------------------------------------------------------ frames
+    def write_frame(self, frame: int, fragment_ids, positions, orientations_wxyz) -> None:
+        """World pose of each live body at ``frame``: positions (K,3) [m] of the body-frame
+        origin (centre of mass), orientations (K,4) unit quaternions (w,x,y,z) body -> world."""
+        self._check_open()
+        ids = np.asarray(fragment_ids, dtype=np.int64).reshape(-1)
+        positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+        quats = np.asarray(orientations_wxyz, dtype=np.float64).reshape(-1, 4)
+        if not len(ids) == len(positions) == len(quats):
+            raise ValueError(f"{len(ids)} ids, {len(positions)} positions, {len(quats)} orientations")
+        if len(ids) and (ids.min() < 0 or ids.max() >= len(self._fragments)):
+            raise ValueError("unknown fragment id in write_frame")
+        norms = np.linalg.norm(quats, axis=1)
+        if np.any(np.abs(norms - 1.0) > 1e-3):
+            raise ValueError("orientations must be unit quaternions (w, x, y, z)")
+        quats = quats / norms[:, None]
+        positions, _ = self._to_stage_vectors(positions)
+        if self.up_axis == "Y":
+            quats = _quat_multiply(_Z_TO_Y_UP, quats)
+        frame = int(frame)
+        time = Usd.TimeCode(frame)
+        with Sdf.ChangeBlock():
+            for fid, p, q in zip(ids.tolist(), positions.tolist(), quats.tolist()):
+                fragment = self._fragments[fid]
+                fragment.translate.Set(Gf.Vec3d(*p), time)
+                fragment.orient.Set(Gf.Quatd(q[0], q[1], q[2], q[3]), time)
+        self._last_frame = frame if self._last_frame is None else max(self._last_frame, frame)
+        self._frames_since_checkpoint += 1
+        if self._frames_since_checkpoint >= self.checkpoint_every:
+            self.checkpoint()
+
+    def end_fragment(self, fragment_id: int, frame: int) -> None:
+        """The fragment is gone (broke into children) from ``frame`` on: invisible from then."""
+        self._check_open()
+        fragment = self._fragments[int(fragment_id)]
+        frame = int(frame)
+        if frame < fragment.birth:
+            raise ValueError(f"fragment {fragment_id} ends at frame {frame}, before its birth {fragment.birth}")
+        fragment.death = frame
+        fragment.visibility.Set(UsdGeom.Tokens.invisible, Usd.TimeCode(frame))
+        self._stage.GetPrimAtPath(fragment.prim_path).GetAttribute(schema.ATTR_DEATH_FRAME).Set(frame)
+
+    # ---------------------------------------------------------------- output
+    def checkpoint(self) -> None:
+        """Write everything so far to ``path`` atomically (temporary file, fsync, os.replace)."""
+        self._check_open()
+        self._write(complete=False)
+
+    def _write(self, complete: bool) -> None:
+        stage = self._stage
+        last = self._last_frame if self._last_frame is not None else self.start_frame
+        deaths = [f.death for f in self._fragments if f.death is not None]
+        stage.SetEndTimeCode(max([last, self.start_frame] + deaths))
+        self._set_layer_data(complete)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.path.with_name(f".{self.path.stem}.tmp{os.getpid()}{self.path.suffix}")
+        try:
+            if not stage.GetRootLayer().Export(str(tmp)):
+                raise OSError(f"USD could not write {tmp}")
+            with open(tmp, "rb") as fh:
+                os.fsync(fh.fileno())
+            os.replace(tmp, self.path)
+        finally:
+            if tmp.exists():
+                tmp.unlink()
+        self._frames_since_checkpoint = 0
+
+    def close(self, complete: bool = True) -> None:
+        """Write the final file (``complete`` True in its layer data). Idempotent."""
+        if self._closed:
+            return
+        self._write(complete=complete)
+        self._closed = True
+
+    def _check_open(self):
+        if self._closed:
+            raise RuntimeError(f"cache {self.path} is closed")
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        # On an exception the frames done so far are still written (marked incomplete).
+        self.close(complete=exc_type is None)
+        return False
+
+    @property
+    def stage(self) -> Usd.Stage:
+        """The in-memory stage (read-only use: inspection in tests)."""
+        return self._stage
+
+
+def _box_projection(corners: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """UVs [m] of face corners by projecting along each face normal's dominant axis."""
+    axis = np.argmax(np.abs(normals), axis=1)
+    drop = np.array([[1, 2], [0, 2], [0, 1]])[axis]
+    return np.take_along_axis(corners, drop, axis=1)
+
+
+def check_cache(path) -> list[str]:
+    """Run every validator USD registers (what ``usdchecker`` runs: UsdValidation, which
+    replaced UsdUtils.ComplianceChecker) on a cache; returns their errors and warnings as text,
+    empty when the file is compliant."""
+    from pxr import UsdValidation
+
+    stage = Usd.Stage.Open(str(path))
+    if stage is None:
+        return [f"USD cannot open {path}"]
+    registry = UsdValidation.ValidationRegistry()
+    context = UsdValidation.ValidationContext(registry.GetOrLoadAllValidators())
+    return [f"{e.GetType()}: {e.GetName()}: {e.GetMessage()}" for e in context.Validate(stage)]
