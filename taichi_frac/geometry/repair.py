@@ -88,11 +88,9 @@ def repair_surface(mesh: trimesh.Trimesh, name: str = "mesh") -> tuple[trimesh.T
     if not mesh.is_winding_consistent:
         trimesh.repair.fix_winding(mesh)
         report.add("made the winding consistent")
-    if mesh.is_watertight:
-        trimesh.repair.fix_inversion(mesh, multibody=True)
-        if mesh.volume < 0:
-            mesh.invert()
-            report.add("flipped the faces outward")
+    if mesh.is_watertight and mesh.is_winding_consistent and mesh.volume < 0:
+        mesh.invert()
+        report.add("flipped the faces outward (the mesh was inside out)")
     if _is_closed(mesh) and mesh.body_count > 1 and len(self_intersections(mesh.vertices, mesh.faces)):
         union = _manifold_union(mesh)
         if union is not None:
