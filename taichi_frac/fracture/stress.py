@@ -129,18 +129,17 @@ def _principal_kernel(
     directions_out: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) columns
 ):
     for q in range(stress.shape[0]):
-        s = _load3(stress, q)
-        s = 0.5 * (s + s.transpose())
-        # sym_eig3x3's tolerances are absolute: solve on the matrix scaled to unit max entry
+        raw = _load3(stress, q)
+        sym = 0.5 * (raw + raw.transpose())
+        # Solve on the matrix scaled to unit max entry (the Jacobi skip test is absolute),
         # so 1e-6 N and 1e9 N impacts are treated alike.
         scale = ti.cast(0.0, ti.f64)  # bare literals would be the default f32
         for r, c in ti.static(ti.ndrange(3, 3)):
-            scale = ti.max(scale, ti.abs(s[r, c]))
+            scale = ti.max(scale, ti.abs(sym[r, c]))
         values = _vec3(0.0)
         vectors = ti.Matrix.identity(ti.f64, 3)
         if scale > 0.0:
-            values, vectors = sym_eig3_f64(s / scale)
-            values *= scale
+            values, vectors = sym_eig3_f64(sym / scale)
         # Sort descending: order[e] = column of the e-th largest value.
         order = ti.Vector([0, 1, 2])
         for _pass in ti.static(range(2)):
@@ -149,20 +148,21 @@ def _principal_kernel(
                     tmp = order[k]
                     order[k] = order[k + 1]
                     order[k + 1] = tmp
+        # Written with fresh names and scalar stores on purpose: in Taichi 1.7.4 re-binding a
+        # local vector here (`v = v * sign`) was silently dropped (seen in a unit test).
         for e in ti.static(range(3)):
             col = order[e]
-            v = _vec3(vectors[0, col], vectors[1, col], vectors[2, col])
-            v = v.normalized()
-            largest = ti.abs(v[0])
-            sign = ti.cast(1.0 if v[0] >= 0.0 else -1.0, ti.f64)
+            column = _vec3(vectors[0, col], vectors[1, col], vectors[2, col])
+            unit = column.normalized()
+            largest = ti.abs(unit[0])
+            sign = ti.cast(1.0 if unit[0] >= 0.0 else -1.0, ti.f64)
             for k in ti.static(range(1, 3)):
-                if ti.abs(v[k]) > largest:
-                    largest = ti.abs(v[k])
-                    sign = ti.cast(1.0 if v[k] >= 0.0 else -1.0, ti.f64)
-            v *= sign
-            values_out[q, e] = values[col]
+                if ti.abs(unit[k]) > largest:
+                    largest = ti.abs(unit[k])
+                    sign = ti.cast(1.0 if unit[k] >= 0.0 else -1.0, ti.f64)
+            values_out[q, e] = values[col] * scale
             for k in ti.static(range(3)):
-                directions_out[q, k, e] = v[k]
+                directions_out[q, k, e] = unit[k] * sign
 
 
 def _as_tensors(a, name) -> np.ndarray:
