@@ -1,0 +1,117 @@
+"""Tetrahedralization: tets fill the solid exactly (volume), nowhere outside it or in a
+hole, counts land near the target, quality is reported, the cache is used."""
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from taichi_frac.geometry import primitives
+from taichi_frac.geometry.prepare import prepare_body
+from taichi_frac.geometry.tetra import tetrahedralize
+from taichi_frac.geometry.topology import dihedral_angles_deg, signed_volumes
+from taichi_frac.options import ParticleOptions
+
+
+@pytest.fixture(autouse=True)
+def private_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("TAICHI_FRAC_CACHE", str(tmp_path / "cache"))
+
+
+def _centroids(tm):
+    return tm.vertices[tm.tets].mean(axis=1)
+
+
+def test_ring_tets_fill_the_torus_and_not_the_hole():
+    R, r = 0.1, 0.025
+    surface = primitives.torus(R, r, edge_length=0.008)
+    tm = tetrahedralize(surface, target_tets=5000)
+    # Sum of tet volumes = enclosed surface volume (0.1 %), and the smooth torus's (0.1 %).
+    assert abs(tm.volume_error) < 1e-3
+    assert signed_volumes(tm.vertices, tm.tets).sum() == pytest.approx(2 * math.pi**2 * R * r**2, rel=1e-3)
+    assert np.all(signed_volumes(tm.vertices, tm.tets) > 0)
+    c = _centroids(tm)
+    # Nothing in the hole (radius R - r about the Z axis), nothing outside the tube
+    # (the volume-matched facets bulge at most ~1 % of r beyond the smooth tube).
+    assert np.hypot(c[:, 0], c[:, 1]).min() > R - r
+    tube = np.hypot(np.hypot(c[:, 0], c[:, 1]) - R, c[:, 2])
+    assert tube.max() < r * 1.01
+    assert surface.contains(c).all()
+
+
+def test_genus_one_block_with_sharp_edges():
+    import manifold3d
+
+    block = manifold3d.Manifold.cube((0.2, 0.2, 0.1), center=True)
+    hole = manifold3d.Manifold.cylinder(0.3, 0.05, 0.05, 64, center=True)
+    out = (block - hole).to_mesh()
+    surface = trimesh.Trimesh(np.asarray(out.vert_properties)[:, :3], np.asarray(out.tri_verts))
+    assert surface.euler_number == 0  # genus 1
+    tm = tetrahedralize(surface, target_tets=3000)
+    assert abs(tm.volume_error) < 1e-3
+    c = _centroids(tm)
+    # Inscribed 64-gon of radius 0.05: its apothem is 0.05 cos(pi/64).
+    assert np.hypot(c[:, 0], c[:, 1]).min() > 0.05 * math.cos(math.pi / 64)
+    assert surface.contains(c).all()
+    # Sharp features kept: every box corner is a tet vertex.
+    corners = np.array([[x, y, z] for x in (-0.1, 0.1) for y in (-0.1, 0.1) for z in (-0.05, 0.05)])
+    d = np.linalg.norm(tm.vertices[None, :, :] - corners[:, None, :], axis=2).min(axis=1)
+    assert d.max() < 1e-6
+
+
+@pytest.mark.parametrize("target", [2000, 5000, 20000])
+def test_count_lands_near_target(target):
+    _, report = prepare_body("torus", particles=ParticleOptions(target_particles=target), use_cache=False)
+    assert abs(report.tets / target - 1.0) < 0.15, report.tets
+
+
+def test_quality_is_reported_truthfully():
+    tm = tetrahedralize(primitives.sphere(0.05, edge_length=0.01), target_tets=3000)
+    angles = dihedral_angles_deg(tm.vertices, tm.tets)
+    assert tm.min_dihedral_deg == pytest.approx(angles.min())
+    assert tm.sliver_count == int(np.sum(angles.min(axis=1) < 5.0))
+    # Few slivers: under 0.5 % of the tets, and no flat (zero-volume) tet.
+    assert tm.sliver_count < 0.005 * tm.tet_count
+    assert tm.min_dihedral_deg > 1.0
+
+
+def test_max_volume_bound_is_respected():
+    surface = primitives.box((0.1, 0.1, 0.1))
+    tm = tetrahedralize(surface, max_volume=1e-6)
+    vol = signed_volumes(tm.vertices, tm.tets)
+    # tetgen's final flips/smoothing may push a few tets slightly over the bound.
+    assert vol.max() <= 1.25e-6 and np.mean(vol > 1e-6) < 0.01
+    assert abs(tm.volume_error) < 1e-9
+
+
+def test_prepare_caches_by_content(tmp_path):
+    particles = ParticleOptions(target_particles=1500)
+    m1, r1 = prepare_body("sphere:radius=0.05", particles=particles)
+    m2, r2 = prepare_body("sphere:radius=0.05", particles=particles)
+    assert not r1.cache_hit and r2.cache_hit
+    assert np.array_equal(m1.tets, m2.tets) and np.allclose(m1.vertices, m2.vertices)
+    _, r3 = prepare_body("sphere:radius=0.051", particles=particles)
+    assert not r3.cache_hit  # different content, different key
+    assert len(list((tmp_path / "cache" / "tets").glob("*.npz"))) == 2
+
+
+def test_prepare_from_file_with_units(tmp_path):
+    box = trimesh.creation.box((10.0, 20.0, 5.0))  # centimetres
+    path = tmp_path / "brick.stl"
+    box.export(str(path))
+    model, report = prepare_body(path, units="cm", material="concrete",
+                                 particles=ParticleOptions(target_particles=800))
+    assert report.source == "brick.stl"
+    assert model.mass == pytest.approx(2400.0 * 0.1 * 0.2 * 0.05, rel=1e-9)
+
+
+def test_prepare_tet_file_used_as_is(tmp_path):
+    import meshio
+
+    tm = tetrahedralize(primitives.box((0.1, 0.1, 0.1)), target_tets=500)
+    path = tmp_path / "cube.vtu"
+    meshio.write(str(path), meshio.Mesh(tm.vertices, [("tetra", tm.tets)]))
+    model, report = prepare_body(path)
+    assert report.tets == tm.tet_count and report.backend == "file"
+    assert model.volume == pytest.approx(1e-3, rel=1e-12)

@@ -1,0 +1,106 @@
+"""The two-scale BodyModel against closed forms and conservation laws."""
+
+import math
+
+import numpy as np
+import pytest
+
+from taichi_frac.geometry import primitives
+from taichi_frac.geometry.tetra import tetrahedralize
+from taichi_frac.model import build_body_model
+
+DENSITY = 2400.0
+
+
+@pytest.fixture(scope="module")
+def ring_tets():
+    return tetrahedralize(primitives.torus(0.1, 0.025, edge_length=0.006), target_tets=12000)
+
+
+@pytest.fixture(scope="module")
+def ring(ring_tets):
+    return build_body_model(ring_tets.vertices, ring_tets.tets, DENSITY)
+
+
+def test_torus_mass_com_inertia_closed_form(ring):
+    R, r = 0.1, 0.025
+    m = DENSITY * 2 * math.pi**2 * R * r**2
+    assert ring.mass == pytest.approx(m, rel=5e-3)
+    assert np.linalg.norm(ring.com_in_source) < 1e-3 * R
+    izz = m * (R**2 + 0.75 * r**2)            # solid torus about its axis
+    ixx = m * (0.5 * R**2 + 0.625 * r**2)     # about a diameter
+    assert np.diag(ring.inertia) == pytest.approx([ixx, ixx, izz], rel=5e-3)
+    off = ring.inertia - np.diag(np.diag(ring.inertia))
+    assert np.abs(off).max() < 1e-3 * izz
+
+
+def test_offset_box_mass_com_inertia_closed_form():
+    a, b, c = 0.3, 0.2, 0.1
+    surface = primitives.box((a, b, c))
+    surface.apply_translation((1.0, -2.0, 0.5))
+    tm = tetrahedralize(surface, target_tets=2000)
+    model = build_body_model(tm.vertices, tm.tets, DENSITY)
+    m = DENSITY * a * b * c
+    assert model.mass == pytest.approx(m, rel=1e-9)
+    assert model.com_in_source == pytest.approx([1.0, -2.0, 0.5], abs=1e-9)
+    expected = m / 12.0 * np.array([b**2 + c**2, a**2 + c**2, a**2 + b**2])
+    assert model.inertia == pytest.approx(np.diag(expected), rel=5e-3, abs=1e-9 * expected.max())
+    # The body frame is centred: mass-weighted particle centroid at the origin.
+    assert np.abs(model.particle_mass @ model.particle_position).max() < 1e-12
+
+
+def test_particles_are_tet_centroids_with_volume_radius(ring):
+    p = ring.vertices[ring.tets]
+    assert np.allclose(ring.particle_position, p.mean(axis=1))
+    assert np.allclose(ring.particle_mass, DENSITY * ring.tet_volume)
+    assert np.allclose(4 / 3 * math.pi * ring.particle_radius**3, ring.tet_volume)
+    assert ring.particle_mass.sum() == pytest.approx(ring.mass, rel=1e-12)
+
+
+def test_bonds_are_shared_faces(ring):
+    shared = [len(set(ring.tets[i]) & set(ring.tets[j])) for i, j in ring.bonds[:2000]]
+    assert set(shared) == {3}
+    # Euler-type count: every tet face is either a bond side or a boundary face.
+    assert 2 * len(ring.bonds) + len(ring.surface_faces) == 4 * ring.tet_count
+
+
+def test_surface_particles_are_tets_with_boundary_faces(ring):
+    assert np.array_equal(ring.surface_particles, np.unique(ring.surface_face_tet))
+    assert np.array_equal(np.nonzero(ring.is_surface)[0], ring.surface_particles)
+    # Boundary faces tile the closed surface: their area-weighted normals sum to zero.
+    v = ring.vertices[ring.surface_faces]
+    assert np.abs(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]).sum(axis=0)).max() < 1e-12
+
+
+@pytest.mark.parametrize("group_size,keep", [(4, True), (4, False), (3, True), (8, False), (1, True)])
+def test_boundary_groups_partition_enclose_and_conserve(ring_tets, group_size, keep):
+    model = build_body_model(ring_tets.vertices, ring_tets.tets, DENSITY,
+                             boundary_group_size=group_size, keep_leftovers=keep)
+    members = model.boundary_members
+    # Every surface particle is in exactly one boundary particle, or reported dropped.
+    everything = np.concatenate([members, model.dropped_surface_particles])
+    assert len(everything) == len(np.unique(everything))
+    assert np.array_equal(np.sort(everything), model.surface_particles)
+    if keep:
+        assert len(model.dropped_surface_particles) == 0
+    sizes = np.diff(model.boundary_member_offsets)
+    assert sizes.min() >= 1 and sizes.max() <= group_size
+    if group_size > 1:
+        assert sizes.mean() > 0.8 * group_size  # groups are mostly full
+    owner = np.repeat(np.arange(model.boundary_particle_count), sizes)
+    # Each boundary sphere encloses its members' spheres.
+    reach = np.linalg.norm(model.particle_position[members] - model.boundary_position[owner], axis=1)
+    assert np.all(reach + model.particle_radius[members] <= model.boundary_radius[owner] * (1 + 1e-12))
+    # Centroid of members; mass = sum of members; total mass conserved.
+    centroid = np.stack([np.bincount(owner, model.particle_position[members, k]) for k in range(3)], 1) / sizes[:, None]
+    assert np.allclose(model.boundary_position, centroid)
+    dropped_mass = model.particle_mass[model.dropped_surface_particles].sum()
+    assert model.boundary_mass.sum() + dropped_mass == pytest.approx(model.particle_mass[model.surface_particles].sum(), rel=1e-12)
+
+
+def test_groups_are_adjacent_patches(ring):
+    # Members of a group lie close together: within a few particle radii of their centroid.
+    sizes = np.diff(ring.boundary_member_offsets)
+    owner = np.repeat(np.arange(ring.boundary_particle_count), sizes)
+    reach = np.linalg.norm(ring.particle_position[ring.boundary_members] - ring.boundary_position[owner], axis=1)
+    assert np.percentile(reach / ring.particle_radius.mean(), 99) < 6.0
