@@ -1,0 +1,379 @@
+"""Sequences a scene: rigid dynamics, fracture and output (the only place that knows all three).
+
+One frame is: ``World.advance`` (broadphase, narrowphase, contact impulses, integration over
+substeps) → the fracture stage (only for breakable bodies hit above their force threshold:
+contact displacement, SPH stress, cracks, split into fragments that replace the parent in the
+world) → the cache writer (one pose per live body). Each stage is timed; a stage a scene does
+not use costs nothing (no breakable body: the fracture stage is never entered).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .model import BodyModel
+from .options import FractureOptions, Material, ParticleOptions
+
+
+@dataclass
+class BodyRecord:
+    """What the simulation knows of a live (or ended) body beyond the World's fields."""
+
+    name: str
+    model: BodyModel
+    root: BodyModel
+    material: Material
+    fracture: FractureOptions
+    particles: ParticleOptions
+    breakable: bool
+    generation: int = 0
+    cache_id: int | None = None
+    parent: int | None = None
+    birth_frame: int = 0
+    friction: float = 0.5
+    restitution: float = 0.2
+
+
+@dataclass
+class StageTimes:
+    """Wall-clock seconds spent per stage over a run."""
+
+    dynamics: float = 0.0
+    fracture_analysis: float = 0.0
+    fragment_split: float = 0.0
+    output: float = 0.0
+
+    def as_dict(self) -> dict:
+        return {k: round(v, 6) for k, v in self.__dict__.items()}
+
+
+@dataclass
+class RunSummary:
+    """The paper's Table 1 columns and what a run cost."""
+
+    scene: str
+    frames: int
+    simulated_time: float
+    physics_particles: int
+    surface_particles: int
+    boundary_particles: int
+    fragments: int
+    fractures: int
+    wall_time: float
+    stage_seconds: dict = field(default_factory=dict)
+    dynamics_stage_seconds: dict = field(default_factory=dict)
+    ms_per_frame: dict = field(default_factory=dict)
+    interrupted: bool = False
+    output: str | None = None
+    mass_initial: float = 0.0
+    mass_final: float = 0.0
+    mass_dropped: float = 0.0
+
+    def to_json(self) -> str:
+        return json.dumps(self.__dict__, indent=2, default=float)
+
+
+def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors v (...,3) by unit quaternions q (...,4) wxyz."""
+    w, xyz = q[..., :1], q[..., 1:]
+    t = 2.0 * np.cross(xyz, v)
+    return v + w * t + np.cross(xyz, t)
+
+
+def _conj(q: np.ndarray) -> np.ndarray:
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def world_to_body(position, orientation, points=None, vectors=None):
+    """Map world points and/or direction vectors into a body's frame."""
+    qc = _conj(np.asarray(orientation, dtype=np.float64))
+    out = []
+    if points is not None:
+        out.append(_rotate(qc, np.asarray(points, dtype=np.float64) - position))
+    if vectors is not None:
+        out.append(_rotate(qc, np.asarray(vectors, dtype=np.float64)))
+    return out[0] if len(out) == 1 else tuple(out)
+
+
+def _strongest_per_pair(impacts: dict, bodies: np.ndarray) -> dict[int, np.ndarray]:
+    """For each body in ``bodies``: row indices of its strongest impact per other body.
+
+    Several substeps of one frame usually hold the same touch; the strongest (largest
+    |impulse| / dt, the brief's contact force) stands for it. Distinct others (the ground,
+    another body, a wall) stay distinct: a body hit at several points in one frame is
+    analysed with all of them at once.
+    """
+    force = np.linalg.norm(impacts["impulse"], axis=1) / np.maximum(impacts["dt"], 1e-30)
+    out: dict[int, np.ndarray] = {}
+    for b in np.unique(impacts["body"]):
+        if b not in bodies:
+            continue
+        rows = np.nonzero(impacts["body"] == b)[0]
+        best = {}
+        for r in rows:
+            o = int(impacts["other"][r])
+            if o not in best or force[r] > force[best[o]]:
+                best[o] = r
+        out[int(b)] = np.array(sorted(best.values()), dtype=np.int64)
+    return out
+
+
+class Simulation:
+    """Runs a :class:`~taichi_frac.scenes.Scene` end to end.
+
+    Usage::
+
+        sim = Simulation(load_scene("scenes/single_ring.toml"))
+        summary = sim.run()                  # writes scene.output_path
+        print(summary.fragments)
+
+    Args:
+        scene: the scene.
+        output: cache path overriding the scene's (None: the scene's; False: write nothing).
+        arch: Taichi backend overriding ``scene.simulation.arch``.
+        progress: callable(frame, frame_count, simulated_time, fragments, frames_per_second)
+            called after every frame, or None.
+        single_scale: override the scene's single_scale setting (benchmarks).
+        fracture: False disables the fracture stage (every body unbreakable).
+    """
+
+    def __init__(self, scene, *, output=None, arch: str | None = None, progress=None,
+                 single_scale: bool | None = None, fracture: bool = True, frames: int | None = None):
+        from .dynamics import DynamicsOptions, World, WorldCapacity
+
+        self.scene = scene
+        sim = scene.simulation
+        self.frame_count = int(frames if frames is not None else sim.frame_count)
+        self.frame_dt = sim.frame_dt
+        self.progress = progress
+        self.fracture_enabled = bool(fracture)
+        self.times = StageTimes()
+        self.records: dict[int, BodyRecord] = {}
+        self.fracture_events = 0
+        self.mass_dropped = 0.0
+        self.prepare_reports = []
+        self._tet_peak_stress: dict[int, np.ndarray] = {}
+        if output is None:
+            output = scene.output_path
+        self.output_path = None if output is False else output
+
+        t0 = time.perf_counter()
+        prepared = []
+        for obj in scene.objects:
+            model, report = obj.prepare()
+            prepared.append((obj, model))
+            self.prepare_reports.append(report)
+        self.prepare_seconds = time.perf_counter() - t0
+
+        breakable = [m for o, m in prepared if o.breakable and self.fracture_enabled]
+        # Fragments add crack faces, so their boundary layers hold more particles than the
+        # parent's: room for about four times the breakable bodies' boundary particles.
+        particles_now = sum(
+            (m.surface_particle_count if (single_scale or sim.single_scale) else m.boundary_particle_count)
+            for _, m in prepared
+        )
+        extra = sum(4 * m.boundary_particle_count + m.surface_particle_count for m in breakable)
+        capacity = WorldCapacity(
+            max_bodies=max(64, len(prepared) + 256 * len(breakable)),
+            max_boundary_particles=max(1024, particles_now + extra),
+            max_contacts=max(65536, 8 * (particles_now + extra)),
+            max_static_boxes=max(4, sum(c.type == "box" for c in scene.colliders)),
+        )
+        overrides = {} if single_scale is None else {"single_scale": bool(single_scale)}
+        thresholds = [o.fracture.impact_force_threshold for o, _ in prepared if o.breakable]
+        overrides["record_force_threshold"] = min(thresholds) if thresholds else 0.0
+        self.world = World(capacity, DynamicsOptions.from_simulation(sim, **overrides), arch=arch or sim.arch)
+        for c in scene.colliders:
+            if c.type == "ground":
+                self.world.add_ground(c.height, friction=c.friction, restitution=c.restitution)
+            else:
+                self.world.add_static_box(c.center, c.half_extents, c.orientation, friction=c.friction,
+                                          restitution=c.restitution)
+        for obj, model in prepared:
+            body = self.world.add_body(
+                model, obj.position, obj.orientation, obj.linear_velocity, obj.angular_velocity,
+                friction=obj.friction, restitution=obj.restitution,
+                breakable=obj.breakable and self.fracture_enabled,
+            )
+            self.records[body] = BodyRecord(
+                name=obj.name, model=model, root=model, material=obj.material, fracture=obj.fracture,
+                particles=obj.particles, breakable=obj.breakable and self.fracture_enabled,
+                friction=obj.friction, restitution=obj.restitution,
+            )
+        self.initial_mass = sum(r.model.mass for r in self.records.values())
+        self.table1 = dict(
+            physics_particles=sum(r.model.tet_count for r in self.records.values() if r.breakable),
+            surface_particles=sum(r.model.surface_particle_count for r in self.records.values() if r.breakable),
+            boundary_particles=sum(r.model.boundary_particle_count for r in self.records.values() if r.breakable),
+        )
+        self.writer = None
+
+    # ------------------------------------------------------------------ output
+
+    def _open_cache(self):
+        from .io.cache import CacheWriter
+
+        out = self.scene.output
+        self.writer = CacheWriter(self.output_path, fps=self.scene.simulation.fps, start_frame=0,
+                                  checkpoint_every=max(1, out.checkpoint_every or 25))
+        for rec in self.records.values():
+            self._add_to_cache(rec, birth_frame=0)
+        self._write_frame(0)
+
+    def _add_to_cache(self, rec: BodyRecord, birth_frame: int, parent_cache=None, impact=None, peak=0.0,
+                      face_peak=None):
+        from .io.fragment_mesh import fragment_surface
+
+        vertices, faces, inner = fragment_surface(rec.model, rec.root)
+        rec.cache_id = self.writer.add_fragment(
+            rec.name, vertices, faces, inner, birth_frame, parent=parent_cache, impact=impact,
+            peak_principal_stress=float(peak), face_peak_stress=face_peak,
+        )
+
+    def _write_frame(self, frame: int):
+        if self.writer is None:
+            return
+        t = time.perf_counter()
+        ids = self.world.body_ids
+        state = self.world.body_state(ids)
+        cache_ids = [self.records[b].cache_id for b in ids]
+        self.writer.write_frame(frame, cache_ids, state["position"], state["orientation"])
+        self.times.output += time.perf_counter() - t
+
+    # ------------------------------------------------------------------ fracture
+
+    def _fracture_stage(self, frame: int) -> None:
+        from .fracture.cracks import analyze_impact
+        from .fracture.fragments import make_fragments, split_body
+
+        breakable = np.array([b for b, r in self.records.items() if r.breakable and b in self.world.body_ids])
+        if len(breakable) == 0:
+            return
+        impacts = self.world.impacts()
+        if len(impacts["body"]) == 0:
+            return
+        per_body = _strongest_per_pair(impacts, breakable)
+        for body, rows in per_body.items():
+            rec = self.records[body]
+            force = impacts["impulse"][rows] / impacts["dt"][rows, None]
+            strong = np.linalg.norm(force, axis=1) >= max(rec.fracture.impact_force_threshold, 1e-12)
+            if not np.any(strong):
+                continue
+            rows, force = rows[strong], force[strong]
+            t = time.perf_counter()
+            state = self.world.body_state([body])
+            pos, quat = state["position"][0], state["orientation"][0]
+            points_b, normals_b = world_to_body(pos, quat, impacts["point"][rows], impacts["normal"][rows])
+            force_b = world_to_body(pos, quat, vectors=force)
+            analysis = analyze_impact(rec.model, points_b, normals_b, force_b, rec.material, rec.fracture)
+            self.times.fracture_analysis += time.perf_counter() - t
+            if not analysis.any_crack:
+                continue
+            t = time.perf_counter()
+            split = split_body(rec.model, analysis, rec.fracture)
+            if split.fragment_count + (1 if split.dropped_mass > 0 else 0) <= 1:
+                self.times.fragment_split += time.perf_counter() - t
+                continue
+            pieces = make_fragments(
+                rec.model, split, pos, quat, state["linear_velocity"][0], state["angular_velocity"][0],
+                rec.material, rec.particles, options=rec.fracture, analysis=analysis, birth_frame=frame,
+                parent=body, parent_generation=rec.generation,
+            )
+            peak_parent = np.maximum(self._tet_peak_stress.get(body, np.zeros(rec.model.tet_count)),
+                                     analysis.particle_principal_stress)
+            self.world.remove_body(body)
+            if self.writer is not None:
+                self.writer.end_fragment(rec.cache_id, frame)
+            self.mass_dropped += split.dropped_mass
+            self.fracture_events += 1
+            for k, piece in enumerate(pieces):
+                child = self.world.add_body(
+                    piece.model, piece.position, piece.orientation, piece.linear_velocity,
+                    piece.angular_velocity, friction=rec.friction, restitution=rec.restitution,
+                    breakable=piece.breakable,
+                )
+                child_rec = BodyRecord(
+                    name=f"{rec.name}_{k}", model=piece.model, root=rec.root, material=rec.material,
+                    fracture=rec.fracture, particles=rec.particles, breakable=piece.breakable,
+                    generation=piece.generation, parent=body, birth_frame=frame, friction=rec.friction,
+                    restitution=rec.restitution,
+                )
+                # The world may hand the parent's freed slot to a child: the parent's record
+                # is no longer needed (its cache id and peak stress are held above).
+                self.records[child] = child_rec
+                tet_peak = peak_parent[piece.parent_tets]
+                self._tet_peak_stress[child] = tet_peak
+                if self.writer is not None:
+                    impact = None if piece.impact is None else dict(point=piece.impact.point, force=piece.impact.force)
+                    self._add_to_cache(child_rec, frame, parent_cache=rec.cache_id, impact=impact,
+                                       peak=piece.peak_principal_stress,
+                                       face_peak=tet_peak[piece.model.surface_face_tet])
+            self.times.fragment_split += time.perf_counter() - t
+
+    # ------------------------------------------------------------------ loop
+
+    @property
+    def fragment_count(self) -> int:
+        """Live pieces made by fracture (the paper's Table 1 'fragments' column)."""
+        return sum(1 for b in self.world.body_ids if self.records[b].generation > 0)
+
+    def run(self) -> RunSummary:
+        """Simulate every frame; Ctrl-C stops cleanly with a valid cache of the frames done."""
+        start = time.perf_counter()
+        interrupted = False
+        frame = 0
+        sim = self.scene.simulation
+        frame_ms: list[float] = []
+        try:
+            if self.output_path is not None:
+                self._open_cache()
+            for frame in range(1, self.frame_count + 1):
+                t_frame = time.perf_counter()
+                t = time.perf_counter()
+                self.world.advance(self.frame_dt, sim.substeps)
+                self.times.dynamics += time.perf_counter() - t
+                if self.fracture_enabled:
+                    self._fracture_stage(frame)
+                self._write_frame(frame)
+                frame_ms.append(1000.0 * (time.perf_counter() - t_frame))
+                if self.progress is not None:
+                    elapsed = time.perf_counter() - start
+                    self.progress(frame, self.frame_count, frame * self.frame_dt, self.fragment_count,
+                                  frame / max(elapsed, 1e-9))
+        except KeyboardInterrupt:
+            interrupted = True
+            frame -= 1
+        finally:
+            if self.writer is not None:
+                t = time.perf_counter()
+                self.writer.close(complete=not interrupted)
+                self.times.output += time.perf_counter() - t
+        return self._summary(frame, frame_ms, time.perf_counter() - start, interrupted)
+
+    def _summary(self, frames: int, frame_ms: list[float], wall: float, interrupted: bool) -> RunSummary:
+        ws = self.world.stats
+        live = self.world.body_ids
+        ms = np.asarray(frame_ms) if frame_ms else np.zeros(1)
+        return RunSummary(
+            scene=self.scene.name,
+            frames=frames,
+            simulated_time=frames * self.frame_dt,
+            physics_particles=self.table1["physics_particles"],
+            surface_particles=self.table1["surface_particles"],
+            boundary_particles=self.table1["boundary_particles"],
+            fragments=self.fragment_count,
+            fractures=self.fracture_events,
+            wall_time=wall,
+            stage_seconds=self.times.as_dict() | {"prepare": round(self.prepare_seconds, 6)},
+            dynamics_stage_seconds={k: round(v, 6) for k, v in ws.seconds.items()},
+            ms_per_frame=dict(mean=float(ms.mean()), max=float(ms.max()), median=float(np.median(ms))),
+            interrupted=interrupted,
+            output=None if self.output_path is None else str(self.output_path),
+            mass_initial=self.initial_mass,
+            mass_final=sum(self.records[b].model.mass for b in live),
+            mass_dropped=self.mass_dropped,
+        )
