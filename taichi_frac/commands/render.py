@@ -72,7 +72,8 @@ def register(subparsers) -> None:
     parser.add_argument("cache", help="a cache written by 'taichi-frac run' (.usdc/.usda/.usd)")
     parser.add_argument("--frames", default="",
                         help="frames to render: '1,50,100', '1-100' or '1-100:10' (default: first, middle, last)")
-    parser.add_argument("-o", "--output", default="renders", help="output folder for frame_NNNN.png (default: renders)")
+    parser.add_argument("-o", "--output", default="out/renders",
+                        help="output folder for frame_NNNN.png (default: out/renders)")
     parser.add_argument("--resolution", default="320x240", help="WIDTHxHEIGHT in pixels (default: 320x240)")
     parser.add_argument("--samples", type=int, default=16, help="Cycles samples per pixel (default: 16)")
     parser.add_argument("--blender-python", default=str(default_blender_python()),

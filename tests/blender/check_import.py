@@ -77,6 +77,13 @@ def check_cache(path):
             expected = "inner" if i in synthetic.INNER_FACES[name] else "outer"
             check(material["taichi_frac_prim"].endswith("/" + expected),
                   f"{label}/{name}: face {i} has material {material.name}, expected {expected}")
+        # No input normals: every corner carries its face's flat normal (custom normals are
+        # stored compressed in Blender: ~1e-4).
+        corner = np.array([tuple(n.vector) for n in mesh.corner_normals]).reshape(-1, 3, 3)
+        tri = vertices[faces]
+        flat = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        flat /= np.linalg.norm(flat, axis=1, keepdims=True)
+        check(np.abs(corner - flat[:, None, :]).max() < 1e-3, f"{label}/{name}: corner normals not flat")
         stress = np.empty(len(mesh.polygons), dtype=np.float32)
         mesh.attributes["peak_principal_stress"].data.foreach_get("value", stress)
         expected_stress = synthetic.face_stress(name, len(faces))
