@@ -274,6 +274,29 @@ class World:
         self._check_body(body)
         _wake(self.bodies, body)
 
+    def clear(self) -> None:
+        """Remove every body and static collider (fields and compiled kernels are kept)."""
+        for body in list(self._body_range):
+            self.remove_body(body)
+        self._free_body_slots = []
+        self._body_slot_end = 0
+        self.bodies.slot_end[None] = 0
+        self._particle_slot_end = 0
+        self.particles.slot_end[None] = 0
+        self._free_ranges = [(0, self.capacity.max_boundary_particles)]
+        self._max_radius = 0.0
+        self._plane_count = self._box_count = 0
+        self.statics.plane_count[None] = 0
+        self.statics.box_count[None] = 0
+        self._update_grid_size()
+
+    def set_options(self, options: DynamicsOptions) -> None:
+        """Replace the solver options between advances (they are kernel arguments, so this
+        compiles nothing)."""
+        self.options = options
+        self._gravity = ti.Vector(list(map(float, options.gravity)))
+        self._update_grid_size()
+
     @property
     def body_ids(self) -> list[int]:
         return sorted(self._body_range)

@@ -1,0 +1,88 @@
+"""Shared fixtures for the dynamics and collision tests (no tests here).
+
+One World for the whole session: its kernels compile once (Taichi compilation dominates the
+run time); each test calls ``fresh_world()`` which clears bodies and statics and restores
+the options. Bodies are tet meshes made with tetgen directly (independent of
+taichi_frac.geometry) and cached.
+"""
+
+import functools
+
+import numpy as np
+import tetgen
+import trimesh
+
+from taichi_frac.dynamics import DynamicsOptions, World, WorldCapacity
+from taichi_frac.model import build_body_model
+
+DENSITY = 2400.0
+
+
+def tet_model(mesh: trimesh.Trimesh, max_volume: float, density: float = DENSITY, group: int = 4):
+    gen = tetgen.TetGen(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+    vertices, tets = gen.tetrahedralize(order=1, mindihedral=10, minratio=1.5, maxvolume=max_volume)[:2]
+    return build_body_model(vertices, tets, density, boundary_group_size=group)
+
+
+@functools.lru_cache(maxsize=None)
+def box_model(ex: float, ey: float, ez: float, pieces: int = 400, density: float = DENSITY):
+    mesh = trimesh.creation.box((ex, ey, ez))
+    return tet_model(mesh, mesh.volume / pieces, density)
+
+
+@functools.lru_cache(maxsize=None)
+def sphere_model(radius: float, subdivisions: int = 2, pieces: int = 300, density: float = DENSITY):
+    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+    return tet_model(mesh, mesh.volume / pieces, density)
+
+
+@functools.lru_cache(maxsize=None)
+def ring_model(pieces: int = 1500, major: float = 0.1, minor: float = 0.025):
+    mesh = trimesh.creation.torus(major, minor, major_sections=40, minor_sections=12)
+    return tet_model(mesh, mesh.volume / pieces)
+
+
+@functools.lru_cache(maxsize=None)
+def single_tet_model(edge: float = 0.05):
+    vertices = np.array([[0, 0, 0], [edge, 0, 0], [0, edge, 0], [0, 0, edge]], dtype=float)
+    return build_body_model(vertices, np.array([[0, 1, 2, 3]]), DENSITY, boundary_group_size=4)
+
+
+@functools.lru_cache(maxsize=None)
+def _world():
+    return World(WorldCapacity(max_bodies=1100, max_boundary_particles=40000, max_contacts=60000,
+                               max_impacts=20000), DynamicsOptions())
+
+
+def fresh_world(**options) -> World:
+    world = _world()
+    world.clear()
+    world.set_options(DynamicsOptions(**options))
+    return world
+
+
+def kinetic_energy(world: World, models: dict) -> float:
+    """Total kinetic energy [J]; models maps body id -> BodyModel."""
+    state = world.body_state(list(models))
+    energy = 0.0
+    for k, (body, model) in enumerate(models.items()):
+        q = state["orientation"][k]
+        rot = rotation(q)
+        inertia_world = rot @ model.inertia @ rot.T
+        v, w = state["linear_velocity"][k], state["angular_velocity"][k]
+        energy += 0.5 * model.mass * v @ v + 0.5 * w @ inertia_world @ w
+    return energy
+
+
+def rotation(q) -> np.ndarray:
+    w, x, y, z = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def lowest_point(model, group_radius=True) -> float:
+    """Lowest z of the boundary spheres in the body frame (to place a body touching z=0)."""
+    return float(np.min(model.boundary_position[:, 2] - model.boundary_radius))
