@@ -16,8 +16,10 @@ Backends are plain functions ``(vertices, faces, max_volume, min_dihedral_deg) -
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -78,6 +80,25 @@ def _tetgen(vertices, faces, max_volume, min_dihedral_deg):
     return np.asarray(out[0], dtype=np.float64), np.asarray(out[1], dtype=np.int64)
 
 
+@contextlib.contextmanager
+def _native_stdout_silenced_in_scratch_dir():
+    """fTetWild prints every pass with std::cout (it would corrupt `info --json`) and writes
+    "__tracked_surface.stl" into the working directory: point file descriptor 1 at
+    /dev/null and work in a scratch folder while it runs."""
+    cwd = os.getcwd()
+    sys.stdout.flush()
+    saved_stdout = os.dup(1)
+    with tempfile.TemporaryDirectory() as scratch, open(os.devnull, "w") as devnull:
+        os.chdir(scratch)
+        os.dup2(devnull.fileno(), 1)
+        try:
+            yield
+        finally:
+            os.dup2(saved_stdout, 1)
+            os.close(saved_stdout)
+            os.chdir(cwd)
+
+
 def _wildmeshing(vertices, faces, max_volume, min_dihedral_deg):
     try:
         import wildmeshing
@@ -87,18 +108,14 @@ def _wildmeshing(vertices, faces, max_volume, min_dihedral_deg):
     # fTetWild sizes by ideal edge length relative to the bounding-box diagonal; a regular
     # tet of volume v has edge (6 sqrt(2) v)^(1/3). Its tets average ~1/2 the ideal volume.
     edge = (6.0 * math.sqrt(2.0) * 2.0 * max_volume) ** (1 / 3) if max_volume else 0.05 * diag
-    mesher = wildmeshing.Tetrahedralizer(stop_quality=10, max_its=80, epsilon=1e-3,
-                                         edge_length_r=min(max(edge / diag, 1e-4), 1.0))
-    mesher.set_mesh(np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int32))
-    # fTetWild writes a scratch file "__tracked_surface.stl" into the working directory.
-    cwd = os.getcwd()
-    with tempfile.TemporaryDirectory() as scratch:
-        os.chdir(scratch)
-        try:
-            mesher.tetrahedralize()
-        finally:
-            os.chdir(cwd)
-    result = mesher.get_tet_mesh()  # (vertices, tets, per-tet attribute)
+    with _native_stdout_silenced_in_scratch_dir():
+        mesher = wildmeshing.Tetrahedralizer(stop_quality=10, max_its=80, epsilon=1e-3,
+                                             edge_length_r=min(max(edge / diag, 1e-4), 1.0))
+        mesher.set_log_level(6)  # spdlog "off"
+        mesher.set_mesh(np.ascontiguousarray(vertices, dtype=np.float64),
+                        np.ascontiguousarray(faces, dtype=np.int32))
+        mesher.tetrahedralize()
+        result = mesher.get_tet_mesh()  # (vertices, tets, per-tet attribute)
     return np.asarray(result[0], dtype=np.float64), np.asarray(result[1], dtype=np.int64)
 
 
