@@ -115,3 +115,33 @@ def test_prepare_tet_file_used_as_is(tmp_path):
     model, report = prepare_body(path)
     assert report.tets == tm.tet_count and report.backend == "file"
     assert model.volume == pytest.approx(1e-3, rel=1e-12)
+
+
+def test_wildmeshing_backend_fills_the_solid():
+    pytest.importorskip("wildmeshing")
+    surface = primitives.box((0.1, 0.1, 0.05))
+    tm = tetrahedralize(surface, target_tets=300, backend="wildmeshing")
+    # fTetWild approximates the surface within an envelope of 1e-3 of the bbox diagonal.
+    assert abs(tm.volume_error) < 5e-3
+    assert surface.contains(_centroids(tm)).all()
+
+
+def test_backends_are_swappable():
+    from taichi_frac.geometry import tetra
+
+    calls = []
+
+    def recording(vertices, faces, max_volume, min_dihedral_deg):
+        calls.append(max_volume)
+        return tetra.BACKENDS["tetgen"](vertices, faces, max_volume, min_dihedral_deg)
+
+    tetra.register_backend("recording", recording)
+    try:
+        tm = tetrahedralize(primitives.box((0.1, 0.1, 0.1)), max_volume=2e-5, backend="recording")
+    finally:
+        del tetra.BACKENDS["recording"]
+    assert calls == [2e-5] and tm.backend == "recording" and abs(tm.volume_error) < 1e-9
+    from taichi_frac.geometry.validate import MeshError
+
+    with pytest.raises(MeshError, match="unknown mesher backend 'nope': use one of tetgen, wildmeshing"):
+        tetrahedralize(primitives.box((0.1, 0.1, 0.1)), backend="nope")
