@@ -6,6 +6,7 @@ the options. Bodies are tet meshes made with tetgen directly (independent of
 taichi_frac.geometry) and cached.
 """
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -81,6 +82,15 @@ def rotation(q) -> np.ndarray:
         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
     ])
+
+
+def with_spheres(model, centres, radii):
+    """The same rigid body (mass, inertia) colliding through the given body-frame spheres:
+    makes the collision geometry exact where a test checks the solver against a closed form
+    (a tet-meshed box's boundary spheres make a bumpy bottom, a tet sphere's an uneven one)."""
+    centres = np.asarray(centres, dtype=float).reshape(-1, 3)
+    return dataclasses.replace(model, boundary_position=centres,
+                               boundary_radius=np.broadcast_to(np.asarray(radii, float), len(centres)).copy())
 
 
 def lowest_point(model, group_radius=True) -> float:

@@ -1,0 +1,176 @@
+"""Contact response against closed form and conservation laws, resting, stacking,
+tunnelling and hard cases."""
+
+import math
+
+import numpy as np
+import pytest
+
+from test_dynamics_support import (box_model, fresh_world, kinetic_energy, lowest_point, ring_model,
+                                   single_tet_model, sphere_model, with_spheres)
+
+G = 9.81
+
+
+def test_head_on_spheres_conserve_momentum_and_restitution():
+    world = fresh_world(gravity=(0.0, 0.0, 0.0), solver_iterations=20)
+    model = with_spheres(sphere_model(0.05), [0.0, 0.0, 0.0], 0.05)  # one exact sphere each
+    e = 0.5
+    left = world.add_body(model, (-0.08, 0, 0), (1, 0, 0, 0), (1.0, 0, 0), (0, 0, 0), friction=0.0, restitution=e)
+    right = world.add_body(model, (0.08, 0, 0), (1, 0, 0, 0), (-1.0, 0, 0), (0, 0, 0), friction=0.0, restitution=e)
+    for _ in range(10):
+        world.advance(0.01, 10)
+    state = world.body_state([left, right])
+    v = state["linear_velocity"]
+    momentum = model.mass * (v[0] + v[1])
+    assert np.linalg.norm(momentum) <= 1e-6 * model.mass * 2.0
+    separation = v[1][0] - v[0][0]
+    assert separation == pytest.approx(e * 2.0, rel=0.02)
+
+
+@pytest.mark.parametrize("mu, slides", [(0.2, True), (0.6, False)])
+def test_block_on_incline_sticks_or_slides_per_coulomb(mu, slides):
+    theta = math.radians(20.0)
+    world = fresh_world(sleep_time=100.0)
+    corners = np.stack(np.meshgrid(*([-0.04, 0.04],) * 3, indexing="ij"), -1).reshape(-1, 3)
+    model = with_spheres(box_model(0.1, 0.1, 0.1, pieces=200), corners, 0.01)  # flat bottom
+    q = (math.cos(theta / 2), 0.0, math.sin(theta / 2), 0.0)  # about +y: slope goes down towards +x
+    half = np.array([1.0, 0.5, 0.05])
+    world.add_static_box((0, 0, 0), half, q, friction=mu, restitution=0.0)
+    rot = np.array([[math.cos(theta), 0, math.sin(theta)], [0, 1, 0], [-math.sin(theta), 0, math.cos(theta)]])
+    up, down = rot @ np.array([0, 0, 1.0]), rot @ np.array([1.0, 0, 0])
+    x0 = rot @ np.array([-0.3, 0, half[2] - lowest_point(model)])
+    body = world.add_body(model, x0, q, friction=mu, restitution=0.0)
+    t = 1.0
+    for _ in range(50):
+        world.advance(0.02, 10)
+    moved = (world.body_state([body])["position"][0] - x0) @ down
+    if slides:
+        exact = 0.5 * G * (math.sin(theta) - mu * math.cos(theta)) * t * t
+        assert moved == pytest.approx(exact, rel=0.02)
+    else:
+        assert abs(moved) < 1e-3
+
+
+def test_ring_dropped_on_ground_comes_to_rest():
+    world = fresh_world()
+    model = ring_model()
+    world.add_ground(0.0, friction=0.5, restitution=0.2)
+    tilt = (math.cos(0.15), math.sin(0.15), 0.0, 0.0)
+    body = world.add_body(model, (0, 0, 0.4), tilt, (0.3, 0, 0), (0, 0, 1.0))
+    models = {body: model}
+    radius = model.boundary_radius
+    peak, touched, rest_frame = 0.0, False, None
+    for frame in range(200):  # 4 s
+        world.advance(0.02, 10)
+        energy = kinetic_energy(world, models)
+        peak = max(peak, energy)
+        particles = world.particle_state(body)
+        depth = -(particles["position"][:, 2] - particles["radius"])
+        if touched:
+            assert np.all(depth <= 0.1 * radius)  # after the first contact substep
+        touched |= world.stats.contacts > 0 or np.any(depth > 0)
+        if rest_frame is None and energy < 1e-6 * peak and frame > 10:
+            rest_frame = frame
+        if rest_frame is not None:
+            assert energy < 1e-6 * peak  # and it stays there
+            state = world.body_state([body])
+            assert np.linalg.norm(state["linear_velocity"][0]) < 1e-3
+    assert rest_frame is not None and rest_frame * 0.02 <= 3.0
+
+
+def test_impacts_sum_to_the_momentum_change():
+    world = fresh_world(record_force_threshold=0.0)
+    model = box_model(0.1, 0.1, 0.1, pieces=200)
+    world.add_ground(0.0, restitution=0.0)
+    body = world.add_body(model, (0, 0, 0.1), (1, 0, 0, 0), (0, 0, -2.0), (0, 0, 0))
+    v_before = world.body_state([body])["linear_velocity"][0]
+    world.advance(0.02, 10)
+    v_after = world.body_state([body])["linear_velocity"][0]
+    rows = world.impacts()
+    assert len(rows["body"]) > 0
+    assert np.all(rows["other"] == -1) and np.all(rows["body"] == body)
+    np.testing.assert_allclose(rows["normal"], np.tile([0, 0, 1.0], (len(rows["body"]), 1)), atol=1e-5)
+    expected = model.mass * (v_after - v_before - np.array([0, 0, -G]) * 0.02)
+    np.testing.assert_allclose(rows["impulse"].sum(axis=0), expected, atol=1e-3 * model.mass * 2.0)
+    assert np.all(rows["dt"] == pytest.approx(0.002))
+
+
+def test_five_stacked_rings_stay_stacked():
+    world = fresh_world()
+    model = ring_model()
+    world.add_ground(0.0)
+    thickness = -2 * lowest_point(model)
+    bodies = [world.add_body(model, (0, 0, (k + 0.5) * thickness + 0.002 * (k + 1))) for k in range(5)]
+    for _ in range(500):  # 10 s
+        world.advance(0.02, 10)
+    state = world.body_state(bodies)
+    assert np.all(np.abs(state["position"][:, :2]) < 0.01)
+    heights = state["position"][:, 2]
+    np.testing.assert_allclose(np.diff(heights), thickness, rtol=0.1)
+    assert np.all(state["sleeping"])
+
+
+def test_fast_small_sphere_does_not_tunnel_through_thin_wall():
+    world = fresh_world(max_substeps=5000)
+    model = sphere_model(0.01, subdivisions=1, pieces=20)
+    world.add_static_box((0.1, 0, 0), (0.01, 0.2, 0.2), friction=0.2, restitution=0.2)
+    body = world.add_body(model, (0, 0, 0), (1, 0, 0, 0), (100.0, 0, 0), (0, 0, 0))
+    for _ in range(4):
+        world.advance(0.005, 1)
+        assert world.body_state([body])["position"][0][0] < 0.09 + 1e-3
+    assert world.stats.substep_limit_hits == 0 and world.stats.total_substeps > 100
+    assert world.body_state([body])["linear_velocity"][0][0] < 0.0  # it bounced back
+
+
+def _assert_bounded(world, models, energy_budget):
+    state = world.body_state(list(models))
+    for key in ("position", "orientation", "linear_velocity", "angular_velocity"):
+        assert np.all(np.isfinite(state[key]))
+    assert kinetic_energy(world, models) <= energy_budget
+
+
+def test_hard_cases_stay_finite_and_bounded():
+    world = fresh_world()
+    world.add_ground(0.0)
+    small, big = box_model(0.02, 0.02, 0.02, pieces=30, density=2400.0), box_model(0.2, 0.2, 0.2, pieces=300)
+    tet = single_tet_model()
+    sphere = sphere_model(0.05)
+    models = {}
+    # Deeply overlapped spheres (centres 1 cm apart).
+    models[world.add_body(sphere, (1.0, 0, 0.3))] = sphere
+    models[world.add_body(sphere, (1.01, 0, 0.3))] = sphere
+    # Mass ratio 1:1000 (small cube on a big one).
+    models[world.add_body(big, (-1.0, 0, 0.11))] = big
+    models[world.add_body(small, (-1.0, 0, 0.24))] = small
+    # A body of one tet.
+    models[world.add_body(tet, (0, 1.0, 0.2), (0.9, 0.3, 0.2, 0.1))] = tet
+    heights = np.array([0.3, 0.3, 0.11, 0.24, 0.2])
+    masses = np.array([m.mass for m in models.values()])
+    # Energy budget: potential released + what the split impulse may add at its capped speed.
+    budget = float(masses @ heights * G + 0.5 * masses.sum() * world.options.max_correction_speed ** 2)
+    for _ in range(100):
+        world.advance(0.02, 10)
+        _assert_bounded(world, models, budget)
+    state = world.body_state(list(models))
+    assert np.all(state["position"][:, 2] > 0.0)
+
+
+def test_pile_of_1000_single_tet_bodies():
+    world = fresh_world()
+    world.add_ground(0.0)
+    for sign in (-1, 1):
+        world.add_static_box((sign * 0.3, 0, 0.3), (0.02, 0.32, 0.3))
+        world.add_static_box((0, sign * 0.3, 0.3), (0.32, 0.02, 0.3))
+    tet = single_tet_model(0.04)
+    grid = np.stack(np.meshgrid(*(np.arange(10) * 0.05 - 0.225,) * 2, np.arange(10) * 0.05 + 0.1, indexing="ij"), -1)
+    models = {world.add_body(tet, p, (1, 0, 0, 0), (0, 0, 0), (1.0, 2.0, 3.0)): tet for p in grid.reshape(-1, 3)}
+    masses = np.full(len(models), tet.mass)
+    budget = float(masses @ (grid.reshape(-1, 3)[:, 2] + 0.05) * G + masses.sum() * 10.0)
+    for _ in range(25):
+        world.advance(0.02, 4)
+        _assert_bounded(world, models, budget)
+    assert world.stats.contact_overflows == 0
+    state = world.body_state(list(models))
+    assert np.all(state["position"][:, 2] > -0.01)
+    assert np.all(np.abs(state["position"][:, :2]) < 0.3)
