@@ -16,6 +16,9 @@ def register(subparsers) -> None:
     p.add_argument("-o", "--output", help="cache file (.usdc/.usda); default: the scene's [output] path")
     p.add_argument("--arch", choices=["cpu", "cuda", "vulkan", "metal", "gpu"],
                    help="Taichi backend (default: the scene's simulation.arch, cpu)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene value, e.g. --set ring.fracture.crack_count=3 "
+                        "--set ring.material.tensile_strength=2e6 --set simulation.duration=1 (repeatable)")
     p.add_argument("--frames", type=int, help="simulate only this many frames (default: duration x fps)")
     p.add_argument("--no-fracture", action="store_true", help="treat every body as unbreakable")
     p.add_argument("--single-scale", action="store_true",
@@ -95,7 +98,7 @@ def main(args) -> int:
     from ..simulation import Simulation
 
     try:
-        scene = load_scene(args.scene)
+        scene = load_scene(args.scene, args.overrides)
     except (OptionError, FileNotFoundError) as exc:
         print(f"taichi-frac run: {exc}", file=sys.stderr)
         return 2

@@ -11,10 +11,11 @@ from .description import (
     SimulationSettings,
     euler_deg_to_quaternion,
 )
-from .loader import load_scene, scene_from_dict
+from .loader import apply_overrides, load_scene, scene_from_dict
 
 __all__ = [
     "Collider",
+    "apply_overrides",
     "OutputSettings",
     "Scene",
     "SceneObject",

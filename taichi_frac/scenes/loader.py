@@ -149,8 +149,9 @@ def scene_from_dict(data: dict, *, where: str = "scene", base_dir: str | os.Path
         raise OptionError(msg if msg.startswith(where) else f"{where}: {msg}") from None
 
 
-def load_scene(path: str | os.PathLike) -> Scene:
-    """Read a scene TOML file. Raises OptionError (bad content) or FileNotFoundError."""
+def load_scene(path: str | os.PathLike, overrides=()) -> Scene:
+    """Read a scene TOML file, with optional ``KEY=VALUE`` overrides (see apply_overrides).
+    Raises OptionError (bad content) or FileNotFoundError."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"scene file {str(path)!r} does not exist")
@@ -159,4 +160,59 @@ def load_scene(path: str | os.PathLike) -> Scene:
             data = tomllib.load(f)
     except tomllib.TOMLDecodeError as exc:
         raise OptionError(f"{path.name}: not valid TOML: {exc}") from None
+    if overrides:
+        data = apply_overrides(data, overrides, where=path.name)
     return scene_from_dict(data, where=path.name, base_dir=path.parent, source_path=path.resolve())
+
+
+def apply_overrides(data: dict, overrides, *, where: str = "scene") -> dict:
+    """Apply ``KEY=VALUE`` overrides to a parsed scene (returns a new dict).
+
+    KEY is a dotted path; an object or collider is named by its ``name`` or its index, e.g.
+    ``ring.fracture.crack_count=3``, ``objects.ring.material.tensile_strength=2e6``,
+    ``simulation.duration=1.5``, ``colliders.0.friction=0.3``. A bare object name stands for
+    ``objects.NAME``. A material given as a preset name becomes ``{preset = NAME}`` when one
+    of its fields is overridden. VALUE is parsed as TOML (``3``, ``2e6``, ``true``,
+    ``[0, 0, 1]``, ``"porcelain"``); text that is not valid TOML is taken as a string.
+    """
+    import copy
+
+    data = copy.deepcopy(data)
+    object_names = {o.get("name") for o in data.get("objects", []) if isinstance(o, dict)}
+    for item in overrides:
+        if "=" not in item:
+            raise OptionError(f"{where}: override {item!r} must look like KEY=VALUE, e.g. ring.fracture.crack_count=3")
+        key, raw = (s.strip() for s in item.split("=", 1))
+        try:
+            value = tomllib.loads(f"v = {raw}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = raw
+        parts = key.split(".")
+        if parts[0] in object_names and parts[0] not in ("objects", "colliders", "simulation", "output", "name"):
+            parts = ["objects"] + parts
+        node = data
+        for depth, part in enumerate(parts[:-1]):
+            here = ".".join(parts[:depth]) or "scene"
+            if isinstance(node, list):
+                match = [t for t in node if isinstance(t, dict) and t.get("name") == part]
+                if match:
+                    node = match[0]
+                elif part.isdigit() and int(part) < len(node):
+                    node = node[int(part)]
+                else:
+                    raise OptionError(f"{where}: override {key!r}: no entry named {part!r} in {here}")
+                continue
+            child = node.get(part)
+            if child is None:
+                child = node[part] = {} if depth > 0 else None
+                if child is None:
+                    raise OptionError(f"{where}: override {key!r}: unknown key {part!r}")
+            elif isinstance(child, str) and part == "material":
+                child = node[part] = {"preset": child}
+            elif not isinstance(child, (dict, list)):
+                raise OptionError(f"{where}: override {key!r}: {here}.{part} is a value, not a table")
+            node = child
+        if isinstance(node, list):
+            raise OptionError(f"{where}: override {key!r} names a list; add the entry's name or index")
+        node[parts[-1]] = value
+    return data
