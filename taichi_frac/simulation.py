@@ -9,6 +9,7 @@ not use costs nothing (no breakable body: the fracture stage is never entered).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from dataclasses import dataclass, field
@@ -139,10 +140,14 @@ class Simulation:
             called after every frame, or None.
         single_scale: override the scene's single_scale setting (benchmarks).
         fracture: False disables the fracture stage (every body unbreakable).
+        frames: simulate this many frames instead of duration x fps.
+        world: an existing World to reuse (cleared first; its capacities must suffice):
+            its kernels are already compiled, so a second scene in one process starts at once.
     """
 
     def __init__(self, scene, *, output=None, arch: str | None = None, progress=None,
-                 single_scale: bool | None = None, fracture: bool = True, frames: int | None = None):
+                 single_scale: bool | None = None, fracture: bool = True, frames: int | None = None,
+                 world=None):
         from .dynamics import DynamicsOptions, World, WorldCapacity
 
         self.scene = scene
@@ -186,7 +191,17 @@ class Simulation:
         overrides = {} if single_scale is None else {"single_scale": bool(single_scale)}
         thresholds = [o.fracture.impact_force_threshold for o, _ in prepared if o.breakable]
         overrides["record_force_threshold"] = min(thresholds) if thresholds else 0.0
-        self.world = World(capacity, DynamicsOptions.from_simulation(sim, **overrides), arch=arch or sim.arch)
+        options = DynamicsOptions.from_simulation(sim, **overrides)
+        if world is None:
+            self.world = World(capacity, options, arch=arch or sim.arch)
+        else:
+            for name in ("max_bodies", "max_boundary_particles", "max_static_boxes"):
+                if getattr(world.capacity, name) < getattr(capacity, name):
+                    raise ValueError(f"the World given has {name}={getattr(world.capacity, name)}, this scene "
+                                     f"needs {getattr(capacity, name)}")
+            world.clear()
+            world.set_options(options)
+            self.world = world
         for c in scene.colliders:
             if c.type == "ground":
                 self.world.add_ground(c.height, friction=c.friction, restitution=c.restitution)
@@ -291,6 +306,7 @@ class Simulation:
             self.mass_dropped += split.dropped_mass
             self.fracture_events += 1
             for k, piece in enumerate(pieces):
+                piece = self._lift_out_of_ground(piece)
                 child = self.world.add_body(
                     piece.model, piece.position, piece.orientation, piece.linear_velocity,
                     piece.angular_velocity, friction=rec.friction, restitution=rec.restitution,
@@ -313,6 +329,27 @@ class Simulation:
                                        peak=piece.peak_principal_stress,
                                        face_peak=tet_peak[piece.model.surface_face_tet])
             self.times.fragment_split += time.perf_counter() - t
+
+    def _lift_out_of_ground(self, piece):
+        """Move a new fragment up out of the ground planes if its collision spheres start
+        inside one. A fragment's boundary layer is built afresh (its crack faces are new
+        surface), so its spheres need not match the parent's, which the solver had kept out
+        of the ground; without this a piece born at the moment of impact can start up to a
+        few millimetres deep and be shot out by the position correction. The shift is
+        vertical and smaller than one boundary particle radius; velocities are untouched."""
+        grounds = [c.height for c in self.scene.colliders if c.type == "ground"]
+        if not grounds:
+            return piece
+        from .fracture.fragments import quaternion_matrix
+
+        m = piece.model
+        rot = quaternion_matrix(piece.orientation)
+        lowest = np.min(piece.position[2] + m.boundary_position @ rot[2] - m.boundary_radius)
+        depth = max(grounds) - lowest
+        allowed = self.world.options.allowed_penetration * float(m.boundary_radius.mean())
+        if depth > allowed:
+            piece = dataclasses.replace(piece, position=piece.position + np.array([0.0, 0.0, depth - allowed]))
+        return piece
 
     # ------------------------------------------------------------------ loop
 

@@ -146,7 +146,11 @@ class SceneObject:
         object.__setattr__(self, "linear_velocity", _vec3(owner, "linear_velocity", self.linear_velocity))
         object.__setattr__(self, "angular_velocity", _vec3(owner, "angular_velocity", self.angular_velocity))
         if self.orientation is not None and self.euler_deg is not None:
-            raise OptionError(f"{owner}: give orientation (quaternion w,x,y,z) or euler_deg, not both")
+            # dataclasses.replace() passes both back: accept them when they agree.
+            from_euler = np.array(euler_deg_to_quaternion(_vec3(owner, "euler_deg", self.euler_deg)))
+            given = np.array(_unit_quaternion(owner, self.orientation))
+            if min(np.abs(from_euler - given).max(), np.abs(from_euler + given).max()) > 1e-9:
+                raise OptionError(f"{owner}: give orientation (quaternion w,x,y,z) or euler_deg, not both")
         if self.euler_deg is not None:
             euler = _vec3(owner, "euler_deg", self.euler_deg)
             object.__setattr__(self, "euler_deg", euler)

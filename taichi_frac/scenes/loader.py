@@ -99,6 +99,8 @@ def _object(table, index: int, base_dir: Path | None, where_file: str) -> SceneO
     where = f"{where_file}: objects[{index}]"
     if not isinstance(table, dict):
         raise OptionError(f"{where} must be a table ([[objects]]), got {table!r}")
+    if "orientation" in table and "euler_deg" in table:
+        raise OptionError(f"{where}: give orientation (quaternion w,x,y,z) or euler_deg, not both")
     extra = {}
     if "material" in table:
         extra["material"] = _material(table["material"], f"{where}.material")
