@@ -37,6 +37,10 @@ class BodyRecord:
     birth_frame: int = 0
     friction: float = 0.5
     restitution: float = 0.2
+    # Shading of the root's boundary faces (aligned with root.surface_faces), shared by
+    # every fragment of it: normals (Fr,3,3), uvs (Fr,3,2) or None.
+    root_normals: np.ndarray | None = None
+    root_uvs: np.ndarray | None = None
 
 
 @dataclass
@@ -208,7 +212,7 @@ class Simulation:
             else:
                 self.world.add_static_box(c.center, c.half_extents, c.orientation, friction=c.friction,
                                           restitution=c.restitution)
-        for obj, model in prepared:
+        for (obj, model), report in zip(prepared, self.prepare_reports):
             body = self.world.add_body(
                 model, obj.position, obj.orientation, obj.linear_velocity, obj.angular_velocity,
                 friction=obj.friction, restitution=obj.restitution,
@@ -219,6 +223,12 @@ class Simulation:
                 particles=obj.particles, breakable=obj.breakable and self.fracture_enabled,
                 friction=obj.friction, restitution=obj.restitution,
             )
+            if report.surface is not None and self.output_path is not None:
+                from .geometry.surface_attributes import boundary_corner_attributes
+
+                corners = model.vertices[model.surface_faces] + model.com_in_source
+                rec = self.records[body]
+                rec.root_normals, rec.root_uvs = boundary_corner_attributes(report.surface, corners)
         self.initial_mass = sum(r.model.mass for r in self.records.values())
         self.table1 = dict(
             physics_particles=sum(r.model.tet_count for r in self.records.values() if r.breakable),
@@ -241,12 +251,15 @@ class Simulation:
 
     def _add_to_cache(self, rec: BodyRecord, birth_frame: int, parent_cache=None, impact=None, peak=0.0,
                       face_peak=None):
-        from .io.fragment_mesh import fragment_surface
+        from .io.fragment_mesh import fragment_surface, surface_corner_attributes
 
         vertices, faces, inner = fragment_surface(rec.model, rec.root)
+        normals = uvs = None
+        if rec.root_normals is not None:
+            normals, uvs = surface_corner_attributes(rec.model, rec.root, rec.root_normals, rec.root_uvs)
         rec.cache_id = self.writer.add_fragment(
             rec.name, vertices, faces, inner, birth_frame, parent=parent_cache, impact=impact,
-            peak_principal_stress=float(peak), face_peak_stress=face_peak,
+            peak_principal_stress=float(peak), face_peak_stress=face_peak, normals=normals, uvs=uvs,
         )
 
     def _write_frame(self, frame: int):
@@ -316,7 +329,7 @@ class Simulation:
                     name=f"{rec.name}_{k}", model=piece.model, root=rec.root, material=rec.material,
                     fracture=rec.fracture, particles=rec.particles, breakable=piece.breakable,
                     generation=piece.generation, parent=body, birth_frame=frame, friction=rec.friction,
-                    restitution=rec.restitution,
+                    restitution=rec.restitution, root_normals=rec.root_normals, root_uvs=rec.root_uvs,
                 )
                 # The world may hand the parent's freed slot to a child: the parent's record
                 # is no longer needed (its cache id and peak stress are held above).

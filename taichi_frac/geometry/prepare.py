@@ -64,9 +64,12 @@ class PrepareReport:
     cache_hit: bool
     repair_steps: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
+    # The input surface in metres, source frame (None for tet-mesh files): shading
+    # attributes for the cache come from it. Not part of the printed report.
+    surface: object = field(default=None, repr=False, compare=False)
 
     def as_dict(self) -> dict:
-        return dict(self.__dict__)
+        return {k: v for k, v in self.__dict__.items() if k != "surface"}
 
 
 def _surface_from_source(source, factor: float, repair: bool, edge_length_for):
@@ -185,6 +188,7 @@ def prepare_body(
                      sliver_count=int(np.sum(dihedral_angles_deg(vertices, tets).min(axis=1) < 5.0)),
                      runs=0, seconds=0.0)
         surface_triangles = -1
+        surface = None
         timings["mesh"] = 0.0
     else:
         target = None if max_volume is not None else particles.target_particles
@@ -227,5 +231,6 @@ def prepare_body(
         cache_hit=cache_hit,
         repair_steps=repair_steps,
         timings=timings,
+        surface=surface,
     )
     return model, report

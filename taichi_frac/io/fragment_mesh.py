@@ -23,7 +23,14 @@ def fragment_surface(model: BodyModel, root: BodyModel):
     offsets from the tet centroid. That keeps it right if a tet's vertices were reordered
     (e.g. re-oriented) when the fragment was built.
     """
-    faces = np.asarray(model.surface_faces)
+    root_tet, root_local = _root_faces(model, root)
+    inner = root.tet_neighbor[root_tet, root_local] != -1
+    return model.vertices, np.asarray(model.surface_faces), inner
+
+
+def _root_faces(model: BodyModel, root: BodyModel):
+    """For each boundary face of ``model``: (root tet (F,), local face index in that root
+    tet (F,)), matched through the geometry (see fragment_surface)."""
     face_tet = np.asarray(model.surface_face_tet, dtype=np.int64)
     local = np.asarray(model.surface_face_local, dtype=np.int64)
     root_tet = np.asarray(model.source_tet, dtype=np.int64)[face_tet]
@@ -41,5 +48,31 @@ def fragment_surface(model: BodyModel, root: BodyModel):
     size = np.linalg.norm(theirs, axis=2).max(axis=1)
     if np.any(distance[np.arange(len(face_tet)), root_local] > 1e-6 * np.maximum(size, 1e-300)):
         raise ValueError("fragment tets do not match their source tets in the root model")
-    inner = root.tet_neighbor[root_tet, root_local] != -1
-    return model.vertices, faces, inner
+    return root_tet, root_local
+
+
+def surface_corner_attributes(model: BodyModel, root: BodyModel, root_normals, root_uvs=None):
+    """Per-corner normals (F,3,3) and UVs (F,3,2) or None for ``model``'s boundary faces,
+    taken from the root's boundary faces (``root_normals`` (Fr,3,3), ``root_uvs``
+    (Fr,3,2) aligned with ``root.surface_faces``). Crack faces have no root counterpart
+    and get NaN (the cache writer then uses their flat face normal)."""
+    root_tet, root_local = _root_faces(model, root)
+    lookup = np.full(root.tet_count * 4, -1, dtype=np.int64)
+    lookup[np.asarray(root.surface_face_tet, np.int64) * 4 + np.asarray(root.surface_face_local, np.int64)] = \
+        np.arange(len(root.surface_faces))
+    root_face = lookup[root_tet * 4 + root_local]
+    outer = root_face >= 0
+    # Match corners by position relative to the face centroid (the frames differ by a shift).
+    mine = model.vertices[np.asarray(model.surface_faces)[outer]]
+    theirs = root.vertices[np.asarray(root.surface_faces)[root_face[outer]]]
+    mine = mine - mine.mean(axis=1, keepdims=True)
+    theirs = theirs - theirs.mean(axis=1, keepdims=True)
+    order = np.argmin(np.linalg.norm(mine[:, :, None, :] - theirs[:, None, :, :], axis=3), axis=2)  # (Fo,3)
+    rows = root_face[outer][:, None]
+    normals = np.full((len(root_face), 3, 3), np.nan)
+    normals[outer] = np.asarray(root_normals)[rows, order]
+    uvs = None
+    if root_uvs is not None:
+        uvs = np.full((len(root_face), 3, 2), np.nan)
+        uvs[outer] = np.asarray(root_uvs)[rows, order]
+    return normals, uvs
