@@ -113,18 +113,18 @@ def _strongest_per_pair(impacts: dict, bodies: np.ndarray) -> dict[int, np.ndarr
     analysed with all of them at once.
     """
     force = np.linalg.norm(impacts["impulse"], axis=1) / np.maximum(impacts["dt"], 1e-30)
-    out: dict[int, np.ndarray] = {}
-    for b in np.unique(impacts["body"]):
-        if b not in bodies:
-            continue
-        rows = np.nonzero(impacts["body"] == b)[0]
-        best = {}
-        for r in rows:
-            o = int(impacts["other"][r])
-            if o not in best or force[r] > force[best[o]]:
-                best[o] = r
-        out[int(b)] = np.array(sorted(best.values()), dtype=np.int64)
-    return out
+    rows = np.nonzero(np.isin(impacts["body"], bodies))[0]
+    if len(rows) == 0:
+        return {}
+    body = impacts["body"][rows].astype(np.int64)
+    other = impacts["other"][rows].astype(np.int64)
+    # Sort by (body, other, -force): the first row of each (body, other) run is its strongest.
+    order = np.lexsort((-force[rows], other, body))
+    body, other, rows = body[order], other[order], rows[order]
+    first = np.ones(len(rows), dtype=bool)
+    first[1:] = (body[1:] != body[:-1]) | (other[1:] != other[:-1])
+    body, rows = body[first], rows[first]
+    return {int(b): np.sort(rows[body == b]) for b in np.unique(body)}
 
 
 class Simulation:

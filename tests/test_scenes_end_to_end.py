@@ -120,3 +120,23 @@ def test_scene_without_breakable_bodies_never_enters_fracture(world):
     assert summary.fractures == 0 and summary.fragments == 0
     assert summary.stage_seconds["fracture_analysis"] == 0.0
     assert_invariants(scene, summary, worst)
+
+
+def test_strongest_impact_per_body_pair_matches_a_plain_loop():
+    from taichi_frac.simulation import _strongest_per_pair
+
+    rng = np.random.default_rng(0)
+    k = 300
+    impacts = dict(body=rng.integers(0, 6, k), other=rng.integers(-2, 6, k), impulse=rng.normal(size=(k, 3)),
+                   dt=rng.uniform(1e-4, 1e-3, k))
+    breakable = np.array([0, 2, 3, 5])
+    result = _strongest_per_pair(impacts, breakable)
+    force = np.linalg.norm(impacts["impulse"], axis=1) / impacts["dt"]
+    for b in breakable:
+        best = {}
+        for r in np.nonzero(impacts["body"] == b)[0]:
+            o = int(impacts["other"][r])
+            if o not in best or force[r] > force[best[o]]:
+                best[o] = r
+        assert np.array_equal(result[int(b)], np.sort(list(best.values())))
+    assert set(result) == {int(b) for b in breakable if np.any(impacts["body"] == b)}
