@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .geometry.rotation import quaternion_matrix
 from .model import BodyModel
 from .options import FractureOptions, Material, ParticleOptions
 
@@ -82,25 +83,14 @@ class RunSummary:
         return json.dumps(self.__dict__, indent=2, default=float)
 
 
-def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors v (...,3) by unit quaternions q (...,4) wxyz."""
-    w, xyz = q[..., :1], q[..., 1:]
-    t = 2.0 * np.cross(xyz, v)
-    return v + w * t + np.cross(xyz, t)
-
-
-def _conj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
-
-
 def world_to_body(position, orientation, points=None, vectors=None):
-    """Map world points and/or direction vectors into a body's frame."""
-    qc = _conj(np.asarray(orientation, dtype=np.float64))
+    """Map world points and/or direction vectors (K,3) into a body's frame."""
+    rot = quaternion_matrix(orientation)  # body -> world; row vectors map back with @ rot
     out = []
     if points is not None:
-        out.append(_rotate(qc, np.asarray(points, dtype=np.float64) - position))
+        out.append((np.asarray(points, dtype=np.float64) - position) @ rot)
     if vectors is not None:
-        out.append(_rotate(qc, np.asarray(vectors, dtype=np.float64)))
+        out.append(np.asarray(vectors, dtype=np.float64) @ rot)
     return out[0] if len(out) == 1 else tuple(out)
 
 
@@ -278,7 +268,8 @@ class Simulation:
         from .fracture.cracks import analyze_impact
         from .fracture.fragments import make_fragments, split_body
 
-        breakable = np.array([b for b, r in self.records.items() if r.breakable and b in self.world.body_ids])
+        live = set(self.world.body_ids)
+        breakable = np.array([b for b, r in self.records.items() if r.breakable and b in live])
         if len(breakable) == 0:
             return
         impacts = self.world.impacts()
@@ -353,8 +344,6 @@ class Simulation:
         grounds = [c.height for c in self.scene.colliders if c.type == "ground"]
         if not grounds:
             return piece
-        from .fracture.fragments import quaternion_matrix
-
         m = piece.model
         rot = quaternion_matrix(piece.orientation)
         lowest = np.min(piece.position[2] + m.boundary_position @ rot[2] - m.boundary_radius)

@@ -6,7 +6,8 @@ import pytest
 
 from _fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL, ring_model
 from taichi_frac.fracture.cracks import CrackPlane, analyze_impact
-from taichi_frac.fracture.fragments import make_fragments, quaternion_matrix, split_body
+from taichi_frac.fracture.fragments import make_fragments, split_body
+from taichi_frac.geometry.rotation import quaternion_matrix
 from taichi_frac.geometry.mass import tet_mass_properties
 from taichi_frac.geometry.topology import TET_FACES
 from taichi_frac.options import FractureOptions, Material, ParticleOptions

@@ -16,6 +16,7 @@ import taichi as ti
 from .. import runtime
 from ..collision import grid as grid_kernels
 from ..collision import narrowphase
+from ..geometry.rotation import quaternion_matrix
 from ..model import BodyModel
 from . import impacts as impact_kernels
 from . import integrate, stages
@@ -130,15 +131,6 @@ def _reset_advance_counters(contacts: ti.template(), impacts: ti.template()):
     contacts.peak[None] = 0
     impacts.count[None] = 0
     impacts.overflow[None] = 0
-
-
-def _quat_to_matrix(q) -> np.ndarray:
-    w, x, y, z = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
 
 
 class World:
@@ -257,7 +249,7 @@ class World:
         q = q / np.linalg.norm(q)
         self.statics.box_center[k] = np.asarray(center, dtype=np.float32)
         self.statics.box_half_extents[k] = np.asarray(half_extents, dtype=np.float32)
-        self.statics.box_rotation[k] = _quat_to_matrix(q).astype(np.float32)
+        self.statics.box_rotation[k] = quaternion_matrix(q).astype(np.float32)
         self.statics.box_friction[k] = friction
         self.statics.box_restitution[k] = restitution
         self._box_count += 1
@@ -401,7 +393,7 @@ class World:
         offsets = self.particles.offset.to_numpy()[start:start + count].astype(np.float64)
         radii = self.particles.radius.to_numpy()[start:start + count].astype(np.float64)
         state = self.body_state([body])
-        rot = _quat_to_matrix(state["orientation"][0])
+        rot = quaternion_matrix(state["orientation"][0])
         return dict(position=state["position"][0] + offsets @ rot.T, radius=radii)
 
     # ---------------------------------------------------------------- slots

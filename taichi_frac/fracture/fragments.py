@@ -34,6 +34,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from ..geometry.rotation import quaternion_matrix
 from ..model import BodyModel, build_body_model
 from ..options import FractureOptions, Material, ParticleOptions
 from .cracks import ImpactAnalysis, cut_bonds
@@ -226,16 +227,6 @@ def _crack_peak_per_piece(model, cracks, cut, labels, piece_labels) -> np.ndarra
     touched = np.unique(labels[model.bonds[cut].reshape(-1)])
     peak[np.isin(piece_labels, touched)] = crack_peak
     return peak
-
-
-def quaternion_matrix(q) -> np.ndarray:
-    """Rotation matrix (3,3) of a unit quaternion (w, x, y, z), body -> world."""
-    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
 
 
 def make_fragments(
