@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 
 import numpy as np
@@ -32,20 +33,16 @@ os.environ.setdefault("TI_LOG_LEVEL", "error")
 
 from taichi_frac import runtime  # noqa: E402
 
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
+from _fracture_ring import jittered_block  # noqa: E402  (the stress test's block)
+
 E, NU = 70.0e9, 0.2
 FORCE = np.array([2e4, -1e4, -1e5])
 TOP = np.array([0.0, 0.0, 1.0])
 DOWN = np.array([0.0, 0.0, -1.0])
 
 
-def jittered_block(per_side, jitter=0.2, seed=0):
-    rng = np.random.default_rng(seed)
-    s = 1.0 / per_side
-    g = (np.arange(per_side) + 0.5) * s - 0.5
-    pts = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
-    pts = pts + rng.uniform(-jitter, jitter, pts.shape) * s
-    pts[:, 2] += 0.5
-    return pts, np.full(len(pts), s**3)
+
 
 
 def tet_particles(mesh, target):
@@ -139,12 +136,9 @@ def main() -> None:
               f"{1e3 * tn:.2f} | {1e3 * tg:.2f} | {1e3 * ts:.2f} | {1e3 * tt:.1f} |")
 
     if not args.no_tets:
-        import sys
-
         from taichi_frac.fracture import contact_field
 
         # The fracture tests' ring (tetgen, ~5,000 tets), the one bench_fracture.py uses.
-        sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
         from _fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL, ring_model
 
         model = ring_model()

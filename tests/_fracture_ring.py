@@ -1,4 +1,4 @@
-"""The fracture tests' ring: torus major radius 0.1 m, minor 0.025 m, about 5,000 tets
+"""Shared bodies of the fracture tests and benchmarks. The ring: torus major radius 0.1 m, minor 0.025 m, about 5,000 tets
 (tetgen directly, so these tests do not depend on the geometry pipeline)."""
 
 from functools import lru_cache
@@ -23,3 +23,17 @@ def ring_model(density: float = 2400.0):
     mesher = tetgen.TetGen(surface.vertices, surface.faces)
     nodes, tets = mesher.tetrahedralize(switches="pq1.8a4.5e-7Q")[:2]
     return build_body_model(nodes, tets, density)
+
+
+def jittered_block(per_side, jitter=0.2, seed=0):
+    """Particles of a unit cube z in [0, 1], x, y in [-1/2, 1/2] (top face z = 1): a
+    lattice of per_side^3 points jittered by ``jitter`` x spacing. Returns (points (N,3)
+    [m], volumes (N,) [m^3]). The stress test and benchmarks/bench_stress.py both use it,
+    so the test's tolerance and the README's error table describe the same block."""
+    rng = np.random.default_rng(seed)
+    s = 1.0 / per_side
+    g = (np.arange(per_side) + 0.5) * s - 0.5
+    pts = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    pts = pts + rng.uniform(-jitter, jitter, pts.shape) * s
+    pts[:, 2] += 0.5
+    return pts, np.full(len(pts), s**3)

@@ -3,6 +3,7 @@ contact_field chain against the exact stress of the same displacement field."""
 
 import numpy as np
 import pytest
+from _fracture_ring import jittered_block
 
 from taichi_frac.fracture import (
     contact_field,
@@ -86,17 +87,6 @@ def test_rankine_flags():
 
 
 # --- the whole chain on a block: SPH stress vs the exact stress of the same field -----------
-
-def jittered_block(per_side, jitter=0.2, seed=0):
-    """Unit cube z in [0, 1], x, y in [-1/2, 1/2]; top face z = 1."""
-    rng = np.random.default_rng(seed)
-    s = 1.0 / per_side
-    g = (np.arange(per_side) + 0.5) * s - 0.5
-    pts = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
-    pts = pts + rng.uniform(-jitter, jitter, pts.shape) * s
-    pts[:, 2] += 0.5
-    return pts, np.full(len(pts), s**3)
-
 
 TOP = np.array([0.0, 0.0, 1.0])
 DOWN = np.array([0.0, 0.0, -1.0])  # inward normal of the top face
