@@ -1,0 +1,15 @@
+"""The benchmark report of issue 6 (``taichi-frac bench report``), one module per part.
+
+- ``tables``: the paper's Table 1 (scene sizes, fragments) and Table 2 (ms per frame);
+- ``grouping``: two-scale vs single-scale dynamics, boundary grouping n = 1, 2, 4, 8,
+  time against the error each n costs;
+- ``sph``: SPH stress error against particle count and time (plain, corrected gradient);
+- ``scaling``: ms per frame and peak memory against physics particle count (1e3 .. 1e6);
+- ``stability``: the hard cases of issues 3 and 4 as a table;
+- ``dynamics``: the older ``bench dynamics`` table (13 rings, a fragment pile);
+- ``report``: runs the parts and writes ``docs/benchmarks.md``, its plots and the README part.
+
+Each part's ``run(ctx) -> Section`` measures, prints progress through ``ctx.progress`` and
+returns its markdown (every number in it comes from the run) and the plots it wrote.
+Nothing here is imported by the simulator; numpy per body is fine (STYLE.md habit 3).
+"""

@@ -1,0 +1,198 @@
+"""Part 1: the paper's Table 1 (scene sizes, fragments) and Table 2 (ms per 20 ms frame)
+beside our runs of the same scenes.
+
+Every scene runs through ``Simulation(scene, output=False, world=shared_world)``: the
+``RunSummary`` gives Table 1's columns and the per-frame times of the fracture-on runs;
+the same scenes again with ``fracture=False`` (and with ``single_scale=True``, the paper's
+single-scale column) give the rest of Table 2.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .common import SCENES, BenchContext, Section, md_table, ms_pair
+
+#: ../shared/paper/BRIEF.md section 4, Table 1: physics, surface, boundary particles, fragments.
+PAPER_TABLE1 = {
+    "single ring, control 1": (5044, 1608, 543, 2),
+    "single ring, control 2": (5044, 1608, 543, 5),
+    "single ring, control 3": (5044, 1608, 543, 10),
+    "3 glass walls": (20748, 7713, 3400, 217),
+    "13 rings": (70616, 14951, 7645, 106),
+}
+#: BRIEF.md section 4, Table 2: dynamics ms per 20 ms step, (average, maximum), Intel Core
+#: i3-2100 3.2 GHz + GeForce GTX 460: two-scale, single-scale.
+PAPER_TABLE2 = {
+    "3 glass walls": ((54.0, 94.0), (218.0, 350.0)),
+    "13 rings": ((7.5, 31.5), (32.0, 107.0)),
+}
+
+
+@dataclass
+class SceneCase:
+    """A scene of the tables: ``label`` is the paper's row name (a key of PAPER_TABLE1, or
+    any name for a scene the paper does not have); ``timed`` puts it in Table 2."""
+
+    label: str
+    scene: object
+    timed: bool = False
+    note: str = ""
+
+
+def default_cases() -> list[SceneCase]:
+    from ..scenes import load_scene
+
+    ring = SCENES / "single_ring.toml"
+    return [
+        SceneCase("single ring, control 1", load_scene(ring, ["ring.fracture.crack_count=1"]), note="crack_count 1"),
+        SceneCase("single ring, control 2", load_scene(ring, ["ring.fracture.crack_count=2"]), note="crack_count 2"),
+        SceneCase("single ring, control 3", load_scene(ring, ["ring.fracture.crack_count=4"]), note="crack_count 4"),
+        SceneCase("3 glass walls", load_scene(SCENES / "glass_walls.toml"), timed=True),
+        SceneCase("13 rings", load_scene(SCENES / "thirteen_rings.toml"), timed=True),
+    ]
+
+
+def run_scene(ctx: BenchContext, scene, label: str, *, fracture: bool = True, single_scale: bool | None = None,
+              frames: int | None = None):
+    """Run one scene on the report's World; returns (Simulation, RunSummary, counts) where
+    counts are Table 1's particle counts summed over the scene's bodies at the start
+    (every body, breakable or not, so a fracture-off run is counted the same way)."""
+    from ..simulation import Simulation
+
+    mode = ("fracture on" if fracture else "fracture off") + (", single-scale" if single_scale else "")
+    sim = Simulation(scene, output=False, world=ctx.world(), fracture=fracture, single_scale=single_scale,
+                     frames=frames, progress=ctx.progress.frames(f"{label} ({mode})"))
+    breakable = [r.model for r in sim.records.values() if r.breakable]
+    counts = dict(
+        physics=sum(m.tet_count for m in breakable), surface=sum(m.surface_particle_count for m in breakable),
+        boundary=sum(m.boundary_particle_count for m in breakable),
+        all_physics=sum(r.model.tet_count for r in sim.records.values()),
+        collision=sum(count for _, count in sim.world._body_range.values()),
+    )
+    substeps_before = sim.world.stats.total_substeps
+    summary = sim.run()
+    counts["substeps_per_frame"] = (sim.world.stats.total_substeps - substeps_before) / max(summary.frames, 1)
+    return sim, summary, counts
+
+
+def run(ctx: BenchContext, cases: list[SceneCase] | None = None, frames: int | None = None) -> Section:
+    """Table 1 and Table 2. ``frames`` caps every run (None: each scene's own duration;
+    quick mode: 10)."""
+    if frames is None and ctx.quick:
+        frames = 10
+    cases = default_cases() if cases is None else cases
+    t0 = time.perf_counter()
+    table1, runs = [], {}
+    for case in cases:
+        sim, summary, counts = run_scene(ctx, case.scene, case.label, frames=frames)
+        runs[case.label] = dict(on=(summary, counts))
+        mass_ok = abs(summary.mass_final + summary.mass_dropped - summary.mass_initial) <= 1e-9 * summary.mass_initial
+        paper = PAPER_TABLE1.get(case.label)
+        ours = (summary.physics_particles, summary.surface_particles, summary.boundary_particles, summary.fragments)
+        cells = [f"{o:,} / {p:,}" if paper else f"{o:,}" for o, p in zip(ours, paper or (0,) * 4)]
+        table1.append([case.label + (f" ({case.note})" if case.note else ""), *cells, summary.frames,
+                       summary.fractures, "yes" if mass_ok else "**no**"])
+        ctx.progress(f"table 1: {case.label}: {summary.fragments} fragments in {summary.frames} frames")
+    table2, stages = [], []
+    for case in cases:
+        if not case.timed:
+            continue
+        summary, counts = runs[case.label]["on"]
+        _, off, off_counts = run_scene(ctx, case.scene, case.label, fracture=False, frames=frames)
+        _, single, single_counts = run_scene(ctx, case.scene, case.label, fracture=False, single_scale=True,
+                                             frames=frames)
+        runs[case.label].update(off=(off, off_counts), single=(single, single_counts))
+        paper = PAPER_TABLE2.get(case.label)
+        table2.append([
+            case.label, f"{counts['physics']:,}", f"{counts['collision']:,} / {single_counts['collision']:,}",
+            ms_pair(summary.ms_per_frame["mean"], summary.ms_per_frame["max"]),
+            ms_pair(off.ms_per_frame["mean"], off.ms_per_frame["max"]),
+            ms_pair(single.ms_per_frame["mean"], single.ms_per_frame["max"]),
+            ms_pair(*paper[0]) if paper else "", ms_pair(*paper[1]) if paper else "",
+        ])
+        per_frame = {k: 1e3 * v / max(summary.frames, 1) for k, v in summary.stage_seconds.items()}
+        stages.append([case.label, summary.frames, f"{counts['substeps_per_frame']:.1f}",
+                       f"{per_frame['dynamics']:.1f}", f"{per_frame['fracture_analysis']:.1f}",
+                       f"{per_frame['fragment_split']:.1f}", summary.fractures, summary.fragments])
+        ctx.progress(f"table 2: {case.label}: fracture on {summary.ms_per_frame['mean']:.1f} ms/frame, "
+                     f"off {off.ms_per_frame['mean']:.1f}, single-scale {single.ms_per_frame['mean']:.1f}")
+
+    parts = [
+        "Each scene runs through `Simulation(scene, output=False, world=shared_world)` and its "
+        "`RunSummary`; paper values from `../shared/paper/BRIEF.md` section 4. Cells are **ours / paper**. "
+        "Particle counts are the breakable bodies' at the start (Table 1's definition); fragments are the "
+        "live pieces made by fracture at the end of the run.",
+        "",
+        "**Table 1: scene sizes and fragments**",
+        "",
+        md_table(["scene", "physics particles", "surface particles", "boundary particles", "fragments", "frames",
+                  "fracture events", "mass conserved"], table1, "lrrrrrrc"),
+    ]
+    if table2:
+        parts += [
+            "",
+            "**Table 2: ms per 20 ms frame, average / maximum** (ours: this machine, wall clock per "
+            "frame including the fracture stage when it is on; the paper: dynamics only, Intel Core i3-2100 "
+            "3.2 GHz + GeForce GTX 460). Collision particles: two-scale / single-scale.",
+            "",
+            md_table(["scene", "physics particles", "collision particles", "ours, fracture on",
+                      "ours, fracture off", "ours, single-scale, fracture off", "paper two-scale",
+                      "paper single-scale"], table2, "lrrrrrrr"),
+            "",
+            "Where the fracture-on time goes (ms per frame averaged over the run):",
+            "",
+            md_table(["scene", "frames", "substeps per frame", "dynamics", "fracture analysis", "fragment split",
+                      "fracture events", "fragments"], stages, "lrrrrrrr"),
+        ]
+    figures, headline = [], {}
+    if table2:
+        path, link = _plot_table2(ctx, table2_rows(cases, runs))
+        figures.append(path)
+        parts += ["", f"![Table 2: ms per frame, ours and the paper's]({link})"]
+        headline = {label: dict(on=runs[label]["on"][0].ms_per_frame, off=runs[label]["off"][0].ms_per_frame,
+                                fragments=runs[label]["on"][0].fragments)
+                    for label in runs if "off" in runs[label]}
+    parts += ["", f"*Part time: {time.perf_counter() - t0:.0f} s.*"]
+    return Section("tables", "Tables 1 and 2 beside the paper", "\n".join(parts), figures,
+                   headline | {"runs": runs})
+
+
+def table2_rows(cases, runs) -> list[tuple[str, list[tuple[str, float, float]]]]:
+    """(scene, [(column, average ms, max ms)]) for the plot."""
+    rows = []
+    for case in cases:
+        if "off" not in runs.get(case.label, {}):
+            continue
+        r = runs[case.label]
+        bars = [("ours, fracture on", r["on"][0].ms_per_frame["mean"], r["on"][0].ms_per_frame["max"]),
+                ("ours, fracture off", r["off"][0].ms_per_frame["mean"], r["off"][0].ms_per_frame["max"]),
+                ("ours, single-scale", r["single"][0].ms_per_frame["mean"], r["single"][0].ms_per_frame["max"])]
+        if case.label in PAPER_TABLE2:
+            (a2, m2), (a1, m1) = PAPER_TABLE2[case.label]
+            bars += [("paper two-scale", a2, m2), ("paper single-scale", a1, m1)]
+        rows.append((case.label, bars))
+    return rows
+
+
+def _plot_table2(ctx: BenchContext, rows):
+    from .common import pyplot
+
+    plt = pyplot()
+    fig, axes = plt.subplots(1, len(rows), figsize=(5.2 * len(rows), 3.6), squeeze=False)
+    for ax, (label, bars) in zip(axes[0], rows):
+        names = [b[0] for b in bars]
+        avg = np.array([b[1] for b in bars])
+        peak = np.array([b[2] for b in bars])
+        x = np.arange(len(bars))
+        ax.bar(x, avg, color=["C0", "C0", "C1", "C2", "C3"][: len(bars)], alpha=0.85, label="average")
+        ax.scatter(x, peak, color="k", marker="_", s=200, label="maximum")
+        ax.set_xticks(x, names, rotation=30, ha="right", fontsize=8)
+        ax.set_yscale("log")
+        ax.set_ylabel("ms per 20 ms frame")
+        ax.set_title(label)
+        ax.legend(fontsize=8)
+    return ctx.save_figure(fig, "table2.png")
