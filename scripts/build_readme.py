@@ -9,7 +9,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 PARTS = ROOT / "docs" / "readme"
-ORDER = ["00_intro.md", "foundation.md", "dynamics.md", "stress.md", "fracture.md", "scenes.md", "usd_blender.md"]
+ORDER = ["00_intro.md", "foundation.md", "dynamics.md", "stress.md", "fracture.md", "scenes.md", "usd_blender.md",
+         "benchmarks.md"]
 
 
 def main() -> None:

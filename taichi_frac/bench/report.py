@@ -131,6 +131,17 @@ def readme_text(sections: list[Section], markdown_path: Path, readme_part: Path)
     return "\n".join(lines).rstrip() + "\n"
 
 
+def _build_readme(ctx: BenchContext) -> None:
+    """Regenerate README.md from docs/readme/*.md (scripts/build_readme.py) so the new
+    benchmark part appears in it."""
+    import runpy
+
+    script = REPO / "scripts" / "build_readme.py"
+    if script.exists():
+        runpy.run_path(str(script), run_name="build_readme")["main"]()
+        ctx.progress("regenerated README.md")
+
+
 def run_report(quick: bool = False, out_dir: Path | None = None, parts=None, arch: str = "cpu",
                readme: bool | None = None) -> list[Section]:
     """Run the parts and write the report. Full run: ``docs/benchmarks.md``,
@@ -147,6 +158,8 @@ def run_report(quick: bool = False, out_dir: Path | None = None, parts=None, arc
     readme = (not quick and out_dir == REPO / "docs") if readme is None else readme
     readme_part = (REPO / "docs" / "readme" / "benchmarks.md") if readme else (out_dir / "readme_benchmarks.md")
     write(ctx, sections, markdown, header(ctx, started, time.perf_counter() - t0, load_start), readme_part)
+    if readme:
+        _build_readme(ctx)
     for s in sections:
         print(f"\n## {s.title}\n\n{s.markdown}")
     return sections
