@@ -49,7 +49,16 @@ def init(arch: str = "cpu", *, debug: bool = False) -> str:
         log_level=ti.WARN,
     )
     _initialised_arch = arch
+    global SERIAL_SMALL_LOOPS
+    SERIAL_SMALL_LOOPS = arch == "cpu"
     return arch
+
+
+# Loops over bodies, contacts and buckets run serially on the CPU backend: there a
+# parallel-for task costs 25-60 us to dispatch (measured, Taichi 1.7.4, 2 cores), more
+# than a serial pass over a few thousand items. Read by kernels at compile time
+# (``ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)``), set by init().
+SERIAL_SMALL_LOOPS = True
 
 
 def is_initialised() -> bool:

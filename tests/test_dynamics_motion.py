@@ -18,15 +18,13 @@ def test_free_fall_and_ballistic_flight_match_closed_form():
     for _ in range(frames):
         world.advance(frame_dt, substeps)
     t = frames * frame_dt
-    dt = frame_dt / substeps
     state = world.body_state([body])
     exact = x0 + v0 * t + 0.5 * np.array([0, 0, -G]) * t * t
-    # Semi-implicit Euler has the known bias  g t dt / 2  along gravity; the rest is round-off.
-    bias = 0.5 * np.array([0, 0, -G]) * t * dt
-    np.testing.assert_allclose(state["position"][0], exact + bias, atol=2e-4)
-    assert abs(state["position"][0][2] - exact[2]) <= 0.5 * G * t * dt + 2e-4
+    # A body touching nothing takes exact constant-gravity steps (x += v dt + g dt^2 / 2):
+    # what is left is float32 round-off (positions near 50 m carry ~4e-6 m each).
+    np.testing.assert_allclose(state["position"][0], exact, atol=2e-4)
     np.testing.assert_allclose(state["linear_velocity"][0], v0 + np.array([0, 0, -G]) * t, atol=2e-4)
-    assert world.stats.substeps == substeps  # slow body: no refinement
+    assert world.stats.substeps == 1  # free flight, not spinning: one substep per frame is exact
 
 
 def test_torque_free_asymmetric_body_conserves_momentum_and_energy():

@@ -6,12 +6,22 @@ does not run on the CPU backend and a few thousand buckets scan in microseconds)
 ``bucket_scatter``. Cells are hashed into a table (Teschner et al. 2003, "Optimized spatial
 hashing for collision detection of deformable objects"), so the domain is unbounded; a
 bucket may hold particles of several cells, so a query checks each candidate's true cell.
-Only particles of bodies flagged ``near_body`` by ``body_cull`` enter the grid.
+
+Cells are sized for the *typical* particle (``typical_particle_radius``: a body's 95th
+percentile), not the largest, so one outsized boundary sphere does not inflate every
+cell. A particle larger than that occupies the box of cells its extra reach covers
+(``cell`` .. ``cell_hi``); a query scans its own box grown by one cell, and a pair seen in
+several cells is kept only in the first of them in scan order (the per-axis max of the
+two boxes' lower corners), so every pair is made exactly once.
+Only *active* particles enter the grid: those of a body with a neighbour (``body_cull``)
+that lie inside that neighbour's grown body-frame box (``particle_cells``), so two rings
+touching at one spot grid and test only the particles around that spot.
 """
 
 
 import taichi as ti
 
+from .. import runtime
 from ..dynamics.quaternion import quat_to_matrix
 
 
@@ -20,12 +30,17 @@ class HashGrid:
     """Bucket arrays, shape (table_capacity,) (a power of two >= 2 x particle capacity).
 
     Fields:
-        bucket_count: i32 particles per bucket; zeroed again by bucket_scan.
+        bucket_count: i32 entries per bucket; zeroed again by bucket_scan.
         bucket_start, bucket_end: i32 range of each bucket in ``sorted_particle``.
         bucket_cursor: i32 scatter cursor.
-        sorted_particle: (particle capacity,) i32 particle slots ordered by bucket.
+        sorted_particle: (entry_capacity,) i32 particle slots ordered by bucket (a large
+            particle has one entry per cell it occupies); sorted_body: its body, beside it
+            (the narrowphase skips same-body candidates without a random read); entries beyond the capacity are
+            counted in ``overflow`` (reported by the World), never silently dropped.
         table_size: scalar, the power of two in use this substep (<= capacity).
-        cell_size: scalar [m], edge of a grid cell.
+        cell_size: scalar [m], edge of a grid cell. typical_radius: scalar [m], largest
+            typical particle radius among bodies with neighbours. max_motion: scalar [m].
+        overflow: scalar i32, entries lost this advance.
     """
 
     def __init__(self, particle_capacity: int):
@@ -37,9 +52,14 @@ class HashGrid:
         self.bucket_start = ti.field(ti.i32, shape=size)
         self.bucket_end = ti.field(ti.i32, shape=size)
         self.bucket_cursor = ti.field(ti.i32, shape=size)
-        self.sorted_particle = ti.field(ti.i32, shape=particle_capacity)
+        self.entry_capacity = 2 * particle_capacity
+        self.sorted_particle = ti.field(ti.i32, shape=self.entry_capacity)
+        self.sorted_body = ti.field(ti.i32, shape=self.entry_capacity)
         self.table_size = ti.field(ti.i32, shape=())
         self.cell_size = ti.field(ti.f32, shape=())
+        self.typical_radius = ti.field(ti.f32, shape=())
+        self.max_motion = ti.field(ti.f32, shape=())
+        self.overflow = ti.field(ti.i32, shape=())
 
 
 @ti.func
@@ -49,59 +69,151 @@ def cell_hash(cell, table_size):
 
 
 @ti.func
-def body_cull(bodies: ti.template(), statics: ti.template(), margin):
-    """Pass over bodies: flag the ones whose bounding sphere (grown by ``margin`` x its
-    smallest particle radius) reaches another body (at least one of the two awake) or a
-    static collider. O(bodies^2), fine for the thousand-odd bodies a scene holds."""
-    for b in range(bodies.slot_end[None]):
-        near_body = 0
-        near_static = 0
-        if bodies.active[b] == 1:
-            xb = bodies.position[b]
-            rb = bodies.bounding_radius[b] * (1.0 + margin)
-            b_idle = bodies.sleeping[b] == 1 or bodies.fixed[b] == 1
-            for o in range(bodies.slot_end[None]):
-                if o != b and bodies.active[o] == 1 and near_body == 0:
-                    o_idle = bodies.sleeping[o] == 1 or bodies.fixed[o] == 1
-                    if not (b_idle and o_idle):
-                        ro = bodies.bounding_radius[o] * (1.0 + margin)
-                        if (bodies.position[o] - xb).norm_sqr() < (rb + ro) ** 2:
-                            near_body = 1
-            if not b_idle:
-                for k in range(statics.plane_count[None]):
-                    if xb[2] - rb < statics.plane_height[k]:
-                        near_static = 1
-                for k in range(statics.box_count[None]):
-                    local = statics.box_rotation[k].transpose() @ (xb - statics.box_center[k])
-                    q = ti.math.clamp(local, -statics.box_half_extents[k], statics.box_half_extents[k])
-                    if (local - q).norm_sqr() < rb * rb:
-                        near_static = 1
-        bodies.near_body[b] = near_body
-        bodies.near_static[b] = near_static
+def _is_idle(bodies: ti.template(), b):
+    return bodies.sleeping[b] == 1 or bodies.fixed[b] == 1
 
 
 @ti.func
-def particle_cells(bodies: ti.template(), particles: ti.template(), grid: ti.template()):
-    """Pass over particles: world position of every particle of a flagged body; for bodies
-    near another body also its cell and a count in the cell's bucket."""
-    for p in range(particles.slot_end[None]):
-        b = particles.body[p]
-        if b >= 0:
-            if bodies.near_body[b] == 1 or bodies.near_static[b] == 1:
-                rot = quat_to_matrix(bodies.orientation[b])
-                x = bodies.position[b] + rot @ particles.offset[p]
-                particles.world_position[p] = x
-                if bodies.near_body[b] == 1:
-                    cell = ti.floor(x / grid.cell_size[None], ti.i32)
-                    particles.cell[p] = cell
-                    ti.atomic_add(grid.bucket_count[cell_hash(cell, grid.table_size[None])], 1)
+def _grown_radius(bodies: ti.template(), b, margin):
+    """Bounding radius grown by the contact margin and this substep's motion [m]."""
+    return bodies.bounding_radius[b] + margin * bodies.max_particle_radius[b] + bodies.motion[b]
+
+
+@ti.func
+def _body_motion(bodies: ti.template(), statics: ti.template(), b, dt):
+    if bodies.active[b] == 1:
+        bodies.rotation[b] = quat_to_matrix(bodies.orientation[b])
+        motion = 0.0
+        if not _is_idle(bodies, b):
+            speed = (bodies.linear_velocity[b].norm() + statics.gravity[None].norm() * dt
+                     + bodies.angular_velocity[b].norm() * bodies.bounding_radius[b])
+            motion = speed * dt
+        bodies.motion[b] = motion
+
+
+@ti.func
+def _body_neighbors(bodies: ti.template(), statics: ti.template(), grid: ti.template(), b, margin):
+    count = 0
+    near_static = 0
+    if bodies.active[b] == 1:
+        xb = bodies.position[b]
+        rb = _grown_radius(bodies, b, margin)
+        b_idle = _is_idle(bodies, b)
+        for o in range(bodies.slot_end[None]):
+            if o != b and bodies.active[o] == 1 and count >= 0:
+                if not (b_idle and _is_idle(bodies, o)):
+                    ro = _grown_radius(bodies, o, margin)
+                    if (bodies.position[o] - xb).norm_sqr() < (rb + ro) ** 2:
+                        if count < bodies.max_neighbors:
+                            bodies.neighbors[b, count] = o
+                            count += 1
+                        else:
+                            count = -1
+        if not b_idle:
+            for k in range(statics.plane_count[None]):
+                if xb[2] - rb < statics.plane_height[k]:
+                    near_static = 1
+            for k in range(statics.box_count[None]):
+                local = statics.box_rotation[k].transpose() @ (xb - statics.box_center[k])
+                q = ti.math.clamp(local, -statics.box_half_extents[k], statics.box_half_extents[k])
+                if (local - q).norm_sqr() < rb * rb:
+                    near_static = 1
+        if count != 0:
+            ti.atomic_max(grid.typical_radius[None], bodies.typical_particle_radius[b])
+            ti.atomic_max(grid.max_motion[None], bodies.motion[b])
+    bodies.neighbor_count[b] = count
+    bodies.near_body[b] = 1 if count != 0 else 0
+    bodies.near_static[b] = near_static
+
+
+@ti.func
+def body_cull(bodies: ti.template(), statics: ti.template(), grid: ti.template(), margin, dt):
+    """Two passes over bodies. First: rotation matrix and motion bound of each body this
+    substep. Second: its neighbour list (grown bounding spheres overlap, at least one of
+    the two awake; O(bodies^2), fine for the thousand-odd bodies a scene holds), whether it
+    reaches a static collider, and the grid cell size (the reach of two typical particles
+    among bodies that have a neighbour: 2 r_typical (1 + margin / 2) + 2 x motion).
+    Serial on the CPU (see ``runtime.SERIAL_SMALL_LOOPS``), parallel elsewhere."""
+    grid.typical_radius[None] = 1e-6
+    grid.max_motion[None] = 0.0
+    if ti.static(runtime.SERIAL_SMALL_LOOPS):
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            for b in range(bodies.slot_end[None]):
+                _body_motion(bodies, statics, b, dt)
+            for b in range(bodies.slot_end[None]):
+                _body_neighbors(bodies, statics, grid, b, margin)
+    else:
+        for b in range(bodies.slot_end[None]):
+            _body_motion(bodies, statics, b, dt)
+        for b in range(bodies.slot_end[None]):
+            _body_neighbors(bodies, statics, grid, b, margin)
+    grid.cell_size[None] = 2.0 * grid.typical_radius[None] * (1.0 + 0.5 * margin) + 2.0 * grid.max_motion[None]
+
+
+@ti.func
+def cell_box(grid: ti.template(), x, radius, margin):
+    """Cells (lower, upper corner) a particle at ``x`` [m] of ``radius`` [m] occupies: one
+    cell, or more when it is larger than the typical radius the cells are sized for."""
+    extra = ti.max(radius - grid.typical_radius[None], 0.0) * (1.0 + 0.5 * margin)
+    lower = ti.floor((x - extra) / grid.cell_size[None], ti.i32)
+    upper = ti.floor((x + extra) / grid.cell_size[None], ti.i32)
+    return lower, upper
+
+
+@ti.func
+def _particle_cell(bodies: ti.template(), particles: ti.template(), grid: ti.template(), p, margin):
+    b = particles.body[p]
+    act = 0
+    if b >= 0:
+        if bodies.near_body[b] == 1 or bodies.near_static[b] == 1:
+            x = bodies.position[b] + bodies.rotation[b] @ particles.offset[p]
+            particles.world_position[p] = x
+            count = bodies.neighbor_count[b]
+            if count < 0:
+                act = 1
+            r = particles.radius[p]
+            for k in range(ti.max(count, 0)):
+                if act == 0:
+                    o = bodies.neighbors[b, k]
+                    local = bodies.rotation[o].transpose() @ (x - bodies.position[o])
+                    q = ti.math.clamp(local, bodies.local_lower[o], bodies.local_upper[o])
+                    grow = ((r + bodies.max_particle_radius[o]) * (1.0 + 0.5 * margin)
+                            + bodies.motion[b] + bodies.motion[o])
+                    if (local - q).norm_sqr() < grow * grow:
+                        act = 1
+            if act == 1:
+                lower, upper = cell_box(grid, x, r, margin)
+                particles.cell[p] = lower
+                particles.cell_hi[p] = upper
+                for i, j, k in ti.ndrange((lower[0], upper[0] + 1), (lower[1], upper[1] + 1), (lower[2], upper[2] + 1)):
+                    ti.atomic_add(grid.bucket_count[cell_hash(ti.math.ivec3(i, j, k), grid.table_size[None])], 1)
+    particles.active[p] = act
+
+
+@ti.func
+def particle_cells(bodies: ti.template(), particles: ti.template(), grid: ti.template(), margin):
+    """Pass over particles: world position of every particle of a body near something; a
+    particle of a body with neighbours is *active* when it lies within a neighbour's
+    body-frame box grown by both spheres' reach and both motions (no contact is possible
+    otherwise); active particles count themselves into the buckets of the cells they
+    occupy. Serial on the CPU, where the pass is lighter than a parallel dispatch."""
+    if ti.static(runtime.SERIAL_SMALL_LOOPS):
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            for p in range(particles.slot_end[None]):
+                _particle_cell(bodies, particles, grid, p, margin)
+    else:
+        for p in range(particles.slot_end[None]):
+            _particle_cell(bodies, particles, grid, p, margin)
 
 
 @ti.func
 def bucket_scan(grid: ti.template()):
     """Serial exclusive prefix sum of bucket counts into start/end/cursor; zeroes counts
     for the next substep."""
-    for _ in range(1):  # one task; the inner loop is serial
+    ti.loop_config(serialize=True)
+    for _ in range(1):  # one serial task
         running = 0
         for h in range(grid.table_size[None]):
             count = grid.bucket_count[h]
@@ -113,11 +225,29 @@ def bucket_scan(grid: ti.template()):
 
 
 @ti.func
-def bucket_scatter(bodies: ti.template(), particles: ti.template(), grid: ti.template()):
-    """Pass over particles: write each gridded particle's slot into its bucket's range."""
-    for p in range(particles.slot_end[None]):
-        b = particles.body[p]
-        if b >= 0:
-            if bodies.near_body[b] == 1:
-                h = cell_hash(particles.cell[p], grid.table_size[None])
-                grid.sorted_particle[ti.atomic_add(grid.bucket_cursor[h], 1)] = p
+def _scatter_one(particles: ti.template(), grid: ti.template(), p):
+    if particles.active[p] == 1:
+        lower = particles.cell[p]
+        upper = particles.cell_hi[p]
+        for i, j, k in ti.ndrange((lower[0], upper[0] + 1), (lower[1], upper[1] + 1), (lower[2], upper[2] + 1)):
+            h = cell_hash(ti.math.ivec3(i, j, k), grid.table_size[None])
+            slot = ti.atomic_add(grid.bucket_cursor[h], 1)
+            if slot < grid.entry_capacity:
+                grid.sorted_particle[slot] = p
+                grid.sorted_body[slot] = particles.body[p]
+            else:
+                ti.atomic_add(grid.overflow[None], 1)
+
+
+@ti.func
+def bucket_scatter(particles: ti.template(), grid: ti.template()):
+    """Pass over particles: write each active particle's slot into the range of every
+    bucket it counted itself in. Serial on the CPU."""
+    if ti.static(runtime.SERIAL_SMALL_LOOPS):
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            for p in range(particles.slot_end[None]):
+                _scatter_one(particles, grid, p)
+    else:
+        for p in range(particles.slot_end[None]):
+            _scatter_one(particles, grid, p)

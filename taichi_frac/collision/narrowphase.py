@@ -3,15 +3,17 @@ sphere-box (static walls). One pass over particles per kernel; each contact is a
 with an atomic counter into fixed-capacity ``Contacts``; contacts beyond the capacity are
 counted in ``overflow`` (reported by the World), never silently lost.
 
-Contacts are speculative: they are made when the gap is below ``margin`` x the mean radius,
-and the solver lets the gap close but not go negative in one substep (Catto, "Speculative
-contacts", GDC 2013).
+Contacts are speculative: they are made when the gap is below ``margin`` x the mean radius
+plus how far both bodies can move in this substep (``bodies.motion``), and the solver lets
+the gap close but not go negative in one substep (Catto, "Speculative contacts", GDC 2013).
+So nothing tunnels, however long the substep: a fast body makes its contact before it
+arrives.
 """
 
 
 import taichi as ti
 
-from .grid import cell_hash
+from .grid import _is_idle, cell_hash
 
 vec3 = ti.math.vec3
 mat3 = ti.math.mat3
@@ -83,98 +85,126 @@ def clear_contacts(contacts: ti.template()):
     contacts.count[None] = 0
 
 
+
+
 @ti.func
-def _is_idle(bodies: ti.template(), b):
-    return bodies.sleeping[b] == 1 or bodies.fixed[b] == 1
+def _sphere_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.template(),
+                     contacts: ti.template(), margin, i, a):
+    """Sphere-sphere contacts of active particle ``i`` (awake body ``a``) with the active
+    particles of other bodies in its cell box grown by one cell. A pair is made once: from
+    the lower slot when both bodies are awake, from the awake side otherwise, and only in
+    the first cell (scan order) both boxes share. An awake body that is still moving
+    (sleep timer at zero) wakes a sleeping body it touches."""
+    xi = particles.world_position[i]
+    ri = particles.radius[i]
+    lower_i = particles.cell[i]
+    upper_i = particles.cell_hi[i]
+    if (lower_i == upper_i).all():  # the common case: 27 cells, unrolled
+        # No partner centre lies further than this: its radius is at most the typical one
+        # beyond its own cell box, and both bodies move at most max_motion.
+        reach = (ri + grid.typical_radius[None]) * (1.0 + 0.5 * margin) + 2.0 * grid.max_motion[None]
+        for dx, dy, dz in ti.static(ti.ndrange((-1, 2), (-1, 2), (-1, 2))):
+            _scan_cell(bodies, particles, grid, contacts, margin, i, a, xi, ri, lower_i,
+                       lower_i + ti.math.ivec3(dx, dy, dz), reach)
+    else:  # a large particle scans its whole box grown by one cell
+        for cx, cy, cz in ti.ndrange((lower_i[0] - 1, upper_i[0] + 2), (lower_i[1] - 1, upper_i[1] + 2),
+                                     (lower_i[2] - 1, upper_i[2] + 2)):
+            _scan_cell(bodies, particles, grid, contacts, margin, i, a, xi, ri, lower_i,
+                       ti.math.ivec3(cx, cy, cz), 1e30)
+
+
+@ti.func
+def _scan_cell(bodies: ti.template(), particles: ti.template(), grid: ti.template(), contacts: ti.template(),
+               margin, i, a, xi, ri, lower_i, cell, reach):
+    """Candidates of particle ``i`` in one cell (skipped when the cell lies beyond ``reach``)."""
+    size = grid.cell_size[None]
+    nearest = ti.math.clamp(xi, ti.cast(cell, ti.f32) * size, ti.cast(cell + 1, ti.f32) * size)
+    if (nearest - xi).norm_sqr() < reach * reach:
+        h = cell_hash(cell, grid.table_size[None])
+        for k in range(grid.bucket_start[h], ti.min(grid.bucket_end[h], grid.entry_capacity)):
+            b = grid.sorted_body[k]
+            j = grid.sorted_particle[k]
+            if b != a and (j > i or _is_idle(bodies, b)):
+                rj = particles.radius[j]
+                d = xi - particles.world_position[j]
+                dist = d.norm()
+                mean_r = 0.5 * (ri + rj)
+                gap = dist - ri - rj
+                if gap < margin * mean_r + bodies.motion[a] + bodies.motion[b]:
+                    lower_j = particles.cell[j]
+                    # j really occupies this cell (not a hash collision), and this is the
+                    # first cell both boxes share in scan order.
+                    if ((lower_j <= cell).all() and (cell <= particles.cell_hi[j]).all()
+                            and (ti.max(lower_i - 1, lower_j) == cell).all()):
+                        n = vec3(0.0, 0.0, 1.0)
+                        if dist > 1e-9:
+                            n = d / dist
+                        point = particles.world_position[j] + n * (rj + 0.5 * gap)
+                        mu = ti.sqrt(bodies.friction[a] * bodies.friction[b])
+                        e = ti.max(bodies.restitution[a], bodies.restitution[b])
+                        _append(contacts, a, b, -1, n, point, gap, ti.min(ri, rj), mu, e)
+                        if bodies.sleeping[b] == 1 and bodies.sleep_timer[a] == 0.0:
+                            bodies.wake_request[b] = 1
+
+
+@ti.func
+def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
+                     contacts: ti.template(), margin, i, a):
+    """Sphere-plane and sphere-box contacts of particle ``i`` of awake body ``a`` (normal
+    out of the collider, i.e. into the body)."""
+    x = particles.world_position[i]
+    r = particles.radius[i]
+    for k in range(statics.plane_count[None]):
+        gap = x[2] - r - statics.plane_height[k]
+        if gap < margin * r + bodies.motion[a]:
+            point = vec3(x[0], x[1], statics.plane_height[k])
+            mu = ti.sqrt(bodies.friction[a] * statics.plane_friction[k])
+            e = ti.max(bodies.restitution[a], statics.plane_restitution[k])
+            _append(contacts, a, GROUND, k, vec3(0.0, 0.0, 1.0), point, gap, r, mu, e)
+    for k in range(statics.box_count[None]):
+        rot = statics.box_rotation[k]
+        half = statics.box_half_extents[k]
+        local = rot.transpose() @ (x - statics.box_center[k])
+        q = ti.math.clamp(local, -half, half)
+        d = local - q
+        dist = d.norm()
+        n_local = vec3(0.0, 0.0, 1.0)
+        gap = 0.0
+        if dist > 1e-9:  # centre outside the box
+            n_local = d / dist
+            gap = dist - r
+        else:  # centre inside: leave through the nearest face
+            depth = half - ti.abs(local)
+            axis = 0
+            if depth[1] < depth[axis]:
+                axis = 1
+            if depth[2] < depth[axis]:
+                axis = 2
+            n_local = vec3(0.0, 0.0, 0.0)
+            for m in ti.static(range(3)):
+                if m == axis:
+                    side = 1.0 if local[m] >= 0.0 else -1.0
+                    n_local[m] = side
+                    q[m] = half[m] * side
+                    gap = -depth[m] - r
+        if gap < margin * r + bodies.motion[a]:
+            n = rot @ n_local
+            point = statics.box_center[k] + rot @ q
+            mu = ti.sqrt(bodies.friction[a] * statics.box_friction[k])
+            e = ti.max(bodies.restitution[a], statics.box_restitution[k])
+            _append(contacts, a, STATIC_BOX, k, n, point, gap, r, mu, e)
 
 
 @ti.func
 def particle_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.template(),
-                      contacts: ti.template(), margin):
-    """Pass over particles of awake bodies near another body: sphere-sphere contacts with
-    particles of other bodies in the 27 surrounding cells. A pair is made once: from the
-    lower slot when both bodies are awake, from the awake side otherwise. An awake body
-    that is still moving (sleep timer at zero) wakes a sleeping body it touches."""
+                      statics: ti.template(), contacts: ti.template(), margin):
+    """One pass over the particles of awake bodies: sphere-sphere contacts of active
+    particles, sphere-plane and sphere-box contacts of bodies near a static collider."""
     for i in range(particles.slot_end[None]):
         a = particles.body[i]
         if a >= 0:
-            if bodies.near_body[a] == 1 and not _is_idle(bodies, a):
-                xi = particles.world_position[i]
-                ri = particles.radius[i]
-                ci = particles.cell[i]
-                table_size = grid.table_size[None]
-                for dx, dy, dz in ti.static(ti.ndrange((-1, 2), (-1, 2), (-1, 2))):
-                    cell = ci + ti.math.ivec3(dx, dy, dz)
-                    h = cell_hash(cell, table_size)
-                    for k in range(grid.bucket_start[h], grid.bucket_end[h]):
-                        j = grid.sorted_particle[k]
-                        b = particles.body[j]
-                        if b != a and (particles.cell[j] == cell).all():
-                            if j > i or _is_idle(bodies, b):
-                                rj = particles.radius[j]
-                                d = xi - particles.world_position[j]
-                                dist = d.norm()
-                                mean_r = 0.5 * (ri + rj)
-                                gap = dist - ri - rj
-                                if gap < margin * mean_r:
-                                    n = vec3(0.0, 0.0, 1.0)
-                                    if dist > 1e-9:
-                                        n = d / dist
-                                    point = particles.world_position[j] + n * (rj + 0.5 * gap)
-                                    mu = ti.sqrt(bodies.friction[a] * bodies.friction[b])
-                                    e = ti.max(bodies.restitution[a], bodies.restitution[b])
-                                    _append(contacts, a, b, -1, n, point, gap, ti.min(ri, rj), mu, e)
-                                    if bodies.sleeping[b] == 1 and bodies.sleep_timer[a] == 0.0:
-                                        bodies.wake_request[b] = 1
-
-
-@ti.func
-def static_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
-                    contacts: ti.template(), margin):
-    """Pass over particles of awake bodies near a static collider: sphere-plane and
-    sphere-box contacts (normal out of the collider, i.e. into the body)."""
-    for i in range(particles.slot_end[None]):
-        a = particles.body[i]
-        if a >= 0:
-            if bodies.near_static[a] == 1 and not _is_idle(bodies, a):
-                x = particles.world_position[i]
-                r = particles.radius[i]
-                for k in range(statics.plane_count[None]):
-                    gap = x[2] - r - statics.plane_height[k]
-                    if gap < margin * r:
-                        point = vec3(x[0], x[1], statics.plane_height[k])
-                        mu = ti.sqrt(bodies.friction[a] * statics.plane_friction[k])
-                        e = ti.max(bodies.restitution[a], statics.plane_restitution[k])
-                        _append(contacts, a, -1, k, vec3(0.0, 0.0, 1.0), point, gap, r, mu, e)
-                for k in range(statics.box_count[None]):
-                    rot = statics.box_rotation[k]
-                    half = statics.box_half_extents[k]
-                    local = rot.transpose() @ (x - statics.box_center[k])
-                    q = ti.math.clamp(local, -half, half)
-                    d = local - q
-                    dist = d.norm()
-                    n_local = vec3(0.0, 0.0, 1.0)
-                    gap = 0.0
-                    if dist > 1e-9:  # centre outside the box
-                        n_local = d / dist
-                        gap = dist - r
-                    else:  # centre inside: leave through the nearest face
-                        depth = half - ti.abs(local)
-                        axis = 0
-                        if depth[1] < depth[axis]:
-                            axis = 1
-                        if depth[2] < depth[axis]:
-                            axis = 2
-                        n_local = vec3(0.0, 0.0, 0.0)
-                        for m in ti.static(range(3)):
-                            if m == axis:
-                                side = 1.0 if local[m] >= 0.0 else -1.0
-                                n_local[m] = side
-                                q[m] = half[m] * side
-                                gap = -depth[m] - r
-                    if gap < margin * r:
-                        n = rot @ n_local
-                        point = statics.box_center[k] + rot @ q
-                        mu = ti.sqrt(bodies.friction[a] * statics.box_friction[k])
-                        e = ti.max(bodies.restitution[a], statics.box_restitution[k])
-                        _append(contacts, a, -2, k, n, point, gap, r, mu, e)
+            if not _is_idle(bodies, a):
+                if particles.active[i] == 1:
+                    _sphere_contacts(bodies, particles, grid, contacts, margin, i, a)
+                if bodies.near_static[a] == 1:
+                    _static_contacts(bodies, particles, statics, contacts, margin, i, a)

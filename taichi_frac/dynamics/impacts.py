@@ -69,6 +69,7 @@ def _emit(impacts: ti.template(), body, other, point, normal, impulse, dt, subst
 @ti.func
 def record_impacts(contacts: ti.template(), impacts: ti.template(), dt, substep,
                    force_threshold):
+    ti.loop_config(serialize=True)
     for _ in range(1):  # one serial task
         mask = impacts.table_size - 1
         used = 0

@@ -13,6 +13,7 @@ of the start and predicted end angular velocity, which keeps the energy error at
 
 import taichi as ti
 
+from .. import runtime
 from .quaternion import quat_integrate, quat_to_matrix
 
 vec3 = ti.math.vec3
@@ -20,64 +21,147 @@ mat3 = ti.math.mat3
 
 
 @ti.func
-def integrate_velocities(bodies: ti.template(), gravity, dt):
-    for b in range(bodies.slot_end[None]):
-        if bodies.active[b] == 1:
-            if bodies.wake_request[b] == 1:
-                bodies.sleeping[b] = 0
-                bodies.sleep_timer[b] = 0.0
-                bodies.wake_request[b] = 0
-            bodies.pseudo_linear_velocity[b] = vec3(0.0)
-            bodies.pseudo_angular_velocity[b] = vec3(0.0)
-            if bodies.sleeping[b] == 1 or bodies.fixed[b] == 1:
-                bodies.solver_inverse_mass[b] = 0.0
-                bodies.solver_inverse_inertia[b] = mat3(0.0)
-            else:
-                rot = quat_to_matrix(bodies.orientation[b])
-                bodies.solver_inverse_mass[b] = bodies.inverse_mass[b]
-                bodies.solver_inverse_inertia[b] = rot @ bodies.inverse_inertia_body[b] @ rot.transpose()
-                bodies.linear_velocity[b] += gravity * dt
+def _integrate_velocity(bodies: ti.template(), gravity, b, dt):
+    if bodies.active[b] == 1:
+        if bodies.wake_request[b] == 1:
+            bodies.sleeping[b] = 0
+            bodies.sleep_timer[b] = 0.0
+            bodies.wake_request[b] = 0
+        bodies.touched[b] = 0
+        bodies.pseudo_linear_velocity[b] = vec3(0.0)
+        bodies.pseudo_angular_velocity[b] = vec3(0.0)
+        if bodies.sleeping[b] == 1 or bodies.fixed[b] == 1:
+            bodies.solver_inverse_mass[b] = 0.0
+            bodies.solver_inverse_inertia[b] = mat3(0.0)
+        else:
+            rot = quat_to_matrix(bodies.orientation[b])
+            bodies.solver_inverse_mass[b] = bodies.inverse_mass[b]
+            bodies.solver_inverse_inertia[b] = rot @ bodies.inverse_inertia_body[b] @ rot.transpose()
+            bodies.linear_velocity[b] += gravity * dt
 
 
 @ti.func
-def integrate_positions(bodies: ti.template(), dt, sleep_linear_speed,
+def integrate_velocities(bodies: ti.template(), statics: ti.template(), dt):
+    """Pass over bodies: wake requests, gravity, this substep's solver masses."""
+    gravity = statics.gravity[None]
+    if ti.static(runtime.SERIAL_SMALL_LOOPS):
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            for b in range(bodies.slot_end[None]):
+                _integrate_velocity(bodies, gravity, b, dt)
+    else:
+        for b in range(bodies.slot_end[None]):
+            _integrate_velocity(bodies, gravity, b, dt)
+
+
+@ti.func
+def _integrate_position(bodies: ti.template(), gravity, b, dt, sleep_linear_speed, sleep_angular_speed, sleep_time):
+    if bodies.active[b] == 1 and bodies.sleeping[b] == 0 and bodies.fixed[b] == 0:
+        v = bodies.linear_velocity[b]
+        w = bodies.angular_velocity[b]
+        step = (v + bodies.pseudo_linear_velocity[b]) * dt
+        if bodies.touched[b] == 0:
+            # No contact: the exact constant-gravity step x += v0 dt + g dt^2 / 2 (v is
+            # already v0 + g dt), so free flight is exact at any substep length.
+            step -= 0.5 * gravity * dt * dt
+        bodies.position[b] += step
+        q = bodies.orientation[b]
+        rot = quat_to_matrix(q)
+        momentum = rot @ (bodies.inertia_body[b] @ (rot.transpose() @ w))
+        # Trapezoidal rotation: predict the end-of-step w from L, rotate with the mean
+        # (first-order rotation with the start w drifts energy by ~1 % per 1,000 steps).
+        w_pseudo = bodies.pseudo_angular_velocity[b]
+        rot_end = quat_to_matrix(quat_integrate(q, w + w_pseudo, dt))
+        w_end = rot_end @ (bodies.inverse_inertia_body[b] @ (rot_end.transpose() @ momentum))
+        q = quat_integrate(q, 0.5 * (w + w_end) + w_pseudo, dt)
+        bodies.orientation[b] = q
+        rot = quat_to_matrix(q)
+        w = rot @ (bodies.inverse_inertia_body[b] @ (rot.transpose() @ momentum))
+        bodies.angular_velocity[b] = w
+        if v.norm() < sleep_linear_speed and w.norm() < sleep_angular_speed:
+            bodies.sleep_timer[b] += dt
+            if bodies.sleep_timer[b] >= sleep_time:
+                bodies.sleeping[b] = 1
+                bodies.linear_velocity[b] = vec3(0.0)
+                bodies.angular_velocity[b] = vec3(0.0)
+        else:
+            bodies.sleep_timer[b] = 0.0
+
+
+@ti.func
+def integrate_positions(bodies: ti.template(), statics: ti.template(), dt, sleep_linear_speed,
                         sleep_angular_speed, sleep_time):
-    for b in range(bodies.slot_end[None]):
-        if bodies.active[b] == 1 and bodies.sleeping[b] == 0 and bodies.fixed[b] == 0:
-            v = bodies.linear_velocity[b]
-            w = bodies.angular_velocity[b]
-            bodies.position[b] += (v + bodies.pseudo_linear_velocity[b]) * dt
-            q = bodies.orientation[b]
-            rot = quat_to_matrix(q)
-            momentum = rot @ (bodies.inertia_body[b] @ (rot.transpose() @ w))
-            # Trapezoidal rotation: predict the end-of-step w from L, rotate with the mean
-            # (first-order rotation with the start w drifts energy by ~1 % per 1,000 steps).
-            w_pseudo = bodies.pseudo_angular_velocity[b]
-            rot_end = quat_to_matrix(quat_integrate(q, w + w_pseudo, dt))
-            w_end = rot_end @ (bodies.inverse_inertia_body[b] @ (rot_end.transpose() @ momentum))
-            q = quat_integrate(q, 0.5 * (w + w_end) + w_pseudo, dt)
-            bodies.orientation[b] = q
-            rot = quat_to_matrix(q)
-            w = rot @ (bodies.inverse_inertia_body[b] @ (rot.transpose() @ momentum))
-            bodies.angular_velocity[b] = w
-            if v.norm() < sleep_linear_speed and w.norm() < sleep_angular_speed:
-                bodies.sleep_timer[b] += dt
-                if bodies.sleep_timer[b] >= sleep_time:
-                    bodies.sleeping[b] = 1
-                    bodies.linear_velocity[b] = vec3(0.0)
-                    bodies.angular_velocity[b] = vec3(0.0)
-            else:
-                bodies.sleep_timer[b] = 0.0
+    """Pass over bodies: positions and orientations from the new velocities; sleeping."""
+    gravity = statics.gravity[None]
+    if ti.static(runtime.SERIAL_SMALL_LOOPS):
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            for b in range(bodies.slot_end[None]):
+                _integrate_position(bodies, gravity, b, dt, sleep_linear_speed, sleep_angular_speed, sleep_time)
+    else:
+        for b in range(bodies.slot_end[None]):
+            _integrate_position(bodies, gravity, b, dt, sleep_linear_speed, sleep_angular_speed, sleep_time)
+
+
+@ti.func
+def _is_near(bodies: ti.template(), statics: ti.template(), b, grow, frame_dt, margin):
+    """Whether body ``b``'s bounding sphere grown by ``grow`` [m] may reach another body
+    (grown by its own margin and frame motion) or a static collider this frame."""
+    xb = bodies.position[b]
+    g = statics.gravity[None].norm()
+    near = 0
+    for o in range(bodies.slot_end[None]):
+        if o != b and bodies.active[o] == 1 and near == 0:
+            reach = grow + bodies.bounding_radius[o] + margin * bodies.max_particle_radius[o]
+            if bodies.sleeping[o] == 0 and bodies.fixed[o] == 0:
+                reach += (bodies.linear_velocity[o].norm() + g * frame_dt
+                          + bodies.angular_velocity[o].norm() * bodies.bounding_radius[o]) * frame_dt
+            if (bodies.position[o] - xb).norm_sqr() < reach * reach:
+                near = 1
+    for k in range(statics.plane_count[None]):
+        if xb[2] - grow < statics.plane_height[k]:
+            near = 1
+    for k in range(statics.box_count[None]):
+        local = statics.box_rotation[k].transpose() @ (xb - statics.box_center[k])
+        q = ti.math.clamp(local, -statics.box_half_extents[k], statics.box_half_extents[k])
+        if (local - q).norm_sqr() < grow * grow:
+            near = 1
+    return near
 
 
 @ti.kernel
-def motion_ratio(bodies: ti.template()) -> ti.f32:
-    """Largest (|v| + |w| x bounding radius) / smallest particle radius over awake
-    bodies [1/s]: the substep must be short enough that this times dt stays below the
-    allowed fraction (no tunnelling). -1 when no body is awake."""
-    ratio = -1.0
-    for b in range(bodies.slot_end[None]):
-        if bodies.active[b] == 1 and bodies.sleeping[b] == 0 and bodies.fixed[b] == 0:
-            speed = bodies.linear_velocity[b].norm() + bodies.angular_velocity[b].norm() * bodies.bounding_radius[b]
-            ti.atomic_max(ratio, speed / bodies.min_particle_radius[b])
-    return ratio
+def substep_count(bodies: ti.template(), statics: ti.template(), margin: ti.f32, frame_dt: ti.f32,
+                  substeps: ti.i32, motion_fraction: ti.f32, max_rotation: ti.f32) -> ti.i32:
+    """Substeps this frame needs: 0 when no body is awake; otherwise the largest over awake
+    bodies of: for a body that may touch something this frame (its bounding sphere grown
+    by a frame's motion reaches another body or a static collider), ``substeps`` or more so
+    that it moves at most ``motion_fraction`` of its mean particle radius per substep; for
+    a body in free flight (exact ballistic steps), enough substeps to turn at most
+    ``max_rotation`` [rad] per substep."""
+    need = 0
+    if ti.static(runtime.SERIAL_SMALL_LOOPS):
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            for b in range(bodies.slot_end[None]):
+                need = ti.max(need, _substeps_of(bodies, statics, b, margin, frame_dt, substeps,
+                                                 motion_fraction, max_rotation))
+    else:
+        for b in range(bodies.slot_end[None]):
+            ti.atomic_max(need, _substeps_of(bodies, statics, b, margin, frame_dt, substeps, motion_fraction,
+                                             max_rotation))
+    return need
+
+
+@ti.func
+def _substeps_of(bodies: ti.template(), statics: ti.template(), b, margin, frame_dt, substeps, motion_fraction,
+                 max_rotation):
+    count = 0
+    if bodies.active[b] == 1 and bodies.sleeping[b] == 0 and bodies.fixed[b] == 0:
+        spin = bodies.angular_velocity[b].norm()
+        speed = bodies.linear_velocity[b].norm() + statics.gravity[None].norm() * frame_dt + spin * bodies.bounding_radius[b]
+        grow = bodies.bounding_radius[b] + margin * bodies.max_particle_radius[b] + speed * frame_dt
+        count = ti.max(1, ti.cast(ti.ceil(spin * frame_dt / max_rotation), ti.i32))
+        if _is_near(bodies, statics, b, grow, frame_dt, margin) == 1:
+            ratio = speed * frame_dt / (motion_fraction * bodies.mean_particle_radius[b])
+            count = ti.max(count, ti.max(substeps, ti.cast(ti.ceil(ratio), ti.i32)))
+    return count

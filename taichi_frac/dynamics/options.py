@@ -55,11 +55,15 @@ class DynamicsOptions:
         gravity: (3,) [m/s^2].
         max_substeps: cap on substeps per frame after the anti-tunnelling refinement; when
             hit, ``stats.substep_limit_hits`` counts it.
-        substep_motion_fraction: a substep is shortened until no body point moves further
-            than this fraction of the body's smallest particle radius [-].
-        contact_margin: speculative contact distance as a fraction of the mean radius of the
-            two spheres [-]; contacts are made this far before touching, so a body moving
-            less than that per substep cannot tunnel.
+        max_rotation_per_substep: a body in free flight (moved by exact ballistic steps)
+            takes enough substeps to turn at most this much per substep [rad].
+        substep_motion_fraction: a substep is shortened until no body that may touch
+            something this frame moves further than this fraction of its mean collision
+            particle radius in one substep [-] (accuracy of contacts; tunnelling is
+            prevented by speculative contacts whatever the substep).
+        contact_margin: contact distance as a fraction of the mean radius of the two spheres
+            [-], on top of the speculative distance (how far the two bodies can move in the
+            substep); contacts are made this far before touching.
         position_correction: split-impulse factor beta: a fraction of the penetration
             removed per substep through pseudo-velocities that do not add kinetic energy [-].
         allowed_penetration: penetration left alone (slop), fraction of particle radius [-].
@@ -78,8 +82,9 @@ class DynamicsOptions:
     restitution_iterations: int = 4
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     max_substeps: int = 200
-    substep_motion_fraction: float = 0.5
-    contact_margin: float = 0.5
+    substep_motion_fraction: float = 1.0
+    max_rotation_per_substep: float = 0.1
+    contact_margin: float = 0.25
     position_correction: float = 0.2
     allowed_penetration: float = 0.01
     max_correction_speed: float = 1.0
@@ -98,6 +103,7 @@ class DynamicsOptions:
             raise OptionError(f"dynamics.gravity must have 3 components, got {self.gravity!r}")
         check_range("dynamics", "max_substeps", self.max_substeps, 1, 1_000_000)
         check_range("dynamics", "substep_motion_fraction", self.substep_motion_fraction, 0.0, 10.0, low_open=True)
+        check_range("dynamics", "max_rotation_per_substep", self.max_rotation_per_substep, 0.0, 10.0, low_open=True)
         check_range("dynamics", "contact_margin", self.contact_margin, 0.0, 4.0)
         check_range("dynamics", "position_correction", self.position_correction, 0.0, 1.0)
         check_range("dynamics", "allowed_penetration", self.allowed_penetration, 0.0, 1.0)

@@ -19,6 +19,8 @@ and carry impulse get a relative normal velocity of -e x their approach speed (B
 
 import taichi as ti
 
+from .. import runtime
+
 vec3 = ti.math.vec3
 mat3 = ti.math.mat3
 
@@ -64,23 +66,34 @@ def _apply_pseudo(bodies: ti.template(), b, arm, impulse):
 
 @ti.func
 def prepare_contacts(bodies: ti.template(), contacts: ti.template()):
-    """Pass over contacts: arms, normal effective mass, approach speed; zero impulses."""
-    for c in range(ti.min(contacts.count[None], contacts.capacity)):
-        a = contacts.body_a[c]
-        b = contacts.body_b[c]
-        n = contacts.normal[c]
-        arm_a = contacts.point[c] - bodies.position[a]
-        arm_b = vec3(0.0)
-        if b >= 0:
-            arm_b = contacts.point[c] - bodies.position[b]
-        contacts.arm_a[c] = arm_a
-        contacts.arm_b[c] = arm_b
-        k = _inverse_mass_along(bodies, a, arm_a, n) + _inverse_mass_along(bodies, b, arm_b, n)
-        contacts.normal_mass[c] = 1.0 / k if k > 0.0 else 0.0
-        contacts.approach_speed[c] = (_velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b)).dot(n)
-        contacts.normal_impulse[c] = 0.0
-        contacts.tangent_impulse[c] = vec3(0.0)
-        contacts.pseudo_impulse[c] = 0.0
+    """Pass over contacts: arms, normal effective mass, approach speed; zero impulses;
+    flags the bodies that have a contact (serial: no two contacts write one flag at once)."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        for c in range(ti.min(contacts.count[None], contacts.capacity)):
+            _prepare_contact(bodies, contacts, c)
+
+
+@ti.func
+def _prepare_contact(bodies: ti.template(), contacts: ti.template(), c):
+    a = contacts.body_a[c]
+    b = contacts.body_b[c]
+    bodies.touched[a] = 1
+    if b >= 0:
+        bodies.touched[b] = 1
+    n = contacts.normal[c]
+    arm_a = contacts.point[c] - bodies.position[a]
+    arm_b = vec3(0.0)
+    if b >= 0:
+        arm_b = contacts.point[c] - bodies.position[b]
+    contacts.arm_a[c] = arm_a
+    contacts.arm_b[c] = arm_b
+    k = _inverse_mass_along(bodies, a, arm_a, n) + _inverse_mass_along(bodies, b, arm_b, n)
+    contacts.normal_mass[c] = 1.0 / k if k > 0.0 else 0.0
+    contacts.approach_speed[c] = (_velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b)).dot(n)
+    contacts.normal_impulse[c] = 0.0
+    contacts.tangent_impulse[c] = vec3(0.0)
+    contacts.pseudo_impulse[c] = 0.0
 
 
 @ti.func
@@ -89,6 +102,7 @@ def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
                    allowed_penetration, max_correction_speed,
                    restitution_threshold):
     """Serial Gauss-Seidel sweeps over the contacts (one task, see the module docstring)."""
+    ti.loop_config(serialize=True)
     for _ in range(1):
         count = ti.min(contacts.count[None], contacts.capacity)
         for sweep in range(iterations):

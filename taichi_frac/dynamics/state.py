@@ -37,15 +37,28 @@ class Bodies:
         sleeping: i32 1 = asleep. sleep_timer: [s] time spent slow. Writer: integrate, wake.
         wake_request: i32 set by the narrowphase when an awake moving body touches a
             sleeping one; applied by integrate_velocities.
+        touched: i32 1 = the body has a contact this substep (free-flying bodies are moved
+            by the exact ballistic step). Writer: prepare_contacts.
         bounding_radius: [m] max |offset| + radius over the body's particles.
-        min_particle_radius: [m] smallest collision particle (substep refinement).
+        mean_particle_radius, max_particle_radius, typical_particle_radius (95th
+            percentile): [m] of its collision particles (substep refinement, contact
+            margins, grid cell size).
+        local_lower, local_upper: vec3 [m] body-frame box holding every collision sphere.
         particle_start, particle_count: i32 its contiguous range of particle slots.
-        near_body, near_static: i32 culling flags (bounding spheres overlap another body /
-            a static collider). Writer: body_cull (broadphase).
+        Writer of all the above: add_body.
+        rotation: mat3 body -> world this substep. motion: [m] bound on how far any of its
+            points moves in this substep ((|v| + |w| bounding_radius) dt; 0 when idle).
+        near_body, near_static: i32 culling flags (its motion-grown bounding sphere reaches
+            another body / a static collider this substep).
+        neighbor_count, neighbors (capacity, max_neighbors): bodies whose grown bounding
+            spheres overlap its own (one of the two awake); more than max_neighbors sets
+            neighbor_count = -1 (then every particle of the body is tested).
+            Writer of rotation ... neighbors: body_cull (broadphase).
     """
 
-    def __init__(self, capacity: int):
+    def __init__(self, capacity: int, max_neighbors: int = 32):
         self.capacity = capacity
+        self.max_neighbors = max_neighbors
         self.position = vec3.field(shape=capacity)
         self.orientation = vec4.field(shape=capacity)
         self.linear_velocity = vec3.field(shape=capacity)
@@ -64,15 +77,23 @@ class Bodies:
         self.sleeping = ti.field(ti.i32, shape=capacity)
         self.sleep_timer = ti.field(ti.f32, shape=capacity)
         self.wake_request = ti.field(ti.i32, shape=capacity)
+        self.touched = ti.field(ti.i32, shape=capacity)
         self.bounding_radius = ti.field(ti.f32, shape=capacity)
-        self.min_particle_radius = ti.field(ti.f32, shape=capacity)
+        self.mean_particle_radius = ti.field(ti.f32, shape=capacity)
+        self.max_particle_radius = ti.field(ti.f32, shape=capacity)
+        self.typical_particle_radius = ti.field(ti.f32, shape=capacity)
+        self.local_lower = vec3.field(shape=capacity)
+        self.local_upper = vec3.field(shape=capacity)
+        self.rotation = mat3.field(shape=capacity)
+        self.motion = ti.field(ti.f32, shape=capacity)
+        self.neighbor_count = ti.field(ti.i32, shape=capacity)
+        self.neighbors = ti.field(ti.i32, shape=(capacity, max_neighbors))
         self.particle_start = ti.field(ti.i32, shape=capacity)
         self.particle_count = ti.field(ti.i32, shape=capacity)
         self.near_body = ti.field(ti.i32, shape=capacity)
         self.near_static = ti.field(ti.i32, shape=capacity)
-        # Scalars: one past the highest slot in use (loops run to it), and a reduction cell.
+        # Scalar: one past the highest slot in use (loops run to it).
         self.slot_end = ti.field(ti.i32, shape=())
-        self.max_motion_ratio = ti.field(ti.f32, shape=())
 
 
 @ti.data_oriented
@@ -84,7 +105,10 @@ class Particles:
         offset: vec3 [m] centre in the body frame. radius: [m]. Writer: add_body.
         world_position: vec3 [m]. Writer: broadphase (particle_cells), for bodies that are
             near something this substep.
-        cell: ivec3 grid cell of world_position. Writer: broadphase.
+        cell, cell_hi: ivec3 lower and upper corner of the grid cells it occupies (equal
+            unless it is larger than the typical radius). Writer: broadphase.
+        active: i32 1 = the particle lies inside a neighbour body's grown box this substep,
+            so it is put in the grid and queried. Writer: broadphase.
         slot_end: one past the highest slot in use.
     """
 
@@ -95,6 +119,8 @@ class Particles:
         self.radius = ti.field(ti.f32, shape=capacity)
         self.world_position = vec3.field(shape=capacity)
         self.cell = ti.math.ivec3.field(shape=capacity)
+        self.cell_hi = ti.math.ivec3.field(shape=capacity)
+        self.active = ti.field(ti.i32, shape=capacity)
         self.slot_end = ti.field(ti.i32, shape=())
 
 
@@ -107,6 +133,8 @@ class Statics:
             plane_restitution [-]. plane_count: scalar.
         box_center: vec3 [m]; box_rotation: mat3 box -> world; box_half_extents: vec3 [m];
             box_friction, box_restitution [-]. box_count: scalar. Writer: add_ground/add_static_box.
+        gravity: vec3 scalar [m/s^2] (a field, not a kernel argument: a vector argument
+            costs ~50 us per launch on the CPU backend). Writer: World.set_options.
     """
 
     def __init__(self, max_planes: int, max_boxes: int):
@@ -122,3 +150,4 @@ class Statics:
         self.box_friction = ti.field(ti.f32, shape=max_boxes)
         self.box_restitution = ti.field(ti.f32, shape=max_boxes)
         self.box_count = ti.field(ti.i32, shape=())
+        self.gravity = vec3.field(shape=())

@@ -6,7 +6,6 @@ bodies is a kernel (``collision/``, ``integrate.py``, ``solver.py``, ``impacts.p
 """
 
 
-import math
 import time
 from dataclasses import dataclass, field
 
@@ -23,7 +22,7 @@ from . import integrate, stages
 from .options import CapacityError, DynamicsOptions, WorldCapacity
 from .state import Bodies, Particles, Statics
 
-STAGES = ("broadphase", "narrowphase", "solve", "integrate")
+STAGES = ("collision", "response")
 
 
 @dataclass
@@ -64,7 +63,7 @@ def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32,
                 inverse_inertia: ti.types.ndarray(dtype=ti.f32, ndim=2),
                 inverse_mass: ti.f32, friction: ti.f32, restitution: ti.f32, fixed: ti.i32,
                 start: ti.i32, offsets: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                radii: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+                radii: ti.types.ndarray(dtype=ti.f32, ndim=1), typical_radius: ti.f32):
     """Fill one body slot and its particle range. ``pose``: (13,) position, orientation
     wxyz, linear velocity, angular velocity."""
     for _ in range(1):
@@ -88,13 +87,24 @@ def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32,
         bodies.particle_count[slot] = radii.shape[0]
         bodies.active[slot] = 1
         bounding = 0.0
-        smallest = 1e30
+        largest = 0.0
+        total = 0.0
+        lower = ti.math.vec3(1e30)
+        upper = ti.math.vec3(-1e30)
         for k in range(radii.shape[0]):
             offset = ti.math.vec3(offsets[k, 0], offsets[k, 1], offsets[k, 2])
             bounding = ti.max(bounding, offset.norm() + radii[k])
-            smallest = ti.min(smallest, radii[k])
+            largest = ti.max(largest, radii[k])
+            total += radii[k]
+            lower = ti.min(lower, offset - radii[k])
+            upper = ti.max(upper, offset + radii[k])
         bodies.bounding_radius[slot] = bounding
-        bodies.min_particle_radius[slot] = smallest
+        bodies.max_particle_radius[slot] = largest
+        bodies.typical_particle_radius[slot] = typical_radius
+        bodies.mean_particle_radius[slot] = total / radii.shape[0]
+        bodies.local_lower[slot] = lower
+        bodies.local_upper[slot] = upper
+        bodies.motion[slot] = 0.0
     for k in range(radii.shape[0]):
         p = start + k
         particles.body[p] = slot
@@ -126,7 +136,8 @@ def _wake(bodies: ti.template(), slot: ti.i32):
 
 
 @ti.kernel
-def _reset_advance_counters(contacts: ti.template(), impacts: ti.template()):
+def _reset_advance_counters(contacts: ti.template(), impacts: ti.template(), grid: ti.template()):
+    grid.overflow[None] = 0
     contacts.overflow[None] = 0
     contacts.peak[None] = 0
     impacts.count[None] = 0
@@ -154,7 +165,7 @@ class World:
         self.contacts = narrowphase.Contacts(cap.max_contacts)
         self.impact_buffer = impact_kernels.Impacts(cap.max_impacts, cap.max_contacts)
         self.particles.body.fill(-1)
-        self._gravity = ti.Vector(list(map(float, self.options.gravity)))
+        self.statics.gravity[None] = tuple(map(float, self.options.gravity))
         self.stats = WorldStats()
         self._free_body_slots: list[int] = []
         self._body_slot_end = 0
@@ -162,7 +173,6 @@ class World:
         self._body_range: dict[int, tuple[int, int]] = {}
         self._particles_in_use = 0
         self._particle_slot_end = 0
-        self._max_radius = 0.0
         self._plane_count = 0
         self._box_count = 0
         self._substep_counter = 0
@@ -200,7 +210,7 @@ class World:
         _write_body(self.bodies, self.particles, slot, pose, inertia.astype(np.float32),
                     inverse_inertia.astype(np.float32), float(inverse_mass), float(friction),
                     float(restitution), int(fixed), start, np.ascontiguousarray(offsets, dtype=np.float32),
-                    np.ascontiguousarray(radii, dtype=np.float32))
+                    np.ascontiguousarray(radii, dtype=np.float32), float(np.percentile(radii, 50)))
         self._body_range[slot] = (start, count)
         self.breakable = getattr(self, "breakable", {})
         self.breakable[slot] = bool(breakable)
@@ -208,8 +218,6 @@ class World:
         self._particle_slot_end = max(self._particle_slot_end, start + count)
         self.particles.slot_end[None] = self._particle_slot_end
         self.bodies.slot_end[None] = self._body_slot_end
-        if float(radii.max()) > self._max_radius:
-            self._max_radius = float(radii.max())
         self._update_grid_size()
         return slot
 
@@ -276,7 +284,6 @@ class World:
         self._particle_slot_end = 0
         self.particles.slot_end[None] = 0
         self._free_ranges = [(0, self.capacity.max_boundary_particles)]
-        self._max_radius = 0.0
         self._plane_count = self._box_count = 0
         self.statics.plane_count[None] = 0
         self.statics.box_count[None] = 0
@@ -286,7 +293,7 @@ class World:
         """Replace the solver options between advances (they are kernel arguments, so this
         compiles nothing)."""
         self.options = options
-        self._gravity = ti.Vector(list(map(float, options.gravity)))
+        self.statics.gravity[None] = tuple(map(float, options.gravity))
         self._update_grid_size()
 
     @property
@@ -297,15 +304,17 @@ class World:
 
     def advance(self, frame_dt: float, substeps: int = 10) -> None:
         """Advance one frame of ``frame_dt`` [s] in at least ``substeps`` substeps; more are
-        taken when a body would otherwise move further than ``substep_motion_fraction`` of
-        its smallest particle radius in one (no tunnelling), up to ``max_substeps``."""
+        taken when a body that may touch something during the frame would otherwise move
+        further than ``substep_motion_fraction`` of its mean collision-particle radius in one
+        substep, up to ``max_substeps``. (Tunnelling is prevented by the speculative
+        contacts at any substep length; the refinement keeps contacts accurate and the grid
+        cells small.)"""
         t_frame = time.perf_counter()
         opt = self.options
-        _reset_advance_counters(self.contacts, self.impact_buffer)
-        ratio = integrate.motion_ratio(self.bodies)
-        count = 0
-        if ratio >= 0.0:  # someone is awake
-            count = max(int(substeps), int(math.ceil(frame_dt * ratio / opt.substep_motion_fraction)))
+        _reset_advance_counters(self.contacts, self.impact_buffer, self.grid)
+        count = int(integrate.substep_count(self.bodies, self.statics, opt.contact_margin, frame_dt, int(substeps),
+                                            opt.substep_motion_fraction, opt.max_rotation_per_substep))
+        if count > 0:  # someone is awake
             if count > opt.max_substeps:
                 self.stats.substep_limit_hits += 1
                 count = opt.max_substeps
@@ -318,6 +327,10 @@ class World:
         self.stats.contacts = int(self.contacts.count[None]) if count else 0
         self.stats.peak_contacts = max(int(self.contacts.peak[None]), self.stats.contacts)
         overflow = int(self.contacts.overflow[None])
+        grid_overflow = int(self.grid.overflow[None])
+        if grid_overflow:
+            print(f"taichi-frac dynamics: {grid_overflow} grid entries lost in this frame (large particles "
+                  f"occupying many cells): contacts may be missed; raise WorldCapacity(max_boundary_particles=...)")
         self.stats.contact_overflows = overflow
         self.stats.total_contact_overflows += overflow
         self.stats.impact_overflows = int(self.impact_buffer.overflow[None])
@@ -330,16 +343,13 @@ class World:
         opt = self.options
         b, p, g, c = self.bodies, self.particles, self.grid, self.contacts
         clock = self._clock()
-        stages.broadphase(b, self.statics, p, g, opt.contact_margin)
-        clock("broadphase")
-        stages.narrow(b, self.statics, p, g, c, opt.contact_margin)
-        clock("narrowphase")
-        stages.solve(b, c, self.impact_buffer, self._gravity, dt, opt.solver_iterations,
-                     opt.restitution_iterations, opt.position_correction, opt.allowed_penetration,
-                     opt.max_correction_speed, opt.restitution_threshold, index, opt.record_force_threshold)
-        clock("solve")
-        stages.integrate_positions(b, dt, opt.sleep_linear_speed, opt.sleep_angular_speed, opt.sleep_time)
-        clock("integrate")
+        stages.collide(b, self.statics, p, g, c, opt.contact_margin, dt)
+        clock("collision")
+        stages.respond(b, self.statics, c, self.impact_buffer, dt, opt.solver_iterations,
+                       opt.restitution_iterations, opt.position_correction, opt.allowed_penetration,
+                       opt.max_correction_speed, opt.restitution_threshold, index, opt.record_force_threshold,
+                       opt.sleep_linear_speed, opt.sleep_angular_speed, opt.sleep_time)
+        clock("response")
 
     def _clock(self):
         last = [time.perf_counter()]
@@ -437,9 +447,8 @@ class World:
         self._free_ranges = merged
 
     def _update_grid_size(self) -> None:
-        # A pair interacts when its gap < margin x mean radius, so centres lie within
-        # 2 r_max (1 + margin / 2): with cells that large, 27 cells cover every partner.
-        self.grid.cell_size[None] = max(2.0 * self._max_radius * (1.0 + 0.5 * self.options.contact_margin), 1e-6)
+        # The cell size is set every substep by the broadphase (body_cull); the hash table
+        # holds about two buckets per particle in use.
         size = 1
         while size < 2 * max(self._particles_in_use, 1) and size < self.grid.table_capacity:
             size *= 2
