@@ -98,11 +98,11 @@ def _strongest_per_pair(impacts: dict, bodies: np.ndarray) -> dict[int, np.ndarr
     """For each body in ``bodies``: row indices of its strongest impact per other body.
 
     Several substeps of one frame usually hold the same touch; the strongest (largest
-    |impulse| / dt, the brief's contact force) stands for it. Distinct others (the ground,
+    contact force, see dynamics/impacts.py) stands for it. Distinct others (the ground,
     another body, a wall) stay distinct: a body hit at several points in one frame is
     analysed with all of them at once.
     """
-    force = np.linalg.norm(impacts["impulse"], axis=1) / np.maximum(impacts["dt"], 1e-30)
+    force = np.linalg.norm(impacts["force"], axis=1)
     rows = np.nonzero(np.isin(impacts["body"], bodies))[0]
     if len(rows) == 0:
         return {}
@@ -207,6 +207,7 @@ class Simulation:
                 model, obj.position, obj.orientation, obj.linear_velocity, obj.angular_velocity,
                 friction=obj.friction, restitution=obj.restitution,
                 breakable=obj.breakable and self.fracture_enabled,
+                young_modulus=obj.material.young_modulus, poisson_ratio=obj.material.poisson_ratio,
             )
             self.records[body] = BodyRecord(
                 name=obj.name, model=model, root=model, material=obj.material, fracture=obj.fracture,
@@ -220,6 +221,7 @@ class Simulation:
                 rec = self.records[body]
                 rec.root_normals, rec.root_uvs = boundary_corner_attributes(report.surface, corners)
         self.initial_mass = sum(r.model.mass for r in self.records.values())
+        self._dynamics_seconds_at_start = dict(self.world.stats.seconds)  # a reused World keeps counting
         self.table1 = dict(
             physics_particles=sum(r.model.tet_count for r in self.records.values() if r.breakable),
             surface_particles=sum(r.model.surface_particle_count for r in self.records.values() if r.breakable),
@@ -278,7 +280,7 @@ class Simulation:
         per_body = _strongest_per_pair(impacts, breakable)
         for body, rows in per_body.items():
             rec = self.records[body]
-            force = impacts["impulse"][rows] / impacts["dt"][rows, None]
+            force = impacts["force"][rows]
             strong = np.linalg.norm(force, axis=1) >= max(rec.fracture.impact_force_threshold, 1e-12)
             if not np.any(strong):
                 continue
@@ -314,7 +316,8 @@ class Simulation:
                 child = self.world.add_body(
                     piece.model, piece.position, piece.orientation, piece.linear_velocity,
                     piece.angular_velocity, friction=rec.friction, restitution=rec.restitution,
-                    breakable=piece.breakable,
+                    breakable=piece.breakable, young_modulus=rec.material.young_modulus,
+                    poisson_ratio=rec.material.poisson_ratio,
                 )
                 child_rec = BodyRecord(
                     name=f"{rec.name}_{k}", model=piece.model, root=rec.root, material=rec.material,
@@ -397,6 +400,7 @@ class Simulation:
         ws = self.world.stats
         live = self.world.body_ids
         ms = np.asarray(frame_ms) if frame_ms else np.zeros(1)
+        dynamics_seconds = {k: v - self._dynamics_seconds_at_start.get(k, 0.0) for k, v in ws.seconds.items()}
         return RunSummary(
             scene=self.scene.name,
             frames=frames,
@@ -408,7 +412,7 @@ class Simulation:
             fractures=self.fracture_events,
             wall_time=wall,
             stage_seconds=self.times.as_dict() | {"prepare": round(self.prepare_seconds, 6)},
-            dynamics_stage_seconds={k: round(v, 6) for k, v in ws.seconds.items()},
+            dynamics_stage_seconds={k: round(v, 6) for k, v in dynamics_seconds.items()},
             ms_per_frame=dict(mean=float(ms.mean()), max=float(ms.max()), median=float(np.median(ms))),
             interrupted=interrupted,
             output=None if self.output_path is None else str(self.output_path),

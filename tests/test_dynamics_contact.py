@@ -96,6 +96,36 @@ def test_impacts_sum_to_the_momentum_change():
     assert np.all(rows["dt"] == pytest.approx(0.002))
 
 
+@pytest.mark.parametrize("substeps", [5, 40])
+def test_impact_force_is_the_hertz_peak_whatever_the_substep(substeps):
+    # A box dropped flat at 2 m/s on the rigid ground impacts like the sphere of its volume
+    # (radius R): Hertz's peak force F = 4/3 E* sqrt(R) d^(3/2), d = (15 m v^2 /
+    # (16 E* sqrt(R)))^(2/5), E* = E / (1 - nu^2), and duration 2.94 d / v. The strongest
+    # row of the frame carries them, whatever the substep.
+    world = fresh_world(record_force_threshold=0.0)
+    model = box_model(0.1, 0.1, 0.1, pieces=200)
+    world.add_ground(0.0, restitution=0.0)
+    e_modulus, nu, speed = 70e9, 0.2, 2.0
+    body = world.add_body(model, (0, 0, 0.1), (1, 0, 0, 0), (0, 0, -speed), (0, 0, 0),
+                          restitution=0.0, young_modulus=e_modulus, poisson_ratio=nu)
+    spheres = world.particle_state(body)
+    gap = np.min(spheres["position"][:, 2] - spheres["radius"])
+    world.advance(0.02, substeps)
+    rows = world.impacts()
+    first = int(np.argmax(np.linalg.norm(rows["force"], axis=1)))
+    v = rows["speed"][first]
+    assert v == pytest.approx(np.sqrt(speed ** 2 + 2 * G * gap), rel=0.02)  # speed on arrival
+    radius = (3 * model.volume / (4 * np.pi)) ** (1 / 3)
+    e_star = e_modulus / (1 - nu ** 2)
+    depth = (15 * model.mass * v ** 2 / (16 * e_star * np.sqrt(radius))) ** 0.4
+    assert np.linalg.norm(rows["force"][first]) == pytest.approx(4 / 3 * e_star * np.sqrt(radius) * depth ** 1.5,
+                                                                 rel=1e-3)
+    assert rows["duration"][first] == pytest.approx(2.94 * depth / v, rel=1e-3)
+    # It dwarfs the sustained force of the box's weight on a later substep (J / dt).
+    resting = np.nonzero(rows["duration"] == 0)[0]
+    assert np.all(np.linalg.norm(rows["force"][resting], axis=1) < 1e-3 * np.linalg.norm(rows["force"][first]))
+
+
 def test_five_stacked_rings_stay_stacked():
     world = fresh_world()
     model = ring_model()

@@ -74,7 +74,10 @@ class DynamicsOptions:
             surface particles instead of the boundary layer.
         sleep_linear_speed, sleep_angular_speed, sleep_time: a body slower than both for
             sleep_time [s] sleeps (velocity zeroed, no integration) until woken.
-        record_force_threshold: impact rows are kept when |impulse| / dt exceeds this [N].
+        record_force_threshold: impact rows are kept when their force exceeds this [N].
+        impact_speed: contacts approaching faster than this [m/s] are impacts, whose force
+            is the Hertz peak of their impulse (see dynamics/impacts.py); slower ones are
+            sustained, with force impulse / dt.
         stage_timing: synchronise the device after each stage so ``stats.seconds`` is exact.
     """
 
@@ -94,6 +97,7 @@ class DynamicsOptions:
     sleep_angular_speed: float = 0.05
     sleep_time: float = 0.5
     record_force_threshold: float = 0.0
+    impact_speed: float = 0.05
     stage_timing: bool = True
 
     def __post_init__(self):
@@ -113,6 +117,7 @@ class DynamicsOptions:
         check_range("dynamics", "sleep_angular_speed", self.sleep_angular_speed, 0.0, None)
         check_range("dynamics", "sleep_time", self.sleep_time, 0.0, None)
         check_range("dynamics", "record_force_threshold", self.record_force_threshold, 0.0, None)
+        check_range("dynamics", "impact_speed", self.impact_speed, 0.0, None)
 
     @classmethod
     def from_simulation(cls, sim: SimulationOptions, **overrides) -> "DynamicsOptions":

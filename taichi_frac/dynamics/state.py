@@ -33,6 +33,9 @@ class Bodies:
         solver_inverse_inertia: mat3 world-frame inverse inertia this substep (0 when
             sleeping or fixed). Writer: integrate_velocities.
         friction: Coulomb coefficient [-]. restitution: [-]. Writer: add_body.
+        contact_compliance: (1 - nu^2) / E [1/Pa], 0 for a rigid body; contact_radius [m],
+            the radius of the sphere it impacts like (Hertz peak force of impact rows, see
+            impacts.py). Writer: add_body.
         active: i32 1 = slot in use. fixed: i32 1 = never moves. Writer: add_body/remove_body.
         sleeping: i32 1 = asleep. sleep_timer: [s] time spent slow. Writer: integrate, wake.
         wake_request: i32 set by the narrowphase when an awake moving body touches a
@@ -71,6 +74,8 @@ class Bodies:
         self.solver_inverse_mass = ti.field(ti.f32, shape=capacity)
         self.solver_inverse_inertia = mat3.field(shape=capacity)
         self.friction = ti.field(ti.f32, shape=capacity)
+        self.contact_compliance = ti.field(ti.f32, shape=capacity)
+        self.contact_radius = ti.field(ti.f32, shape=capacity)
         self.restitution = ti.field(ti.f32, shape=capacity)
         self.active = ti.field(ti.i32, shape=capacity)
         self.fixed = ti.field(ti.i32, shape=capacity)

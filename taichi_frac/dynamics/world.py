@@ -62,6 +62,7 @@ def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32,
                 inertia: ti.types.ndarray(dtype=ti.f32, ndim=2),
                 inverse_inertia: ti.types.ndarray(dtype=ti.f32, ndim=2),
                 inverse_mass: ti.f32, friction: ti.f32, restitution: ti.f32, fixed: ti.i32,
+                compliance: ti.f32, contact_radius: ti.f32,
                 start: ti.i32, offsets: ti.types.ndarray(dtype=ti.f32, ndim=2),
                 radii: ti.types.ndarray(dtype=ti.f32, ndim=1), typical_radius: ti.f32):
     """Fill one body slot and its particle range. ``pose``: (13,) position, orientation
@@ -79,6 +80,8 @@ def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32,
         bodies.inverse_mass[slot] = inverse_mass
         bodies.friction[slot] = friction
         bodies.restitution[slot] = restitution
+        bodies.contact_compliance[slot] = compliance
+        bodies.contact_radius[slot] = contact_radius
         bodies.fixed[slot] = fixed
         bodies.sleeping[slot] = 0
         bodies.sleep_timer[slot] = 0.0
@@ -182,11 +185,15 @@ class World:
     def add_body(self, model: BodyModel, position=(0.0, 0.0, 0.0), orientation_wxyz=(1.0, 0.0, 0.0, 0.0),
                  linear_velocity=(0.0, 0.0, 0.0), angular_velocity=(0.0, 0.0, 0.0), *, friction: float = 0.5,
                  restitution: float = 0.2, single_scale: bool | None = None, fixed: bool = False,
-                 breakable: bool = True) -> int:
+                 breakable: bool = True, young_modulus: float | None = None, poisson_ratio: float = 0.25,
+                 contact_radius: float | None = None) -> int:
         """Add a body (its COM at ``position`` [m], world velocities [m/s], [rad/s]) and
         return its slot id. ``single_scale`` (default ``options.single_scale``) collides with
         the physics surface particles instead of the boundary layer. ``breakable`` is
-        bookkeeping for the fracture stage (kept in ``self.breakable``)."""
+        bookkeeping for the fracture stage (kept in ``self.breakable``).
+        ``young_modulus`` [Pa] (None: rigid) and ``poisson_ratio`` give the Hertz contact
+        time of its impacts; ``contact_radius`` [m] (default: the radius of the sphere of
+        its volume) is the curvature it impacts with (see impacts.py)."""
         single = self.options.single_scale if single_scale is None else bool(single_scale)
         if single:
             offsets = model.particle_position[model.surface_particles]
@@ -204,12 +211,17 @@ class World:
             inverse_mass, inverse_inertia = 0.0, np.zeros((3, 3))
         else:
             inverse_mass, inverse_inertia = 1.0 / model.mass, np.linalg.inv(inertia)
+        if young_modulus is not None and not young_modulus > 0:
+            raise ValueError(f"young_modulus must be > 0 [Pa] or None (rigid), got {young_modulus!r}")
+        compliance = 0.0 if young_modulus is None else (1.0 - poisson_ratio ** 2) / young_modulus
+        if contact_radius is None:
+            contact_radius = (3.0 * model.volume / (4.0 * np.pi)) ** (1.0 / 3.0)
         pose = np.concatenate([position, orientation_wxyz, linear_velocity, angular_velocity]).astype(np.float32)
         if pose.shape != (13,):
             raise ValueError("position, velocities need 3 components and orientation_wxyz 4")
         _write_body(self.bodies, self.particles, slot, pose, inertia.astype(np.float32),
                     inverse_inertia.astype(np.float32), float(inverse_mass), float(friction),
-                    float(restitution), int(fixed), start, np.ascontiguousarray(offsets, dtype=np.float32),
+                    float(restitution), int(fixed), float(compliance), float(contact_radius), start, np.ascontiguousarray(offsets, dtype=np.float32),
                     np.ascontiguousarray(radii, dtype=np.float32), float(np.percentile(radii, 50)))
         self._body_range[slot] = (start, count)
         self.breakable = getattr(self, "breakable", {})
@@ -348,7 +360,7 @@ class World:
         stages.respond(b, self.statics, c, self.impact_buffer, dt, opt.solver_iterations,
                        opt.restitution_iterations, opt.position_correction, opt.allowed_penetration,
                        opt.max_correction_speed, opt.restitution_threshold, index, opt.record_force_threshold,
-                       opt.sleep_linear_speed, opt.sleep_angular_speed, opt.sleep_time)
+                       opt.impact_speed, opt.sleep_linear_speed, opt.sleep_angular_speed, opt.sleep_time)
         clock("response")
 
     def _clock(self):
@@ -386,13 +398,18 @@ class World:
     def impacts(self) -> dict:
         """Impact rows of the last advance (see docs/ARCHITECTURE.md): body (K,), other (K,)
         (-1 ground, -2 static box), point (K,3) [m], normal (K,3) unit into body, impulse
-        (K,3) [N s] on body, dt (K,) [s], substep (K,)."""
+        (K,3) [N s] on body, force (K,3) [N] on body (Hertz peak force at the approach
+        speed for an impact, J / dt for a sustained contact; see dynamics/impacts.py),
+        duration (K,) [s] Hertz contact time
+        (0: sustained), speed (K,) [m/s] approach speed, dt (K,) [s], substep (K,)."""
         n = min(int(self.impact_buffer.count[None]), self.capacity.max_impacts)
         ib = self.impact_buffer
         return dict(
             body=ib.body.to_numpy()[:n], other=ib.other.to_numpy()[:n],
             point=ib.point.to_numpy()[:n].astype(np.float64), normal=ib.normal.to_numpy()[:n].astype(np.float64),
-            impulse=ib.impulse.to_numpy()[:n].astype(np.float64), dt=ib.dt.to_numpy()[:n].astype(np.float64),
+            impulse=ib.impulse.to_numpy()[:n].astype(np.float64), force=ib.force.to_numpy()[:n].astype(np.float64),
+            duration=ib.duration.to_numpy()[:n].astype(np.float64), speed=ib.speed.to_numpy()[:n].astype(np.float64),
+            dt=ib.dt.to_numpy()[:n].astype(np.float64),
             substep=ib.substep.to_numpy()[:n],
         )
 
