@@ -64,6 +64,11 @@ class BodyModel:
         source_tet: (T,) index of each tet in the root solid's tet mesh (identity for a
             root body): lets a fragment tell crack faces from original surface.
         boundary_group_size: the n used to build the boundary layer.
+        boundary_contact_position: (N,3) [m] where each boundary particle's sphere (radius
+            boundary_radius) sits for collisions: moved inward along the group's outward
+            normal until its outermost point lies on the true surface (so the coarse layer
+            does not stand proud of the body), no further than keeps it inside the body
+            behind it. None: collide at boundary_position. Use ``collision_position``.
     """
 
     vertices: np.ndarray
@@ -91,6 +96,12 @@ class BodyModel:
     com_in_source: np.ndarray
     source_tet: np.ndarray
     boundary_group_size: int
+    boundary_contact_position: np.ndarray | None = None
+
+    @property
+    def collision_position(self) -> np.ndarray:
+        """(N,3) [m] centres of the boundary spheres used for collision."""
+        return self.boundary_position if self.boundary_contact_position is None else self.boundary_contact_position
 
     @property
     def tet_count(self) -> int:
@@ -228,6 +239,7 @@ def build_body_model(
     reach = np.linalg.norm(centroids[members] - b_pos[owner], axis=1) + radius[members]
     b_radius = np.zeros(len(groups))
     np.maximum.at(b_radius, owner, reach)
+    contact_pos = contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius)
 
     return BodyModel(
         vertices=vertices,
@@ -255,4 +267,48 @@ def build_body_model(
         com_in_source=com,
         source_tet=(np.arange(len(tets)) if source_tet is None else np.asarray(source_tet)).astype(np.int32),
         boundary_group_size=int(boundary_group_size),
+        boundary_contact_position=contact_pos,
     )
+
+
+def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius):
+    """Collision centres of the boundary spheres (see ``BodyModel.boundary_contact_position``).
+
+    For each group: its outward normal n (area-weighted normals of its members' boundary
+    faces), the height h of the true surface above its centre along n (largest over those
+    faces' vertices) and the body's thickness t behind the centre along -n (a ray cast
+    against the boundary). The centre moves inward by s = min(R - h, t - R), at least 0, so
+    the sphere's outermost point along n lies on the surface and its innermost stays inside.
+    """
+    import trimesh
+
+    n_groups = len(b_pos)
+    if n_groups == 0 or len(faces) == 0:
+        return b_pos.copy()
+    group_of_tet = np.full(len(centroids), -1, dtype=np.int64)
+    group_of_tet[members] = owner
+    corners = vertices[faces]  # (F,3,3)
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    outward = np.sign(((corners.mean(axis=1) - centroids[face_tet]) * normal).sum(axis=1))
+    normal *= outward[:, None]  # away from the owning tet, whatever the winding
+    group = group_of_tet[face_tet]
+    mine = group >= 0
+    n_sum = np.zeros((n_groups, 3))
+    np.add.at(n_sum, group[mine], normal[mine])
+    length = np.linalg.norm(n_sum, axis=1)
+    has_normal = length > 1e-12 * max(float(length.max()), 1e-300)
+    n_unit = np.where(has_normal[:, None], n_sum / np.maximum(length, 1e-300)[:, None], 0.0)
+    heights = ((corners[mine] - b_pos[group[mine]][:, None, :]) * n_unit[group[mine]][:, None, :]).sum(axis=2)
+    h = np.full(n_groups, np.inf)
+    np.minimum.at(h, group[mine], -heights.max(axis=1))
+    h = -h  # largest height of the group's faces above its centre
+    shift = np.where(has_normal & np.isfinite(h), b_radius - h, 0.0)
+    todo = np.nonzero(shift > 0)[0]
+    if len(todo):
+        mesh = trimesh.Trimesh(vertices, faces, process=False)
+        thickness = np.zeros(n_groups)
+        locations, ray, _ = mesh.ray.intersects_location(b_pos[todo], -n_unit[todo], multiple_hits=False)
+        thickness[todo[ray]] = np.linalg.norm(locations - b_pos[todo[ray]], axis=1)
+        shift = np.minimum(shift, thickness - b_radius)
+    shift = np.maximum(shift, 0.0)
+    return b_pos - shift[:, None] * n_unit

@@ -349,7 +349,7 @@ class Simulation:
             return piece
         m = piece.model
         rot = quaternion_matrix(piece.orientation)
-        lowest = np.min(piece.position[2] + m.boundary_position @ rot[2] - m.boundary_radius)
+        lowest = np.min(piece.position[2] + m.collision_position @ rot[2] - m.boundary_radius)
         depth = max(grounds) - lowest
         allowed = self.world.options.allowed_penetration * float(m.boundary_radius.mean())
         if depth > allowed:

@@ -89,10 +89,10 @@ def with_spheres(model, centres, radii):
     makes the collision geometry exact where a test checks the solver against a closed form
     (a tet-meshed box's boundary spheres make a bumpy bottom, a tet sphere's an uneven one)."""
     centres = np.asarray(centres, dtype=float).reshape(-1, 3)
-    return dataclasses.replace(model, boundary_position=centres,
+    return dataclasses.replace(model, boundary_position=centres, boundary_contact_position=None,
                                boundary_radius=np.broadcast_to(np.asarray(radii, float), len(centres)).copy())
 
 
 def lowest_point(model, group_radius=True) -> float:
-    """Lowest z of the boundary spheres in the body frame (to place a body touching z=0)."""
-    return float(np.min(model.boundary_position[:, 2] - model.boundary_radius))
+    """Lowest z of the collision spheres in the body frame (to place a body touching z=0)."""
+    return float(np.min(model.collision_position[:, 2] - model.boundary_radius))

@@ -33,8 +33,10 @@ class Contacts:
     Written by solver.prepare_contacts: arm_a, arm_b (vec3 [m] COM -> point), normal_mass
     ([kg], 1 / effective inverse mass along the normal), approach_speed ([m/s] normal
     relative velocity before the solve, < 0 approaching).
-    Written by the solver: normal_impulse ([N s] accumulated, >= 0), tangent_impulse
-    (vec3 [N s]), pseudo_impulse (split impulse, [N s]).
+    query (i32 particle that made it), key (i32 partner key, see Particles' contact cache).
+    Written by the narrowphase (the impulses the same pair had last substep: warm start)
+    and the solver: normal_impulse ([N s] accumulated, >= 0), tangent_impulse (vec3
+    [N s]), pseudo_impulse (split impulse, [N s]).
     Scalars: count (may exceed capacity: the excess is ``overflow``), overflow (summed over
     an advance, reset by the World), peak (largest count since the World reset it).
     """
@@ -57,15 +59,31 @@ class Contacts:
         self.normal_impulse = ti.field(ti.f32, shape=capacity)
         self.tangent_impulse = vec3.field(shape=capacity)
         self.pseudo_impulse = ti.field(ti.f32, shape=capacity)
+        self.query = ti.field(ti.i32, shape=capacity)
+        self.key = ti.field(ti.i32, shape=capacity)
         self.count = ti.field(ti.i32, shape=())
         self.overflow = ti.field(ti.i32, shape=())
         self.peak = ti.field(ti.i32, shape=())
 
 
 @ti.func
-def _append(contacts: ti.template(), a, b, static_index, normal, point, separation, radius, friction, restitution):
+def _append(contacts: ti.template(), particles: ti.template(), query, key, a, b, static_index, normal, point,
+            separation, radius, friction, restitution):
     c = ti.atomic_add(contacts.count[None], 1)
     if c < contacts.capacity:
+        contacts.query[c] = query
+        contacts.key[c] = key
+        # Warm start: the impulses this pair carried at the end of the last substep.
+        previous = particles.parity[None]
+        jn = 0.0
+        jt = vec3(0.0)
+        if particles.cache_stamp[previous, query] == particles.cache_epoch[None]:
+            for k in range(particles.cache_count[previous, query]):
+                if particles.cache_key[previous, query, k] == key:
+                    jn = particles.cache_normal[previous, query, k]
+                    jt = particles.cache_tangent[previous, query, k]
+        contacts.normal_impulse[c] = jn
+        contacts.tangent_impulse[c] = jt
         contacts.body_a[c] = a
         contacts.body_b[c] = b
         contacts.static_index[c] = static_index
@@ -142,7 +160,7 @@ def _scan_cell(bodies: ti.template(), particles: ti.template(), grid: ti.templat
                         point = particles.world_position[j] + n * (rj + 0.5 * gap)
                         mu = ti.sqrt(bodies.friction[a] * bodies.friction[b])
                         e = ti.max(bodies.restitution[a], bodies.restitution[b])
-                        _append(contacts, a, b, -1, n, point, gap, ti.min(ri, rj), mu, e)
+                        _append(contacts, particles, i, j, a, b, -1, n, point, gap, ti.min(ri, rj), mu, e)
                         if bodies.sleeping[b] == 1 and bodies.sleep_timer[a] == 0.0:
                             bodies.wake_request[b] = 1
 
@@ -160,7 +178,7 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
             point = vec3(x[0], x[1], statics.plane_height[k])
             mu = ti.sqrt(bodies.friction[a] * statics.plane_friction[k])
             e = ti.max(bodies.restitution[a], statics.plane_restitution[k])
-            _append(contacts, a, GROUND, k, vec3(0.0, 0.0, 1.0), point, gap, r, mu, e)
+            _append(contacts, particles, i, -1 - k, a, GROUND, k, vec3(0.0, 0.0, 1.0), point, gap, r, mu, e)
     for k in range(statics.box_count[None]):
         rot = statics.box_rotation[k]
         half = statics.box_half_extents[k]
@@ -192,7 +210,7 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
             point = statics.box_center[k] + rot @ q
             mu = ti.sqrt(bodies.friction[a] * statics.box_friction[k])
             e = ti.max(bodies.restitution[a], statics.box_restitution[k])
-            _append(contacts, a, STATIC_BOX, k, n, point, gap, r, mu, e)
+            _append(contacts, particles, i, -1000 - k, a, STATIC_BOX, k, n, point, gap, r, mu, e)
 
 
 @ti.func

@@ -78,6 +78,8 @@ class DynamicsOptions:
         impact_speed: contacts approaching faster than this [m/s] are impacts, whose force
             is the Hertz peak of their impulse (see dynamics/impacts.py); slower ones are
             sustained, with force impulse / dt.
+        warm_start: fraction of each contact's impulses from the last substep applied
+            before the sweeps [-] (1: full warm starting, 0: none).
         stage_timing: synchronise the device after each stage so ``stats.seconds`` is exact.
     """
 
@@ -98,6 +100,7 @@ class DynamicsOptions:
     sleep_time: float = 0.5
     record_force_threshold: float = 0.0
     impact_speed: float = 0.05
+    warm_start: float = 1.0
     stage_timing: bool = True
 
     def __post_init__(self):
@@ -118,6 +121,7 @@ class DynamicsOptions:
         check_range("dynamics", "sleep_time", self.sleep_time, 0.0, None)
         check_range("dynamics", "record_force_threshold", self.record_force_threshold, 0.0, None)
         check_range("dynamics", "impact_speed", self.impact_speed, 0.0, None)
+        check_range("dynamics", "warm_start", self.warm_start, 0.0, 1.0)
 
     @classmethod
     def from_simulation(cls, sim: SimulationOptions, **overrides) -> "DynamicsOptions":

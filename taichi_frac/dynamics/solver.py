@@ -65,13 +65,58 @@ def _apply_pseudo(bodies: ti.template(), b, arm, impulse):
 
 
 @ti.func
-def prepare_contacts(bodies: ti.template(), contacts: ti.template()):
-    """Pass over contacts: arms, normal effective mass, approach speed; zero impulses;
-    flags the bodies that have a contact (serial: no two contacts write one flag at once)."""
+def prepare_contacts(bodies: ti.template(), contacts: ti.template(), warm_start):
+    """Two serial passes over contacts: arms, normal effective mass, approach speed, body
+    flags (no two contacts write one flag at once); then the warm start: each contact's
+    impulses from the last substep (projected on its friction cone) applied to the bodies
+    (Catto, "Iterative Dynamics with Temporal Coherence", GDC 2005)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
         for c in range(ti.min(contacts.count[None], contacts.capacity)):
             _prepare_contact(bodies, contacts, c)
+        for c in range(ti.min(contacts.count[None], contacts.capacity)):
+            _warm_start(bodies, contacts, c, warm_start)
+
+
+@ti.func
+def _warm_start(bodies: ti.template(), contacts: ti.template(), c, warm_start):
+    a = contacts.body_a[c]
+    b = contacts.body_b[c]
+    n = contacts.normal[c]
+    jn = ti.max(contacts.normal_impulse[c], 0.0) * warm_start
+    jt = contacts.tangent_impulse[c] * warm_start
+    jt -= jt.dot(n) * n
+    limit = contacts.friction[c] * jn
+    if jt.norm() > limit:
+        jt *= limit / jt.norm()
+    contacts.normal_impulse[c] = jn
+    contacts.tangent_impulse[c] = jt
+    impulse = jn * n + jt
+    _apply(bodies, a, contacts.arm_a[c], impulse)
+    _apply(bodies, b, contacts.arm_b[c], -impulse)
+
+
+@ti.func
+def store_impulses(particles: ti.template(), contacts: ti.template()):
+    """Serial passes: keep each contact's final impulses in its querying particle's half
+    of the cache for the next substep, then flip the halves."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        following = 1 - particles.parity[None]
+        epoch = particles.cache_epoch[None] + 1
+        for c in range(ti.min(contacts.count[None], contacts.capacity)):
+            i = contacts.query[c]
+            if particles.cache_stamp[following, i] != epoch:
+                particles.cache_stamp[following, i] = epoch
+                particles.cache_count[following, i] = 0
+            k = particles.cache_count[following, i]
+            if k < particles.cache_key.shape[2]:
+                particles.cache_key[following, i, k] = contacts.key[c]
+                particles.cache_normal[following, i, k] = contacts.normal_impulse[c]
+                particles.cache_tangent[following, i, k] = contacts.tangent_impulse[c]
+                particles.cache_count[following, i] = k + 1
+        particles.parity[None] = following
+        particles.cache_epoch[None] = epoch
 
 
 @ti.func
@@ -91,8 +136,6 @@ def _prepare_contact(bodies: ti.template(), contacts: ti.template(), c):
     k = _inverse_mass_along(bodies, a, arm_a, n) + _inverse_mass_along(bodies, b, arm_b, n)
     contacts.normal_mass[c] = 1.0 / k if k > 0.0 else 0.0
     contacts.approach_speed[c] = (_velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b)).dot(n)
-    contacts.normal_impulse[c] = 0.0
-    contacts.tangent_impulse[c] = vec3(0.0)
     contacts.pseudo_impulse[c] = 0.0
 
 

@@ -12,6 +12,7 @@ import taichi as ti
 vec3 = ti.math.vec3
 vec4 = ti.math.vec4
 mat3 = ti.math.mat3
+CACHE_SLOTS = 4  # contacts remembered per particle for warm starting
 
 
 @ti.data_oriented
@@ -114,6 +115,14 @@ class Particles:
             unless it is larger than the typical radius). Writer: broadphase.
         active: i32 1 = the particle lies inside a neighbour body's grown box this substep,
             so it is put in the grid and queried. Writer: broadphase.
+        Contact cache (warm starting), two halves (previous / next substep), ``parity``
+        names the previous one: cache_count (2, P) contacts kept for particle P as the
+        querying side; cache_key (2, P, CACHE_SLOTS) partner (particle slot >= 0, -1 - k
+        ground plane k, -1000 - k static box k); cache_normal [N s], cache_tangent (vec3,
+        [N s]) their accumulated impulses; cache_stamp (2, P) the store that wrote the
+        particle's entries (only the last store, ``cache_epoch``, is valid; add_body sets
+        -1 on a reused slot). Writer: solver.store_impulses; read by the narrowphase when
+        the same pair is made again.
         slot_end: one past the highest slot in use.
     """
 
@@ -126,6 +135,13 @@ class Particles:
         self.cell = ti.math.ivec3.field(shape=capacity)
         self.cell_hi = ti.math.ivec3.field(shape=capacity)
         self.active = ti.field(ti.i32, shape=capacity)
+        self.cache_count = ti.field(ti.i32, shape=(2, capacity))
+        self.cache_key = ti.field(ti.i32, shape=(2, capacity, CACHE_SLOTS))
+        self.cache_normal = ti.field(ti.f32, shape=(2, capacity, CACHE_SLOTS))
+        self.cache_tangent = vec3.field(shape=(2, capacity, CACHE_SLOTS))
+        self.cache_stamp = ti.field(ti.i32, shape=(2, capacity))
+        self.parity = ti.field(ti.i32, shape=())
+        self.cache_epoch = ti.field(ti.i32, shape=())
         self.slot_end = ti.field(ti.i32, shape=())
 
 

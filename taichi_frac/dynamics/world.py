@@ -111,6 +111,8 @@ def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32,
     for k in range(radii.shape[0]):
         p = start + k
         particles.body[p] = slot
+        particles.cache_stamp[0, p] = -1
+        particles.cache_stamp[1, p] = -1
         particles.offset[p] = ti.math.vec3(offsets[k, 0], offsets[k, 1], offsets[k, 2])
         particles.radius[p] = radii[k]
 
@@ -199,7 +201,7 @@ class World:
             offsets = model.particle_position[model.surface_particles]
             radii = model.particle_radius[model.surface_particles]
         else:
-            offsets = model.boundary_position
+            offsets = model.collision_position
             radii = model.boundary_radius
         count = len(radii)
         if count == 0:
@@ -357,10 +359,11 @@ class World:
         clock = self._clock()
         stages.collide(b, self.statics, p, g, c, opt.contact_margin, dt)
         clock("collision")
-        stages.respond(b, self.statics, c, self.impact_buffer, dt, opt.solver_iterations,
+        stages.respond(b, self.statics, p, c, self.impact_buffer, dt, opt.solver_iterations,
                        opt.restitution_iterations, opt.position_correction, opt.allowed_penetration,
                        opt.max_correction_speed, opt.restitution_threshold, index, opt.record_force_threshold,
-                       opt.impact_speed, opt.sleep_linear_speed, opt.sleep_angular_speed, opt.sleep_time)
+                       opt.impact_speed, opt.sleep_linear_speed, opt.sleep_angular_speed, opt.sleep_time,
+                       opt.warm_start)
         clock("response")
 
     def _clock(self):
