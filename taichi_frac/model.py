@@ -276,9 +276,16 @@ def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner,
 
     For each group: its outward normal n (area-weighted normals of its members' boundary
     faces), the height h of the true surface above its centre along n (largest over those
-    faces' vertices) and the body's thickness t behind the centre along -n (a ray cast
-    against the boundary). The centre moves inward by s = min(R - h, t - R), at least 0, so
-    the sphere's outermost point along n lies on the surface and its innermost stays inside.
+    faces' vertices), the radius rho its members' centroids span about the normal axis,
+    and the body's thickness t behind the centre along -n (a ray cast against the boundary).
+    The centre moves inward by
+
+        s = min(R - h, sqrt(R^2 - rho^2) - h, t - R), at least 0:
+
+    toward putting the sphere's outermost point on the surface (R - h), but never so far
+    that its cross-section at the surface stops covering its members (so neighbouring
+    spheres leave no hole a small body could fall through, even on a coarse mesh), and
+    never so far that it pokes out behind (t - R).
     """
     import trimesh
 
@@ -298,11 +305,17 @@ def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner,
     length = np.linalg.norm(n_sum, axis=1)
     has_normal = length > 1e-12 * max(float(length.max()), 1e-300)
     n_unit = np.where(has_normal[:, None], n_sum / np.maximum(length, 1e-300)[:, None], 0.0)
-    heights = ((corners[mine] - b_pos[group[mine]][:, None, :]) * n_unit[group[mine]][:, None, :]).sum(axis=2)
+    rel = corners[mine] - b_pos[group[mine]][:, None, :]  # (Fm,3,3) face vertices from the centre
+    heights = (rel * n_unit[group[mine]][:, None, :]).sum(axis=2)
     h = np.full(n_groups, np.inf)
     np.minimum.at(h, group[mine], -heights.max(axis=1))
     h = -h  # largest height of the group's faces above its centre
-    shift = np.where(has_normal & np.isfinite(h), b_radius - h, 0.0)
+    member_rel = centroids[members] - b_pos[owner]
+    along = (member_rel * n_unit[owner]).sum(axis=1)
+    rho = np.zeros(n_groups)
+    np.maximum.at(rho, owner, np.sqrt(np.maximum((member_rel ** 2).sum(axis=1) - along ** 2, 0.0)))
+    cover = np.sqrt(np.maximum(b_radius ** 2 - rho ** 2, 0.0))
+    shift = np.where(has_normal & np.isfinite(h), np.minimum(b_radius, cover) - h, 0.0)
     todo = np.nonzero(shift > 0)[0]
     if len(todo):
         mesh = trimesh.Trimesh(vertices, faces, process=False)
