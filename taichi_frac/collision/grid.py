@@ -22,6 +22,7 @@ touching at one spot grid and test only the particles around that spot.
 import taichi as ti
 
 from .. import runtime
+from ..dynamics.bounds import is_idle, motion_speed, near_static
 from ..dynamics.quaternion import quat_to_matrix
 
 
@@ -69,11 +70,6 @@ def cell_hash(cell, table_size):
 
 
 @ti.func
-def _is_idle(bodies: ti.template(), b):
-    return bodies.sleeping[b] == 1 or bodies.fixed[b] == 1
-
-
-@ti.func
 def _grown_radius(bodies: ti.template(), b, margin):
     """Bounding radius grown by the contact margin and this substep's motion [m]."""
     return bodies.bounding_radius[b] + margin * bodies.max_particle_radius[b] + bodies.motion[b]
@@ -84,24 +80,22 @@ def _body_motion(bodies: ti.template(), statics: ti.template(), b, dt):
     if bodies.active[b] == 1:
         bodies.rotation[b] = quat_to_matrix(bodies.orientation[b])
         motion = 0.0
-        if not _is_idle(bodies, b):
-            speed = (bodies.linear_velocity[b].norm() + statics.gravity[None].norm() * dt
-                     + bodies.angular_velocity[b].norm() * bodies.bounding_radius[b])
-            motion = speed * dt
+        if not is_idle(bodies, b):
+            motion = motion_speed(bodies, statics, b, dt) * dt
         bodies.motion[b] = motion
 
 
 @ti.func
 def _body_neighbors(bodies: ti.template(), statics: ti.template(), grid: ti.template(), b, margin):
     count = 0
-    near_static = 0
+    near = 0
     if bodies.active[b] == 1:
         xb = bodies.position[b]
         rb = _grown_radius(bodies, b, margin)
-        b_idle = _is_idle(bodies, b)
+        b_idle = is_idle(bodies, b)
         for o in range(bodies.slot_end[None]):
             if o != b and bodies.active[o] == 1 and count >= 0:
-                if not (b_idle and _is_idle(bodies, o)):
+                if not (b_idle and is_idle(bodies, o)):
                     ro = _grown_radius(bodies, o, margin)
                     if (bodies.position[o] - xb).norm_sqr() < (rb + ro) ** 2:
                         if count < bodies.max_neighbors:
@@ -110,20 +104,13 @@ def _body_neighbors(bodies: ti.template(), statics: ti.template(), grid: ti.temp
                         else:
                             count = -1
         if not b_idle:
-            for k in range(statics.plane_count[None]):
-                if xb[2] - rb < statics.plane_height[k]:
-                    near_static = 1
-            for k in range(statics.box_count[None]):
-                local = statics.box_rotation[k].transpose() @ (xb - statics.box_center[k])
-                q = ti.math.clamp(local, -statics.box_half_extents[k], statics.box_half_extents[k])
-                if (local - q).norm_sqr() < rb * rb:
-                    near_static = 1
+            near = near_static(statics, xb, rb)
         if count != 0:
             ti.atomic_max(grid.typical_radius[None], bodies.typical_particle_radius[b])
             ti.atomic_max(grid.max_motion[None], bodies.motion[b])
     bodies.neighbor_count[b] = count
     bodies.near_body[b] = 1 if count != 0 else 0
-    bodies.near_static[b] = near_static
+    bodies.near_static[b] = near
 
 
 @ti.func

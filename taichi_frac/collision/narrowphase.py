@@ -13,7 +13,8 @@ arrives.
 
 import taichi as ti
 
-from .grid import _is_idle, cell_hash
+from ..dynamics.bounds import is_idle
+from .grid import cell_hash
 
 vec3 = ti.math.vec3
 mat3 = ti.math.mat3
@@ -146,7 +147,7 @@ def _scan_cell(bodies: ti.template(), particles: ti.template(), grid: ti.templat
         for k in range(grid.bucket_start[h], ti.min(grid.bucket_end[h], grid.entry_capacity)):
             b = grid.sorted_body[k]
             j = grid.sorted_particle[k]
-            if b != a and (j > i or _is_idle(bodies, b)):
+            if b != a and (j > i or is_idle(bodies, b)):
                 rj = particles.radius[j]
                 d = xi - particles.world_position[j]
                 dist = d.norm()
@@ -225,7 +226,7 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.
     for i in range(particles.slot_end[None]):
         a = particles.body[i]
         if a >= 0:
-            if not _is_idle(bodies, a):
+            if not is_idle(bodies, a):
                 if particles.active[i] == 1:
                     _sphere_contacts(bodies, particles, grid, contacts, margin, i, a)
                 if bodies.near_static[a] == 1:

@@ -14,6 +14,7 @@ of the start and predicted end angular velocity, which keeps the energy error at
 import taichi as ti
 
 from .. import runtime
+from .bounds import is_idle, motion_speed, near_static
 from .quaternion import quat_integrate, quat_to_matrix
 
 vec3 = ti.math.vec3
@@ -108,24 +109,14 @@ def _is_near(bodies: ti.template(), statics: ti.template(), b, grow, frame_dt, m
     """Whether body ``b``'s bounding sphere grown by ``grow`` [m] may reach another body
     (grown by its own margin and frame motion) or a static collider this frame."""
     xb = bodies.position[b]
-    g = statics.gravity[None].norm()
-    near = 0
+    near = near_static(statics, xb, grow)
     for o in range(bodies.slot_end[None]):
         if o != b and bodies.active[o] == 1 and near == 0:
             reach = grow + bodies.bounding_radius[o] + margin * bodies.max_particle_radius[o]
-            if bodies.sleeping[o] == 0 and bodies.fixed[o] == 0:
-                reach += (bodies.linear_velocity[o].norm() + g * frame_dt
-                          + bodies.angular_velocity[o].norm() * bodies.bounding_radius[o]) * frame_dt
+            if not is_idle(bodies, o):
+                reach += motion_speed(bodies, statics, o, frame_dt) * frame_dt
             if (bodies.position[o] - xb).norm_sqr() < reach * reach:
                 near = 1
-    for k in range(statics.plane_count[None]):
-        if xb[2] - grow < statics.plane_height[k]:
-            near = 1
-    for k in range(statics.box_count[None]):
-        local = statics.box_rotation[k].transpose() @ (xb - statics.box_center[k])
-        q = ti.math.clamp(local, -statics.box_half_extents[k], statics.box_half_extents[k])
-        if (local - q).norm_sqr() < grow * grow:
-            near = 1
     return near
 
 
@@ -156,9 +147,9 @@ def substep_count(bodies: ti.template(), statics: ti.template(), margin: ti.f32,
 def _substeps_of(bodies: ti.template(), statics: ti.template(), b, margin, frame_dt, substeps, motion_fraction,
                  max_rotation):
     count = 0
-    if bodies.active[b] == 1 and bodies.sleeping[b] == 0 and bodies.fixed[b] == 0:
+    if bodies.active[b] == 1 and not is_idle(bodies, b):
         spin = bodies.angular_velocity[b].norm()
-        speed = bodies.linear_velocity[b].norm() + statics.gravity[None].norm() * frame_dt + spin * bodies.bounding_radius[b]
+        speed = motion_speed(bodies, statics, b, frame_dt)
         grow = bodies.bounding_radius[b] + margin * bodies.max_particle_radius[b] + speed * frame_dt
         count = ti.max(1, ti.cast(ti.ceil(spin * frame_dt / max_rotation), ti.i32))
         if _is_near(bodies, statics, b, grow, frame_dt, margin) == 1:
