@@ -197,8 +197,12 @@ class SimulationOptions:
     Attributes:
         fps: output frames per second [1/s].
         duration: simulated time [s].
-        substeps: solver substeps per frame (more are added automatically where a fast body
-            would move further than a boundary particle radius in one substep).
+        substeps: solver substeps per frame while any body may touch something (a frame of
+            free flight takes one exact step).
+        substep_motion_fraction: more substeps are added where a body that may touch
+            something would move further than this fraction of its mean collision-particle
+            radius in one substep [-]. Tunnelling is prevented by speculative contacts
+            whatever the substep; this bounds how far a contact is extrapolated.
         max_substeps: upper bound on substeps per frame after that refinement.
         solver_iterations: contact impulse iterations per substep.
         gravity: (3,) [m/s^2], world Z up.
@@ -213,6 +217,7 @@ class SimulationOptions:
     fps: float = 50.0
     duration: float = 3.0
     substeps: int = 10
+    substep_motion_fraction: float = 1.0
     max_substeps: int = 200
     solver_iterations: int = 10
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
@@ -226,6 +231,8 @@ class SimulationOptions:
         check_range("simulation", "fps", self.fps, 1.0, 10_000.0)
         check_range("simulation", "duration", self.duration, 0.0, 3600.0, low_open=True)
         check_range("simulation", "substeps", self.substeps, 1, 10_000)
+        check_range("simulation", "substep_motion_fraction", self.substep_motion_fraction, 0.0, 10.0,
+                    low_open=True)
         check_range("simulation", "max_substeps", self.max_substeps, self.substeps, 100_000)
         check_range("simulation", "solver_iterations", self.solver_iterations, 1, 1000)
         if len(self.gravity) != 3:

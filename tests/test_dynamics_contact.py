@@ -126,6 +126,25 @@ def test_impact_force_is_the_hertz_peak_whatever_the_substep(substeps):
     assert np.all(np.linalg.norm(rows["force"][resting], axis=1) < 1e-3 * np.linalg.norm(rows["force"][first]))
 
 
+def test_struck_resting_body_is_not_driven_into_the_ground():
+    """A bouncing contact must not be paid for by the contacts under the struck body: a
+    restitution pass over the bouncing contacts alone pushed a resting block 20 mm (two
+    sphere radii) into the floor in the 10 ms substep of the impact; now 2 mm."""
+    world = fresh_world()
+    corners = np.stack(np.meshgrid(*([-0.04, 0.04],) * 3, indexing="ij"), -1).reshape(-1, 3)
+    block = with_spheres(box_model(0.1, 0.1, 0.1, pieces=200), corners, 0.01)
+    ball = with_spheres(sphere_model(0.05), [0.0, 0.0, 0.0], 0.05)
+    world.add_ground(0.0, friction=0.5, restitution=0.0)
+    resting = world.add_body(block, (0, 0, -lowest_point(block)), friction=0.5, restitution=0.5)
+    world.add_body(ball, (0.03, 0.0, 0.16), linear_velocity=(0, 0, -4.0), friction=0.5, restitution=0.5)
+    worst = 0.0
+    for _ in range(30):  # one 10 ms substep each (the ball falls 1.6 of its radii in one)
+        world.advance(0.01, 1)
+        p = world.particle_state(resting)
+        worst = max(worst, float(np.max(p["radius"] - p["position"][:, 2])))
+    assert worst < 0.5 * 0.01
+
+
 def test_five_stacked_rings_stay_stacked():
     world = fresh_world()
     model = ring_model()

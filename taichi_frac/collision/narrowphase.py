@@ -33,7 +33,8 @@ class Contacts:
     penetration), radius ([m] smaller of the two spheres), friction, restitution (combined).
     Written by solver.prepare_contacts: arm_a, arm_b (vec3 [m] COM -> point), normal_mass
     ([kg], 1 / effective inverse mass along the normal), approach_speed ([m/s] normal
-    relative velocity before the solve, < 0 approaching).
+    relative velocity before the solve, < 0 approaching), restitution_target ([m/s] normal
+    velocity the restitution sweeps aim for).
     query (i32 particle that made it), key (i32 partner key, see Particles' contact cache).
     Written by the narrowphase (the impulses the same pair had last substep: warm start)
     and the solver: normal_impulse ([N s] accumulated, >= 0), tangent_impulse (vec3
@@ -57,6 +58,7 @@ class Contacts:
         self.arm_b = vec3.field(shape=capacity)
         self.normal_mass = ti.field(ti.f32, shape=capacity)
         self.approach_speed = ti.field(ti.f32, shape=capacity)
+        self.restitution_target = ti.field(ti.f32, shape=capacity)
         self.normal_impulse = ti.field(ti.f32, shape=capacity)
         self.tangent_impulse = vec3.field(shape=capacity)
         self.pseudo_impulse = ti.field(ti.f32, shape=capacity)

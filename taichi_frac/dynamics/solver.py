@@ -13,7 +13,8 @@ through pseudo-velocities integrated into positions only, so correcting overlap 
 kinetic energy (bodies rest without jitter, deep overlaps separate gently).
 Restitution: after the main sweeps, contacts that were approaching faster than a threshold
 and carry impulse get a relative normal velocity of -e x their approach speed (Box2D v3,
-``b2ApplyRestitution``), which also works with speculative contacts.
+``b2ApplyRestitution``), which also works with speculative contacts; unlike Box2D's pass,
+these sweeps include every other contact with its non-penetration target.
 """
 
 
@@ -192,11 +193,22 @@ def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
                     contacts.pseudo_impulse[c] = new_p
                     _apply_pseudo(bodies, a, arm_a, (new_p - old_p) * n)
                     _apply_pseudo(bodies, b, arm_b, -(new_p - old_p) * n)
-        for sweep in range(restitution_iterations):
-            for c in range(count):
-                e = contacts.restitution[c]
-                v0 = contacts.approach_speed[c]
-                if e > 0.0 and v0 < -restitution_threshold and contacts.normal_impulse[c] > 0.0:
+        # Restitution: a contact that was approaching faster than the threshold and carries
+        # impulse gets the target normal velocity -e x its approach speed. The sweeps run
+        # over every contact, the others holding their non-penetration target, so a bounce
+        # is not bought by pushing a struck body into the floor (a bounce-only pass pushed
+        # a resting ring struck by a falling one up to a particle radius into the ground).
+        bouncing = 0
+        for c in range(count):
+            target = -ti.max(contacts.separation[c], 0.0) / dt
+            v0 = contacts.approach_speed[c]
+            if contacts.restitution[c] > 0.0 and v0 < -restitution_threshold and contacts.normal_impulse[c] > 0.0:
+                target = -contacts.restitution[c] * v0
+                bouncing = 1
+            contacts.restitution_target[c] = target
+        if bouncing == 1:
+            for sweep in range(restitution_iterations):
+                for c in range(count):
                     a = contacts.body_a[c]
                     b = contacts.body_b[c]
                     n = contacts.normal[c]
@@ -204,7 +216,7 @@ def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
                     arm_b = contacts.arm_b[c]
                     vn = (_velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b)).dot(n)
                     old = contacts.normal_impulse[c]
-                    new = ti.max(old + contacts.normal_mass[c] * (-e * v0 - vn), 0.0)
+                    new = ti.max(old + contacts.normal_mass[c] * (contacts.restitution_target[c] - vn), 0.0)
                     contacts.normal_impulse[c] = new
                     _apply(bodies, a, arm_a, (new - old) * n)
                     _apply(bodies, b, arm_b, -(new - old) * n)

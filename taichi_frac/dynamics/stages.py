@@ -30,7 +30,8 @@ def respond(bodies: ti.template(), statics: ti.template(), particles: ti.templat
             impact_buffer: ti.template(),
             dt: ti.f32, iterations: ti.i32, restitution_iterations: ti.i32, position_correction: ti.f32,
             allowed_penetration: ti.f32, max_correction_speed: ti.f32, restitution_threshold: ti.f32,
-            substep: ti.i32, force_threshold: ti.f32, impact_speed: ti.f32, sleep_linear_speed: ti.f32,
+            substep: ti.i32, force_threshold: ti.f32, impact_speed: ti.f32, max_rotation: ti.f32,
+            sleep_linear_speed: ti.f32,
             sleep_angular_speed: ti.f32, sleep_time: ti.f32, warm_start: ti.f32):
     integrate.integrate_velocities(bodies, statics, dt)
     solver.prepare_contacts(bodies, contacts, warm_start)
@@ -38,4 +39,5 @@ def respond(bodies: ti.template(), statics: ti.template(), particles: ti.templat
                           allowed_penetration, max_correction_speed, restitution_threshold)
     solver.store_impulses(particles, contacts)
     impacts.record_impacts(bodies, contacts, impact_buffer, dt, substep, force_threshold, impact_speed)
-    integrate.integrate_positions(bodies, statics, dt, sleep_linear_speed, sleep_angular_speed, sleep_time)
+    integrate.integrate_positions(bodies, statics, dt, max_rotation, sleep_linear_speed, sleep_angular_speed,
+                                  sleep_time)

@@ -6,6 +6,7 @@ bodies is a kernel (``collision/``, ``integrate.py``, ``solver.py``, ``impacts.p
 """
 
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -327,7 +328,7 @@ class World:
         opt = self.options
         _reset_advance_counters(self.contacts, self.impact_buffer, self.grid)
         count = int(integrate.substep_count(self.bodies, self.statics, opt.contact_margin, frame_dt, int(substeps),
-                                            opt.substep_motion_fraction, opt.max_rotation_per_substep))
+                                            opt.substep_motion_fraction))
         if count > 0:  # someone is awake
             if count > opt.max_substeps:
                 self.stats.substep_limit_hits += 1
@@ -360,10 +361,11 @@ class World:
         stages.collide(b, self.statics, p, g, c, opt.contact_margin, dt)
         clock("collision")
         stages.respond(b, self.statics, p, c, self.impact_buffer, dt, opt.solver_iterations,
-                       opt.restitution_iterations, opt.position_correction, opt.allowed_penetration,
+                       opt.restitution_iterations, 1.0 - math.exp(-opt.position_correction_rate * dt),
+                       opt.allowed_penetration,
                        opt.max_correction_speed, opt.restitution_threshold, index, opt.record_force_threshold,
-                       opt.impact_speed, opt.sleep_linear_speed, opt.sleep_angular_speed, opt.sleep_time,
-                       opt.warm_start)
+                       opt.impact_speed, opt.max_rotation_per_substep, opt.sleep_linear_speed,
+                       opt.sleep_angular_speed, opt.sleep_time, opt.warm_start)
         clock("response")
 
     def _clock(self):
