@@ -167,7 +167,11 @@ def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
                 _apply(bodies, a, arm_a, (new - old) * n)
                 _apply(bodies, b, arm_b, -(new - old) * n)
                 # Friction: Coulomb cone, the tangential impulse opposes sliding, |jt| <= mu jn.
-                v_rel = _velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b)
+                # Skipped while the contact carries no impulse at all (most speculative
+                # contacts: their cone is a point and they hold no friction to undo).
+                v_rel = vec3(0.0)
+                if new > 0.0 or contacts.tangent_impulse[c].norm_sqr() > 0.0:
+                    v_rel = _velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b)
                 v_t = v_rel - v_rel.dot(n) * n
                 speed_t = v_t.norm()
                 if speed_t > 1e-12:
