@@ -208,8 +208,9 @@ class SimulationOptions:
         gravity: (3,) [m/s^2], world Z up.
         single_scale: collide with every surface particle instead of the boundary layer
             (the paper's "single-scale" column; for measurement).
-        sleep_linear_speed: a body slower than this ... [m/s]
-        sleep_angular_speed: ... and turning slower than this [rad/s] ...
+        sleep_linear_speed: a body whose every point (|v| + |w| x bounding radius) is slower
+            than this ... [m/s]
+        sleep_angular_speed: ... and that turns slower than this [rad/s] ...
         sleep_time: ... for this long goes to sleep [s].
         arch: Taichi backend: cpu, cuda, vulkan, metal or gpu.
     """
@@ -223,7 +224,7 @@ class SimulationOptions:
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     single_scale: bool = False
     sleep_linear_speed: float = 0.01
-    sleep_angular_speed: float = 0.05
+    sleep_angular_speed: float = 1.0
     sleep_time: float = 0.5
     arch: str = "cpu"
 

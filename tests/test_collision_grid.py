@@ -21,7 +21,8 @@ def test_particle_contacts_match_brute_force():
         owners.append(np.full(12, b))
     centres, radii, owners = np.concatenate(centres), np.concatenate(radii), np.concatenate(owners)
     margin = world.options.contact_margin
-    stages.collide(world.bodies, world.statics, world.particles, world.grid, world.contacts, margin, 1e-3)
+    stages.collide(world.bodies, world.statics, world.particles, world.grid, world.contacts, margin, 1e-3,
+                   world.options.sleep_time)
     count = int(world.contacts.count[None])
     d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
     gap = d - radii[:, None] - radii[None]

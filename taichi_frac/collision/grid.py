@@ -78,6 +78,16 @@ def _grown_radius(bodies: ti.template(), b, margin):
 @ti.func
 def _body_motion(bodies: ti.template(), statics: ti.template(), b, dt):
     if bodies.active[b] == 1:
+        if bodies.wake_request[b] == 1:
+            # Woken by a moving body's touch in the last substep. Woken here, before this
+            # substep's contacts are made, so it also gets its contacts with sleeping
+            # neighbours (woken later, it fell through its sleeping supports for a
+            # substep, hit them at g dt and woke them in turn: a pile never slept). Its
+            # sleep timer is kept (>= sleep_time): it sleeps again at the end of the
+            # substep unless the touch set it moving, and until then wakes no one (the
+            # narrowphase wakes only from bodies whose timer is 0).
+            bodies.sleeping[b] = 0
+            bodies.wake_request[b] = 0
         bodies.rotation[b] = quat_to_matrix(bodies.orientation[b])
         motion = 0.0
         if not is_idle(bodies, b):

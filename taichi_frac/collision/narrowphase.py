@@ -110,12 +110,13 @@ def clear_contacts(contacts: ti.template()):
 
 @ti.func
 def _sphere_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.template(),
-                     contacts: ti.template(), margin, i, a):
+                     contacts: ti.template(), margin, sleep_time, i, a):
     """Sphere-sphere contacts of active particle ``i`` (awake body ``a``) with the active
     particles of other bodies in its cell box grown by one cell. A pair is made once: from
     the lower slot when both bodies are awake, from the awake side otherwise, and only in
-    the first cell (scan order) both boxes share. An awake body that is still moving
-    (sleep timer at zero) wakes a sleeping body it touches."""
+    the first cell (scan order) both boxes share. An awake body that has not been still
+    for ``sleep_time`` [s] wakes a sleeping body it touches; one just woken itself (its
+    timer kept at ``sleep_time`` or more) does not, so a touch does not wake a whole pile."""
     xi = particles.world_position[i]
     ri = particles.radius[i]
     lower_i = particles.cell[i]
@@ -129,18 +130,18 @@ def _sphere_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.t
         for dx in range(-1, 2):
             for dy in range(-1, 2):
                 for dz in range(-1, 2):
-                    _scan_cell(bodies, particles, grid, contacts, margin, i, a, xi, ri, lower_i,
+                    _scan_cell(bodies, particles, grid, contacts, margin, sleep_time, i, a, xi, ri, lower_i,
                                lower_i + ti.math.ivec3(dx, dy, dz), reach)
     else:  # a large particle scans its whole box grown by one cell
         for cx, cy, cz in ti.ndrange((lower_i[0] - 1, upper_i[0] + 2), (lower_i[1] - 1, upper_i[1] + 2),
                                      (lower_i[2] - 1, upper_i[2] + 2)):
-            _scan_cell(bodies, particles, grid, contacts, margin, i, a, xi, ri, lower_i,
+            _scan_cell(bodies, particles, grid, contacts, margin, sleep_time, i, a, xi, ri, lower_i,
                        ti.math.ivec3(cx, cy, cz), 1e30)
 
 
 @ti.func
 def _scan_cell(bodies: ti.template(), particles: ti.template(), grid: ti.template(), contacts: ti.template(),
-               margin, i, a, xi, ri, lower_i, cell, reach):
+               margin, sleep_time, i, a, xi, ri, lower_i, cell, reach):
     """Candidates of particle ``i`` in one cell (skipped when the cell lies beyond ``reach``)."""
     size = grid.cell_size[None]
     nearest = ti.math.clamp(xi, ti.cast(cell, ti.f32) * size, ti.cast(cell + 1, ti.f32) * size)
@@ -168,7 +169,7 @@ def _scan_cell(bodies: ti.template(), particles: ti.template(), grid: ti.templat
                         mu = ti.sqrt(bodies.friction[a] * bodies.friction[b])
                         e = ti.max(bodies.restitution[a], bodies.restitution[b])
                         _append(contacts, particles, i, j, a, b, -1, n, point, gap, ti.min(ri, rj), mu, e)
-                        if bodies.sleeping[b] == 1 and bodies.sleep_timer[a] == 0.0:
+                        if bodies.sleeping[b] == 1 and bodies.sleep_timer[a] < sleep_time:
                             bodies.wake_request[b] = 1
 
 
@@ -222,7 +223,7 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
 
 @ti.func
 def particle_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.template(),
-                      statics: ti.template(), contacts: ti.template(), margin):
+                      statics: ti.template(), contacts: ti.template(), margin, sleep_time):
     """One pass over the particles of awake bodies: sphere-sphere contacts of active
     particles, sphere-plane and sphere-box contacts of bodies near a static collider."""
     for i in range(particles.slot_end[None]):
@@ -230,6 +231,6 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.
         if a >= 0:
             if not is_idle(bodies, a):
                 if particles.active[i] == 1:
-                    _sphere_contacts(bodies, particles, grid, contacts, margin, i, a)
+                    _sphere_contacts(bodies, particles, grid, contacts, margin, sleep_time, i, a)
                 if bodies.near_static[a] == 1:
                     _static_contacts(bodies, particles, statics, contacts, margin, i, a)

@@ -77,8 +77,10 @@ class DynamicsOptions:
         restitution_threshold: approach speeds below this do not bounce [m/s].
         single_scale: default of ``add_body(single_scale=None)``: collide with the physics
             surface particles instead of the boundary layer.
-        sleep_linear_speed, sleep_angular_speed, sleep_time: a body slower than both for
-            sleep_time [s] sleeps (velocity zeroed, no integration) until woken.
+        sleep_linear_speed, sleep_angular_speed, sleep_time: a body whose every point is
+            slower than sleep_linear_speed [m/s] (|v| + |w| x bounding radius) and that turns
+            slower than sleep_angular_speed [rad/s], for sleep_time [s], sleeps (velocity
+            zeroed, no integration) until woken.
         record_force_threshold: impact rows are kept when their force exceeds this [N].
         impact_speed: contacts approaching faster than this [m/s] are impacts, whose force
             is the Hertz peak of their impulse (see dynamics/impacts.py); slower ones are
@@ -101,7 +103,7 @@ class DynamicsOptions:
     restitution_threshold: float = 0.2
     single_scale: bool = False
     sleep_linear_speed: float = 0.01
-    sleep_angular_speed: float = 0.05
+    sleep_angular_speed: float = 1.0
     sleep_time: float = 0.5
     record_force_threshold: float = 0.0
     impact_speed: float = 0.05

@@ -16,13 +16,13 @@ from . import impacts, integrate, solver
 
 @ti.kernel
 def collide(bodies: ti.template(), statics: ti.template(), particles: ti.template(),
-            hash_grid: ti.template(), contacts: ti.template(), margin: ti.f32, dt: ti.f32):
+            hash_grid: ti.template(), contacts: ti.template(), margin: ti.f32, dt: ti.f32, sleep_time: ti.f32):
     grid.body_cull(bodies, statics, hash_grid, margin, dt)
     grid.particle_cells(bodies, particles, hash_grid, margin)
     grid.bucket_scan(hash_grid)
     grid.bucket_scatter(particles, hash_grid)
     narrowphase.clear_contacts(contacts)
-    narrowphase.particle_contacts(bodies, particles, hash_grid, statics, contacts, margin)
+    narrowphase.particle_contacts(bodies, particles, hash_grid, statics, contacts, margin, sleep_time)
 
 
 @ti.kernel

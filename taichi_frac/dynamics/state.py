@@ -40,7 +40,7 @@ class Bodies:
         active: i32 1 = slot in use. fixed: i32 1 = never moves. Writer: add_body/remove_body.
         sleeping: i32 1 = asleep. sleep_timer: [s] time spent slow. Writer: integrate, wake.
         wake_request: i32 set by the narrowphase when an awake moving body touches a
-            sleeping one; applied by integrate_velocities.
+            sleeping one; applied at the start of the next substep's broadphase (body_cull).
         touched: i32 1 = the body has a contact this substep (free-flying bodies are moved
             by the exact ballistic step). Writer: prepare_contacts.
         bounding_radius: [m] max |offset| + radius over the body's particles.

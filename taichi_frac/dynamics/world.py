@@ -358,7 +358,7 @@ class World:
         opt = self.options
         b, p, g, c = self.bodies, self.particles, self.grid, self.contacts
         clock = self._clock()
-        stages.collide(b, self.statics, p, g, c, opt.contact_margin, dt)
+        stages.collide(b, self.statics, p, g, c, opt.contact_margin, dt, opt.sleep_time)
         clock("collision")
         stages.respond(b, self.statics, p, c, self.impact_buffer, dt, opt.solver_iterations,
                        opt.restitution_iterations, 1.0 - math.exp(-opt.position_correction_rate * dt),
