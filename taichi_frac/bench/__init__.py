@@ -6,7 +6,8 @@
 - ``sph``: SPH stress error against particle count and time (plain, corrected gradient);
 - ``scaling``: ms per frame and peak memory against physics particle count (1e3 .. 1e6);
 - ``stability``: the hard cases of issues 3 and 4 as a table;
-- ``dynamics``: the older ``bench dynamics`` table (13 rings, a fragment pile);
+- ``dynamics``: issue 3's ``bench dynamics`` table (the 13-ring scene two- vs single-scale,
+  the drop error at n = 4 against n = 1, a fragment pile);
 - ``report``: runs the parts and writes ``docs/benchmarks.md``, its plots and the README part.
 
 Each part's ``run(ctx) -> Section`` measures, prints progress through ``ctx.progress`` and

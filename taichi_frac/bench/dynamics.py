@@ -1,7 +1,17 @@
-"""``taichi-frac bench dynamics``: the rigid-body table of issue 3 (13 rings two- vs
-single-scale, a pile of loose fragments, what two-scale changes), driving the World directly.
-The report's ``grouping`` part measures the same question per boundary grouping n through
-``Simulation``; this table stays as issue 3's quick check.
+"""``taichi-frac bench dynamics``: issue 3's rigid-body table, in one run.
+
+- ``scenes/thirteen_rings.toml`` with the rings unbreakable, two-scale (the boundary layer)
+  and single-scale (every physics surface particle collides), the paper's Table 2 columns:
+  ms per 20 ms frame (average / max), substeps per frame, contacts lost to capacity, bodies
+  asleep at the end, the deepest collision sphere below the ground at the end;
+- what two-scale costs against single-scale: the report's single-ring drop
+  (``grouping.measure_drop``: rest height against the exact 0.025 m, rebound, first-impact
+  impulse, penetration) with boundary grouping n = 4 against n = 1 (the rings' rest
+  positions are no measure: a pile is chaotic, two runs of one mode differ by as much);
+- a pile of loose fragments (two-scale) in a box, with the scene's time stepping.
+
+Every run uses the report's one World (``BenchContext.world``), so the kernels compile once.
+``--set KEY=VALUE`` overrides the scene as ``taichi-frac run --set`` does.
 """
 
 from __future__ import annotations
@@ -12,20 +22,7 @@ import time
 
 import numpy as np
 
-TORUS_MAJOR, TORUS_MINOR = 0.1, 0.025
-
-
-def _ring_model(particles: int):
-    import tetgen
-    import trimesh
-
-    from ..model import build_body_model
-
-    mesh = trimesh.creation.torus(TORUS_MAJOR, TORUS_MINOR, major_sections=64, minor_sections=20)
-    gen = tetgen.TetGen(np.asarray(mesh.vertices), np.asarray(mesh.faces))
-    vertices, tets = gen.tetrahedralize(order=1, mindihedral=10, minratio=1.5,
-                                        maxvolume=mesh.volume / (1.55 * particles))[:2]
-    return build_body_model(vertices, tets, 2400.0, boundary_group_size=4)
+from .common import SCENES, BenchContext, md_table, ms_pair
 
 
 def _fragment_model():
@@ -40,31 +37,8 @@ def _fragment_model():
     return build_body_model(vertices, tets, 2400.0, boundary_group_size=4)
 
 
-def _pile_poses(count: int, rng):
-    """A loose pile: rings in layers of 4-5, tilted at random, 2 cm apart vertically."""
-    poses = []
-    for k in range(count):
-        layer, slot = divmod(k, 5)
-        angle = 2 * math.pi * slot / 5 + 0.6 * layer
-        centre = np.array([0.12 * math.cos(angle), 0.12 * math.sin(angle), 0.08 + 0.07 * layer])
-        axis = rng.normal(size=3)
-        axis /= np.linalg.norm(axis)
-        tilt = rng.uniform(0.1, 0.5)
-        q = np.concatenate([[math.cos(tilt / 2)], math.sin(tilt / 2) * axis])
-        poses.append((centre, q))
-    return poses
-
-
-def _run_frames(world, frames, frame_dt, substeps):
-    times = []
-    for _ in range(frames):
-        t = time.perf_counter()
-        world.advance(frame_dt, substeps)
-        times.append(time.perf_counter() - t)
-    return np.array(times) * 1e3
-
-
-def _ground_penetration(world, bodies):
+def _deepest_below_ground(world, bodies) -> float:
+    """Deepest collision sphere below z = 0 over ``bodies`` [m] (0 when none is below)."""
     depth = 0.0
     for b in bodies:
         p = world.particle_state(b)
@@ -72,115 +46,120 @@ def _ground_penetration(world, bodies):
     return depth
 
 
-def run_dynamics(args) -> int:
-    """Print issue 3's table (see the module docstring)."""
-    from .. import runtime
-    from ..dynamics import DynamicsOptions, World, WorldCapacity
+def _rings(ctx: BenchContext, scene, single: bool) -> dict:
+    from .tables import run_scene
 
-    runtime.init(args.arch)
-    frame_dt, frames, substeps = 1.0 / args.fps, int(round(args.seconds * args.fps)), args.substeps
-    t0 = time.perf_counter()
-    ring = _ring_model(args.ring_particles)
-    fragment = _fragment_model()
-    print(f"ring: {ring.tet_count} physics, {ring.surface_particle_count} surface, "
-          f"{ring.boundary_particle_count} boundary particles; fragment: {fragment.tet_count} tets, "
-          f"{fragment.boundary_particle_count} boundary particles; meshing {time.perf_counter() - t0:.1f} s")
-    capacity = WorldCapacity(max_bodies=max(args.rings, args.fragments) + 8,
-                             max_boundary_particles=max(args.rings * ring.surface_particle_count,
-                                                        args.fragments * fragment.surface_particle_count) + 64,
-                             max_contacts=200_000)
-    world = World(capacity, DynamicsOptions(solver_iterations=args.iterations), arch=args.arch)
-    results = {}
-    for mode, single in (("two-scale", False), ("single-scale", True)):
-        # Single ring dropped flat-ish: rest height, rebound height, first-impact impulse.
-        world.clear()
-        world.add_ground(0.0, friction=0.5, restitution=0.5)
-        body = world.add_body(ring, (0, 0, 0.3), (math.cos(0.05), math.sin(0.05), 0, 0), single_scale=single,
-                              restitution=0.5)
-        first_impulse, bounced, peak_after, last_vz = None, False, 0.0, 0.0
-        for _ in range(int(2.0 * args.fps)):
-            world.advance(frame_dt, substeps)
-            rows = world.impacts()
-            if first_impulse is None and len(rows["body"]):
-                first_impulse = float(np.linalg.norm(rows["impulse"].sum(axis=0)))
-            state = world.body_state([body])
-            vz = state["linear_velocity"][0][2]
-            if first_impulse is not None and vz > 0:
-                bounced = True
-            if bounced:
-                peak_after = max(peak_after, state["position"][0][2])
-        rest_height = world.body_state([body])["position"][0][2]
-        # 13 rings in a pile.
-        world.clear()
-        world.add_ground(0.0, friction=0.5, restitution=0.2)
-        rng = np.random.default_rng(1)
-        bodies = [world.add_body(ring, c, q, single_scale=single) for c, q in _pile_poses(args.rings, rng)]
-        particles = sum(world._body_range[b][1] for b in bodies)
-        world.advance(frame_dt, substeps)  # compile outside the timing
-        ms = _run_frames(world, frames, frame_dt, substeps)
-        results[mode] = dict(
-            particles=particles, avg=ms.mean(), max=ms.max(), rest=world.body_state(bodies)["position"],
-            penetration=_ground_penetration(world, bodies), rest_height=rest_height,
-            rebound=peak_after - rest_height, first_impulse=first_impulse or 0.0,
-            substeps=world.stats.total_substeps, overflows=world.stats.total_contact_overflows,
-            asleep=int(world.body_state(bodies)["sleeping"].sum()),
-        )
-    # Pile of loose fragments (two-scale).
+    label = "single-scale" if single else "two-scale"
+    sim, summary, counts = run_scene(ctx, scene, f"13 rings {label}", fracture=False, single_scale=single)
+    world = sim.world
+    bodies = world.body_ids
+    state = world.body_state(bodies)
+    return dict(summary=summary, particles=counts["collision"], substeps=counts["substeps_per_frame"],
+                overflows=world.stats.total_contact_overflows, asleep=int(state["sleeping"].sum()),
+                bodies=len(bodies), depth=_deepest_below_ground(world, bodies))
+
+
+def _fragment_pile(ctx: BenchContext, scene, count: int, seconds: float) -> dict:
+    """``count`` small fragments dropped into a 0.44 m box from a loose cube lattice."""
+    from ..dynamics import DynamicsOptions
+
+    sim = scene.simulation
+    world = ctx.world()
     world.clear()
+    world.set_options(DynamicsOptions.from_simulation(sim))
     world.add_ground(0.0)
     for sign in (-1, 1):
         world.add_static_box((sign * 0.22, 0, 0.3), (0.02, 0.24, 0.3))
         world.add_static_box((0, sign * 0.22, 0.3), (0.24, 0.02, 0.3))
-    side = math.ceil(args.fragments ** (1 / 3))
+    fragment = _fragment_model()
+    side = math.ceil(count ** (1 / 3))
     rng = np.random.default_rng(2)
-    cells = np.stack(np.meshgrid(*(np.arange(side),) * 3, indexing="ij"), -1).reshape(-1, 3)[: args.fragments]
-    frag_bodies = [world.add_body(fragment, (c - [side / 2 - 0.5, side / 2 - 0.5, -0.5]) * 0.05 + rng.normal(0, 0.003, 3),
-                                  (1, 0, 0, 0), (0, 0, 0), rng.normal(0, 2.0, 3)) for c in cells]
-    world.advance(frame_dt, substeps)
-    frag_ms = _run_frames(world, frames, frame_dt, substeps)
+    cells = np.stack(np.meshgrid(*(np.arange(side),) * 3, indexing="ij"), -1).reshape(-1, 3)[:count]
+    bodies = [world.add_body(fragment, (c - [side / 2 - 0.5, side / 2 - 0.5, -0.5]) * 0.05 + rng.normal(0, 0.003, 3),
+                             (1, 0, 0, 0), (0, 0, 0), rng.normal(0, 2.0, 3)) for c in cells]
+    frame_dt = sim.frame_dt
+    world.advance(frame_dt, sim.substeps)  # compile outside the timing
+    times = []
+    for frame in range(int(round(seconds / frame_dt))):
+        t = time.perf_counter()
+        world.advance(frame_dt, sim.substeps)
+        times.append(time.perf_counter() - t)
+        if frame % 25 == 0:
+            ctx.progress(f"fragment pile: frame {frame}, {1e3 * np.mean(times):.1f} ms/frame so far")
+    ms = np.array(times) * 1e3
+    return dict(avg=ms.mean(), max=ms.max(), particles=sum(world._body_range[b][1] for b in bodies),
+                tets=fragment.tet_count, asleep=int(world.body_state(bodies)["sleeping"].sum()),
+                depth=_deepest_below_ground(world, bodies), overflows=world.stats.total_contact_overflows)
 
-    two, one = results["two-scale"], results["single-scale"]
-    rest_error = np.linalg.norm(two["rest"] - one["rest"], axis=1)
+
+def run_dynamics(args) -> int:
+    """Print issue 3's tables (see the module docstring)."""
+    from ..scenes import load_scene
+    from . import grouping
+    from .common import Progress, warm_up
+
+    ctx = BenchContext(arch=args.arch, progress=Progress(enabled=not args.quiet))
+    scene = load_scene(args.scene, args.set or [])
+    sim = scene.simulation
+    t0 = time.perf_counter()
+    warm_up(ctx)
+    two = _rings(ctx, scene, single=False)
+    one = _rings(ctx, scene, single=True)
+    drops = {n: grouping.measure_drop(ctx, grouping.drop_scene(n)) for n in (4, 1)}
+    pile = _fragment_pile(ctx, scene, args.fragments, args.seconds)
+    t_two, t_one = two["summary"].ms_per_frame, one["summary"].ms_per_frame
+    d4, d1 = drops[4], drops[1]
     lines = [
-        f"13 rings ({args.rings} x torus R {TORUS_MAJOR} m r {TORUS_MINOR} m), {args.seconds:g} s at "
-        f"{1e3 * frame_dt:g} ms frames, {substeps} substeps (+ anti-tunnelling), {args.iterations} iterations",
+        f"`{args.scene}`{' with ' + ', '.join(args.set) if args.set else ''}: rings unbreakable, "
+        f"{two['summary'].frames} frames of {1e3 * sim.frame_dt:g} ms, {sim.substeps} substeps where bodies touch "
+        f"(more while one moves over {sim.substep_motion_fraction:g} particle radius per substep), "
+        f"{sim.solver_iterations} solver sweeps; arch {args.arch}.",
         "",
-        "| scene | collision particles | two-scale ms/frame avg / max | single-scale ms/frame avg / max | speed-up |",
-        "|---|---|---|---|---|",
-        f"| {args.rings} rings | {two['particles']} / {one['particles']} | {two['avg']:.2f} / {two['max']:.2f} | "
-        f"{one['avg']:.2f} / {one['max']:.2f} | {one['avg'] / two['avg']:.1f}x |",
-        f"| {args.fragments} fragments (two-scale) | {sum(world._body_range[b][1] for b in frag_bodies)} | "
-        f"{frag_ms.mean():.2f} / {frag_ms.max():.2f} | | |",
+        md_table(["scene", "collision particles", "ms/frame avg / max", "substeps/frame", "asleep at end",
+                  "deepest below ground [mm]", "contacts lost"], [
+            ["13 rings, two-scale", f"{two['particles']:,}", ms_pair(t_two["mean"], t_two["max"]),
+             f"{two['substeps']:.1f}", f"{two['asleep']} / {two['bodies']}", f"{1e3 * two['depth']:.3f}",
+             two["overflows"]],
+            ["13 rings, single-scale", f"{one['particles']:,}", ms_pair(t_one["mean"], t_one["max"]),
+             f"{one['substeps']:.1f}", f"{one['asleep']} / {one['bodies']}", f"{1e3 * one['depth']:.3f}",
+             one["overflows"]],
+            [f"{args.fragments} fragments ({pile['tets']} tets each), two-scale, {args.seconds:g} s",
+             f"{pile['particles']:,}", ms_pair(pile["avg"], pile["max"]), "", f"{pile['asleep']} / {args.fragments}",
+             f"{1e3 * pile['depth']:.3f}", pile["overflows"]],
+        ]),
         "",
-        "| what two-scale changes against single-scale | two-scale | single-scale | difference |",
-        "|---|---|---|---|",
-        f"| single ring rest height (COM z, true 0.025 m) [m] | {two['rest_height']:.4f} | {one['rest_height']:.4f} | "
-        f"{two['rest_height'] - one['rest_height']:+.4f} |",
-        f"| single ring rebound (e = 0.5, from 0.3 m) [m] | {two['rebound']:.4f} | {one['rebound']:.4f} | "
-        f"{two['rebound'] - one['rebound']:+.4f} |",
-        f"| first-impact impulse [N s] | {two['first_impulse']:.4f} | {one['first_impulse']:.4f} | "
-        f"{100 * (two['first_impulse'] / max(one['first_impulse'], 1e-12) - 1):+.1f} % |",
-        f"| pile rest positions, mean / max COM distance [m] | | | {rest_error.mean():.4f} / {rest_error.max():.4f} |",
-        f"| penetration into the ground at rest [mm] | {1e3 * two['penetration']:.3f} | {1e3 * one['penetration']:.3f} | |",
-        f"| rings asleep at the end | {two['asleep']} | {one['asleep']} | |",
-        f"| contacts lost to capacity | {two['overflows']} | {one['overflows']} | |",
+        f"Two-scale is **{t_one['mean'] / t_two['mean']:.1f}x** faster than single-scale on average "
+        f"({t_one['max'] / t_two['max']:.1f}x on the slowest frame).",
+        "",
+        md_table(["what two-scale changes against single-scale", "two-scale (n = 4)", "single-scale (n = 1)",
+                  "difference"], [
+            ["single ring drop: rest height (COM z; exact 25.0 mm) [mm]", f"{1e3 * d4.rest_height:.1f}",
+             f"{1e3 * d1.rest_height:.1f}", f"{1e3 * (d4.rest_height - d1.rest_height):+.1f}"],
+            ["single ring drop: rebound (e = 0.5, from 0.3 m) [mm]", f"{1e3 * d4.rebound:.1f}",
+             f"{1e3 * d1.rebound:.1f}", f"{1e3 * (d4.rebound - d1.rebound):+.1f}"],
+            ["single ring drop: first-impact impulse [N s]", f"{d4.first_impulse:.3f}", f"{d1.first_impulse:.3f}",
+             f"{100 * (d4.first_impulse / max(d1.first_impulse, 1e-12) - 1):+.1f} %"],
+            ["single ring drop: deepest below ground [mm]", f"{1e3 * d4.penetration:.3f}",
+             f"{1e3 * d1.penetration:.3f}", ""],
+        ]),
+        "",
+        f"({time.perf_counter() - t0:.0f} s in all.)",
     ]
     try:
         import pybullet  # noqa: F401
-        lines.append("pybullet is importable but the comparison scene is not implemented yet")
+        lines.append("pybullet is importable, but no pybullet version of these scenes is written: no ratio printed.")
     except ImportError:
-        lines.append("")
-        lines.append("pybullet not importable: comparison skipped")
+        lines.append("pybullet is not installed: no pybullet comparison.")
     print("\n".join(lines))
     return 0
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--rings", type=int, default=13)
-    p.add_argument("--ring-particles", type=int, default=5400, help="physics particles per ring (default 5400)")
-    p.add_argument("--fragments", type=int, default=216)
-    p.add_argument("--seconds", type=float, default=3.0)
-    p.add_argument("--fps", type=float, default=50.0)
-    p.add_argument("--substeps", type=int, default=4)
-    p.add_argument("--iterations", type=int, default=10)
+    p.add_argument("--scene", default=str(SCENES / "thirteen_rings.toml"),
+                   help="the rings scene (default scenes/thirteen_rings.toml)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a scene value, e.g. --set simulation.substeps=4 (repeatable)")
+    p.add_argument("--fragments", type=int, default=216, help="fragments in the pile (default 216)")
+    p.add_argument("--seconds", type=float, default=3.0, help="simulated time of the pile [s] (default 3)")
     p.add_argument("--arch", default="cpu")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
