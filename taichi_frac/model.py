@@ -277,7 +277,8 @@ def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner,
     For each group: its outward normal n (area-weighted normals of its members' boundary
     faces), the height h of the true surface above its centre along n (largest over those
     faces' vertices), the radius rho its members' centroids span about the normal axis,
-    and the body's thickness t behind the centre along -n (a ray cast against the boundary).
+    and the body's thickness t behind the centre along -n (``ray_exit_distance`` against
+    the boundary faces, looked at only as far as the limit can bind, s + R).
     The centre moves inward by
 
         s = min(R - h, sqrt(R^2 - rho^2) - h, t - R), at least 0:
@@ -287,8 +288,6 @@ def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner,
     spheres leave no hole a small body could fall through, even on a coarse mesh), and
     never so far that it pokes out behind (t - R).
     """
-    import trimesh
-
     n_groups = len(b_pos)
     if n_groups == 0 or len(faces) == 0:
         return b_pos.copy()
@@ -318,10 +317,48 @@ def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner,
     shift = np.where(has_normal & np.isfinite(h), np.minimum(b_radius, cover) - h, 0.0)
     todo = np.nonzero(shift > 0)[0]
     if len(todo):
-        mesh = trimesh.Trimesh(vertices, faces, process=False)
-        thickness = np.zeros(n_groups)
-        locations, ray, _ = mesh.ray.intersects_location(b_pos[todo], -n_unit[todo], multiple_hits=False)
-        thickness[todo[ray]] = np.linalg.norm(locations - b_pos[todo[ray]], axis=1)
+        thickness = np.full(n_groups, np.inf)
+        thickness[todo] = ray_exit_distance(vertices, faces, b_pos[todo], -n_unit[todo],
+                                            shift[todo] + b_radius[todo])
         shift = np.minimum(shift, thickness - b_radius)
     shift = np.maximum(shift, 0.0)
     return b_pos - shift[:, None] * n_unit
+
+
+def ray_exit_distance(vertices, faces, origin, direction, reach):
+    """Distance [m] along each ray (origin (P,3) [m], unit direction (P,3)) to the first
+    boundary face (F,3) it crosses within ``reach`` (P,) [m]; inf when none does.
+
+    Only faces whose bounding sphere comes within ``reach`` of the origin are tested
+    (a KD-tree ball query), each with the Moller-Trumbore test, all vectorised. The
+    model build asks only as far as the result can matter (a few particle radii), so this
+    costs a fraction of a general ray cast (trimesh's rtree cast took ~21 ms per fragment
+    model, 60 % of its build).
+    """
+    from scipy.spatial import cKDTree
+
+    corners = vertices[faces]  # (F,3,3)
+    centre = corners.mean(axis=1)
+    spread = float(np.linalg.norm(corners - centre[:, None, :], axis=2).max())
+    near = cKDTree(centre).query_ball_point(origin, reach + spread)
+    counts = np.fromiter((len(n) for n in near), dtype=np.int64, count=len(near))
+    result = np.full(len(origin), np.inf)
+    if counts.sum() == 0:
+        return result
+    ray = np.repeat(np.arange(len(origin)), counts)
+    face = np.concatenate([np.asarray(n, dtype=np.int64) for n in near if len(n)])
+    o, d = origin[ray], direction[ray]
+    v0 = corners[face, 0]
+    e1, e2 = corners[face, 1] - v0, corners[face, 2] - v0
+    p = np.cross(d, e2)
+    det = (e1 * p).sum(axis=1)
+    ok = np.abs(det) > 1e-18
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = o - v0
+    u = (s * p).sum(axis=1) * inv
+    q = np.cross(s, e1)
+    v = (d * q).sum(axis=1) * inv
+    t = (e2 * q).sum(axis=1) * inv
+    hit = ok & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > 0.0) & (t <= reach[ray])
+    np.minimum.at(result, ray[hit], t[hit])
+    return result

@@ -4,10 +4,11 @@ import math
 
 import numpy as np
 import pytest
+import trimesh
 
 from taichi_frac.geometry import primitives
 from taichi_frac.geometry.tetra import tetrahedralize
-from taichi_frac.model import build_body_model
+from taichi_frac.model import build_body_model, ray_exit_distance
 
 DENSITY = 2400.0
 
@@ -125,3 +126,17 @@ def test_collision_spheres_sit_closer_to_the_true_surface_and_cover_their_member
     to_member = np.linalg.norm(ring.particle_position[ring.boundary_members] - ring.collision_position[owner], axis=1)
     assert np.all(to_member <= ring.boundary_radius[owner] * (1 + 1e-9))
     assert np.all(np.linalg.norm(ring.collision_position - ring.boundary_position, axis=1) <= ring.boundary_radius)
+
+
+def test_ray_exit_distance_matches_a_hand_computed_box():
+    # Unit cube [0,1]^3 (12 triangles). Rays from inside: exit distances by hand; a ray
+    # whose exit lies beyond its reach reports inf.
+    box = trimesh.creation.box((1.0, 1.0, 1.0))
+    vertices, faces = np.asarray(box.vertices) + 0.5, np.asarray(box.faces)
+    origin = np.array([[0.5, 0.5, 0.5], [0.2, 0.3, 0.9], [0.1, 0.5, 0.5], [0.5, 0.5, 0.5]])
+    direction = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    reach = np.array([2.0, 2.0, 2.0, 0.3])
+    got = ray_exit_distance(vertices, faces, origin, direction, reach)
+    np.testing.assert_allclose(got[:3], [0.5, 0.9, 0.5 * np.sqrt(2.0)], rtol=1e-12)
+    assert got[3] == np.inf

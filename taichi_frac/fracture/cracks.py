@@ -45,6 +45,7 @@ Decisions (the paper leaves them open; docs/readme/fracture.md explains them for
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -172,6 +173,22 @@ def _as_rows(a, name: str) -> np.ndarray:
     return a
 
 
+_NEIGHBORS: "weakref.WeakKeyDictionary[BodyModel, dict]" = weakref.WeakKeyDictionary()
+
+
+def model_neighbor_lists(model: BodyModel, h: float):
+    """The full-field SPH neighbour lists (CSR offsets, indices, int64) of a body model's
+    physics particles within ``h`` [m]. They are fixed in the body frame, so they are
+    built once per model and h and kept while the model lives (a ring struck again, or
+    several rings built from one model, reuse them: 9 ms a build for a 5,550-particle
+    ring, about half of an analysis)."""
+    per_model = _NEIGHBORS.setdefault(model, {})
+    if h not in per_model:
+        offsets, indices = neighbor_lists(model.particle_position, h)
+        per_model[h] = (np.asarray(offsets, dtype=np.int64), np.asarray(indices, dtype=np.int64))
+    return per_model[h]
+
+
 def analyze_impact(
     model: BodyModel,
     contact_point_body,
@@ -232,9 +249,7 @@ def analyze_impact(
         )
 
     # Steps 6-7 on the full field (every neighbour of every particle).
-    offsets, indices = neighbor_lists(points, h)
-    offsets = np.asarray(offsets, dtype=np.int64)
-    indices = np.asarray(indices, dtype=np.int64)
+    offsets, indices = model_neighbor_lists(model, h)
     grad = displacement_gradient(points, volumes, displacement, offsets, indices, h,
                                  corrected=options.corrected_gradient)
     stress = stress_from_gradient(grad, material.young_modulus, material.poisson_ratio)
