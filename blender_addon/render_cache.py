@@ -2,16 +2,19 @@
 to PNG with Cycles on the CPU. Called by ``taichi-frac render`` (taichi_frac/commands/render.py);
 not part of the extension zip.
 
-    python render_cache.py CACHE OUT_DIR --frames 1,50,100 --resolution 320x240 --samples 16
+    python render_cache.py CACHE OUT_DIR --frames 1,50,100 --resolution 320x240 --samples 16 \
+        [--look-at 'wall*']
 
 The camera looks at the bounding box of every fragment visible in the rendered frames (one
-fixed camera for all of them), a sun and a grey sky light them, a ground plane lies at z = 0
+fixed camera for all of them; with --look-at, only of the objects whose names match one of
+its comma-separated globs, e.g. to leave out a projectile that flew far away), a sun and a grey sky light them, a ground plane lies at z = 0
 (or under the lowest fragment when one goes below it).
 """
 
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import math
 import sys
 from pathlib import Path
@@ -99,6 +102,7 @@ def main(argv):
     parser.add_argument("--frames", default="")
     parser.add_argument("--resolution", default="320x240")
     parser.add_argument("--samples", type=int, default=16)
+    parser.add_argument("--look-at", default="")
     args = parser.parse_args(argv)
     width, height = (int(v) for v in args.resolution.lower().split("x"))
 
@@ -110,7 +114,15 @@ def main(argv):
         frames = [int(f) for f in args.frames.split(",")]
     else:
         frames = sorted({scene.frame_start, (scene.frame_start + scene.frame_end) // 2, scene.frame_end})
-    low, high = visible_bounds(list(collection.objects), frames)
+    framed = list(collection.objects)
+    if args.look_at:
+        globs = [g.strip() for g in args.look_at.split(",") if g.strip()]
+        framed = [o for o in framed if any(fnmatch.fnmatchcase(o.name, g) for g in globs)]
+        if not framed:
+            names = ", ".join(sorted(o.name for o in collection.objects)[:10])
+            print(f"--look-at {args.look_at!r} matches no object (some names: {names})", file=sys.stderr)
+            return 2
+    low, high = visible_bounds(framed, frames)
     setup_stage(low, high, width, height, args.samples)
     out_dir = Path(args.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -57,6 +57,8 @@ def run(args) -> int:
                "--resolution", args.resolution, "--samples", str(args.samples)]
     if frames:
         command += ["--frames", frames]
+    if args.look_at:
+        command += ["--look-at", args.look_at]
     env = dict(os.environ)
     env.pop("PYTHONPATH", None)  # the main environment's pxr must not reach Blender
     return subprocess.run(command, env=env).returncode
@@ -72,6 +74,9 @@ def register(subparsers) -> None:
     parser.add_argument("cache", help="a cache written by 'taichi-frac run' (.usdc/.usda/.usd)")
     parser.add_argument("--frames", default="",
                         help="frames to render: '1,50,100', '1-100' or '1-100:10' (default: first, middle, last)")
+    parser.add_argument("--look-at", default="", metavar="GLOBS",
+                        help="frame the camera on the objects whose names match these comma-separated globs "
+                             "(e.g. 'wall*' to leave out a ball that flew away; default: every object)")
     parser.add_argument("-o", "--output", default="out/renders",
                         help="output folder for frame_NNNN.png (default: out/renders)")
     parser.add_argument("--resolution", default="320x240", help="WIDTHxHEIGHT in pixels (default: 320x240)")
