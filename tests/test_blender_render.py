@@ -7,6 +7,7 @@ import struct
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from taichi_frac.cli import main
@@ -45,3 +46,25 @@ def test_render_reports_missing_blender(tmp_path, capsys):
     cache.write_bytes(b"")
     code = main(["render", str(cache), "--blender-python", str(tmp_path / "nope" / "python")])
     assert code == 2 and "no Blender Python" in capsys.readouterr().err
+
+
+def test_render_look_at_frames_only_matching_objects(tmp_path, capfd):
+    from matplotlib.image import imread
+
+    blender_python()
+    cache = tmp_path / "synthetic.usdc"
+    write_synthetic.write(cache)
+    args = ["--frames", "20", "--resolution", "64x48", "--samples", "2"]
+
+    def render(folder, *look_at):
+        assert main(["render", str(cache), "-o", str(tmp_path / folder)] + args + list(look_at)) == 0
+        return imread(tmp_path / folder / "frame_0020.png")[..., :3]
+
+    # A glob that matches nothing is an error that names some objects.
+    assert main(["render", str(cache), "-o", str(tmp_path / "none"), "--look-at", "no_such_*"] + args) == 2
+    assert "matches no object" in capfd.readouterr().err
+    # '*' frames what no --look-at frames (the pictures differ by sampling noise only);
+    # one of the two shards alone moves the camera in (they differ by far more).
+    wide, same, near = render("all"), render("star", "--look-at", "*"), render("one", "--look-at", "shard_a")
+    noise = np.abs(wide - same).mean()
+    assert np.abs(wide - near).mean() > 3 * noise + 1e-3
