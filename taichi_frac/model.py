@@ -13,6 +13,7 @@ Layers:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -149,10 +150,13 @@ def group_surface_particles(
     inc = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(s_count, int(cols.max()) + 1))
     adj = (inc @ inc.T).tocsr()
     indptr, indices = adj.indptr, adj.indices
-    pos = positions[surface]
-    free = np.ones(s_count, dtype=bool)
+    # The greedy walk below is sequential; on a fragment's few hundred particles plain
+    # Python lists beat numpy's per-call overhead (~4x on a ring's 2,562).
+    pos = positions[surface].tolist()
+    rows = [indices[indptr[k]:indptr[k + 1]].tolist() for k in range(s_count)]
+    free = [True] * s_count
+    visited = [False] * s_count
     groups, dropped = [], []
-    visited = np.zeros(s_count, dtype=bool)
     for start in range(s_count):
         if visited[start]:
             continue
@@ -162,25 +166,28 @@ def group_surface_particles(
         while head < len(queue):
             seed = queue[head]
             head += 1
-            nbrs = indices[indptr[seed]:indptr[seed + 1]]
-            fresh = nbrs[~visited[nbrs]]
-            visited[fresh] = True
-            queue.extend(fresh.tolist())
+            nbrs = rows[seed]
+            for m in nbrs:
+                if not visited[m]:
+                    visited[m] = True
+                    queue.append(m)
             if not free[seed]:
                 continue
             members = [seed]
             free[seed] = False
             frontier = nbrs
+            seed_pos = pos[seed]
             for _ in range(3):  # widen at most twice beyond the seed's own ring
-                cand = np.unique(frontier[free[frontier]])
-                if len(cand):
-                    d = np.linalg.norm(pos[cand] - pos[seed], axis=1)
-                    take = cand[np.argsort(d, kind="stable")[: group_size - len(members)]]
-                    free[take] = False
-                    members.extend(take.tolist())
+                cand = sorted({m for m in frontier if free[m]})
+                if cand:
+                    cand.sort(key=lambda m: math.dist(pos[m], seed_pos))  # stable: ties by index
+                    take = cand[: group_size - len(members)]
+                    for m in take:
+                        free[m] = False
+                    members.extend(take)
                 if len(members) >= group_size:
                     break
-                frontier = np.concatenate([indices[indptr[m]:indptr[m + 1]] for m in members])
+                frontier = [m for member in members for m in rows[member]]
             if len(members) == 1 and not keep_leftovers:
                 dropped.append(seed)
             else:
