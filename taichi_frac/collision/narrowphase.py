@@ -32,7 +32,10 @@ class Contacts:
     B into A), point (vec3 [m] world, middle of the overlap), separation ([m], gap; < 0 is
     penetration), radius ([m] smaller of the two spheres), friction, restitution (combined).
     Written by solver.prepare_contacts: arm_a, arm_b (vec3 [m] COM -> point), normal_mass
-    ([kg], 1 / effective inverse mass along the normal), approach_speed ([m/s] normal
+    ([kg], 1 / effective inverse mass along the normal), tangent1, tangent2 (vec3 unit,
+    the friction directions), tangent_mass (vec2 [kg], along each), response_a, response_b
+    ((capacity, 3) vec3 [rad/s per N s]: angular velocity change of each body per unit
+    impulse along n, t1, t2), approach_speed ([m/s] normal
     relative velocity before the solve, < 0 approaching), restitution_target ([m/s] normal
     velocity the restitution sweeps aim for).
     query (i32 particle that made it), key (i32 partner key, see Particles' contact cache).
@@ -57,6 +60,11 @@ class Contacts:
         self.arm_a = vec3.field(shape=capacity)
         self.arm_b = vec3.field(shape=capacity)
         self.normal_mass = ti.field(ti.f32, shape=capacity)
+        self.tangent1 = vec3.field(shape=capacity)
+        self.tangent2 = vec3.field(shape=capacity)
+        self.tangent_mass = ti.math.vec2.field(shape=capacity)
+        self.response_a = vec3.field(shape=(capacity, 3))
+        self.response_b = vec3.field(shape=(capacity, 3))
         self.approach_speed = ti.field(ti.f32, shape=capacity)
         self.restitution_target = ti.field(ti.f32, shape=capacity)
         self.normal_impulse = ti.field(ti.f32, shape=capacity)
