@@ -245,12 +245,11 @@ def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
             # have the last word in every sweep: a small piece pressed into the floor by a
             # heavy one (mass ratio ~500 in the 13-ring pile) is held by the floor rather
             # than by the converging pair, and sinks less.
-            for c in range(count):
-                if contacts.body_b[c] >= 0:
-                    _solve_contact(bodies, contacts, c, dt, position_correction, allowed_penetration,
-                                   max_correction_speed)
-            for c in range(count):
-                if contacts.body_b[c] < 0:
+            # (One loop over both passes: two inlined copies of the update doubled the
+            # respond kernel's compile time, which every new process pays.)
+            for k in range(2 * count):
+                c = k % count
+                if (contacts.body_b[c] < 0) == (k >= count):
                     _solve_contact(bodies, contacts, c, dt, position_correction, allowed_penetration,
                                    max_correction_speed)
         # Restitution: a contact that was approaching faster than the threshold and carries
