@@ -7,8 +7,9 @@ not part of the extension zip.
 
 The camera looks at the bounding box of every fragment visible in the rendered frames (one
 fixed camera for all of them; with --look-at, only of the objects whose names match one of
-its comma-separated globs, e.g. to leave out a projectile that flew far away), a sun and a grey sky light them, a ground plane lies at z = 0
-(or under the lowest fragment when one goes below it).
+its comma-separated globs, e.g. to leave out a projectile that flew far away), a sun and a
+grey sky light them, a ground plane lies at z = 0 (or under the lowest fragment when one
+goes below it).
 """
 
 from __future__ import annotations

@@ -136,6 +136,16 @@ def md_table(header: list[str], rows: list[list], align: str | None = None) -> s
     return "\n".join(lines)
 
 
+def deepest_below_ground(world, bodies) -> float:
+    """Deepest collision sphere below z = 0 over ``bodies`` of ``world`` [m] (0 when none
+    is below)."""
+    depth = 0.0
+    for b in bodies:
+        p = world.particle_state(b)
+        depth = max(depth, float(np.max(p["radius"] - p["position"][:, 2])))
+    return depth
+
+
 def ms_pair(avg: float, peak: float) -> str:
     return f"{avg:.1f} / {peak:.1f}"
 

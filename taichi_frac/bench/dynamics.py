@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from .common import SCENES, BenchContext, md_table, ms_pair
+from .common import SCENES, BenchContext, deepest_below_ground, md_table, ms_pair
 
 
 def _fragment_model():
@@ -37,15 +37,6 @@ def _fragment_model():
     return build_body_model(vertices, tets, 2400.0, boundary_group_size=4)
 
 
-def _deepest_below_ground(world, bodies) -> float:
-    """Deepest collision sphere below z = 0 over ``bodies`` [m] (0 when none is below)."""
-    depth = 0.0
-    for b in bodies:
-        p = world.particle_state(b)
-        depth = max(depth, float(np.max(p["radius"] - p["position"][:, 2])))
-    return depth
-
-
 def _rings(ctx: BenchContext, scene, single: bool) -> dict:
     from .tables import run_scene
 
@@ -56,7 +47,7 @@ def _rings(ctx: BenchContext, scene, single: bool) -> dict:
     state = world.body_state(bodies)
     return dict(summary=summary, particles=counts["collision"], substeps=counts["substeps_per_frame"],
                 overflows=world.stats.total_contact_overflows, asleep=int(state["sleeping"].sum()),
-                bodies=len(bodies), depth=_deepest_below_ground(world, bodies))
+                bodies=len(bodies), depth=deepest_below_ground(world, bodies))
 
 
 def _fragment_pile(ctx: BenchContext, scene, count: int, seconds: float) -> dict:
@@ -89,7 +80,7 @@ def _fragment_pile(ctx: BenchContext, scene, count: int, seconds: float) -> dict
     ms = np.array(times) * 1e3
     return dict(avg=ms.mean(), max=ms.max(), particles=sum(world._body_range[b][1] for b in bodies),
                 tets=fragment.tet_count, asleep=int(world.body_state(bodies)["sleeping"].sum()),
-                depth=_deepest_below_ground(world, bodies), overflows=world.stats.total_contact_overflows)
+                depth=deepest_below_ground(world, bodies), overflows=world.stats.total_contact_overflows)
 
 
 def run_dynamics(args) -> int:

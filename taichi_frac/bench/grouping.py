@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .common import SCENES, BenchContext, Section, md_table, ms_pair, pyplot
+from .common import SCENES, BenchContext, Section, deepest_below_ground, md_table, ms_pair, pyplot
 
 GROUP_SIZES = (1, 2, 4, 8)
 MINOR_RADIUS = 0.025  # m: COM height of a torus lying flat on the ground
@@ -74,8 +74,7 @@ def measure_drop(ctx: BenchContext, scene) -> DropResult:
         if seen["bounced"] and not seen.get("landed"):
             seen["peak"] = max(seen["peak"], state["position"][0][2])
             seen["landed"] = state["linear_velocity"][0][2] < 0 and seen["peak"] > state["position"][0][2]
-        p = sim.world.particle_state(body)
-        seen["penetration"] = max(seen["penetration"], float(np.max(p["radius"] - p["position"][:, 2])))
+        seen["penetration"] = max(seen["penetration"], deepest_below_ground(sim.world, [body]))
 
     sim.progress = frame_done
     sim.run()

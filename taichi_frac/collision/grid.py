@@ -85,7 +85,7 @@ def _body_motion(bodies: ti.template(), statics: ti.template(), b, dt):
             # substep, hit them at g dt and woke them in turn: a pile never slept). Its
             # sleep timer is kept (>= sleep_time): it sleeps again at the end of the
             # substep unless the touch set it moving, and until then wakes no one (the
-            # narrowphase wakes only from bodies whose timer is 0).
+            # narrowphase wakes only from bodies whose timer is below sleep_time).
             bodies.sleeping[b] = 0
             bodies.wake_request[b] = 0
         bodies.rotation[b] = quat_to_matrix(bodies.orientation[b])

@@ -110,7 +110,7 @@ def integrate_positions(bodies: ti.template(), statics: ti.template(), dt, max_r
     else:
         for b in range(bodies.slot_end[None]):
             _integrate_position(bodies, gravity, b, dt, max_rotation, sleep_linear_speed, sleep_angular_speed,
-                                    sleep_time)
+                                sleep_time)
 
 
 @ti.func
