@@ -7,9 +7,11 @@ does not run on the CPU backend and a few thousand buckets scan in microseconds)
 hashing for collision detection of deformable objects"), so the domain is unbounded; a
 bucket may hold particles of several cells, so a query checks each candidate's true cell.
 
-Cells are sized for the *typical* particle (``typical_particle_radius``: a body's 95th
-percentile), not the largest, so one outsized boundary sphere does not inflate every
-cell. A particle larger than that occupies the box of cells its extra reach covers
+Cells are sized for the *typical* particle (``typical_particle_radius``: a body's median
+radius), not the largest, so one outsized boundary sphere does not inflate every cell,
+plus the farthest any neighbouring pair of bodies can close in the substep
+(``bounds.pair_motion``, relative: two rings falling side by side close nothing, where the
+sum of their own motion bounds doubled the cells' edge at every first impact). A particle larger than that occupies the box of cells its extra reach covers
 (``cell`` .. ``cell_hi``); a query scans its own box grown by one cell, and a pair seen in
 several cells is kept only in the first of them in scan order (the per-axis max of the
 two boxes' lower corners), so every pair is made exactly once.
@@ -22,7 +24,7 @@ touching at one spot grid and test only the particles around that spot.
 import taichi as ti
 
 from .. import runtime
-from ..dynamics.bounds import is_idle, motion_speed, near_static
+from ..dynamics.bounds import is_idle, motion_speed, near_static, pair_motion
 from ..dynamics.quaternion import quat_to_matrix
 
 
@@ -32,15 +34,21 @@ class HashGrid:
 
     Fields:
         bucket_count: i32 entries per bucket; zeroed again by bucket_scan.
-        bucket_start, bucket_end: i32 range of each bucket in ``sorted_particle``.
+        bucket_start: (table_capacity + 1,) i32: bucket h holds the entries
+            bucket_start[h] .. bucket_start[h + 1] of ``sorted_particle`` (one array, so a
+            query reads both ends from one cache line).
         bucket_cursor: i32 scatter cursor.
         sorted_particle: (entry_capacity,) i32 particle slots ordered by bucket (a large
-            particle has one entry per cell it occupies); sorted_body: its body, beside it
+            particle has one entry per cell it occupies); within a bucket in ascending slot
+            order where the scatter is serial (the CPU: ``runtime.SERIAL_SMALL_LOOPS``),
+            which the narrowphase uses to skip a body's own particles without reading
+            them; sorted_body: its body, beside it
             (the narrowphase skips same-body candidates without a random read); entries beyond the capacity are
             counted in ``overflow`` (reported by the World), never silently dropped.
         table_size: scalar, the power of two in use this substep (<= capacity).
         cell_size: scalar [m], edge of a grid cell. typical_radius: scalar [m], largest
-            typical particle radius among bodies with neighbours. max_motion: scalar [m].
+            typical particle radius among bodies with neighbours. max_motion: scalar [m],
+            largest ``pair_motion`` over neighbouring bodies.
         overflow: scalar i32, entries lost this advance.
     """
 
@@ -50,8 +58,7 @@ class HashGrid:
             size *= 2
         self.table_capacity = size
         self.bucket_count = ti.field(ti.i32, shape=size)
-        self.bucket_start = ti.field(ti.i32, shape=size)
-        self.bucket_end = ti.field(ti.i32, shape=size)
+        self.bucket_start = ti.field(ti.i32, shape=size + 1)
         self.bucket_cursor = ti.field(ti.i32, shape=size)
         self.entry_capacity = 2 * particle_capacity
         self.sorted_particle = ti.field(ti.i32, shape=self.entry_capacity)
@@ -96,29 +103,38 @@ def _body_motion(bodies: ti.template(), statics: ti.template(), b, dt):
 
 
 @ti.func
-def _body_neighbors(bodies: ti.template(), statics: ti.template(), grid: ti.template(), b, margin):
+def _body_neighbors(bodies: ti.template(), statics: ti.template(), grid: ti.template(), b, margin, dt):
     count = 0
     near = 0
+    idle_neighbor = 0
     if bodies.active[b] == 1:
         xb = bodies.position[b]
-        rb = _grown_radius(bodies, b, margin)
+        rb = bodies.bounding_radius[b] + margin * bodies.max_particle_radius[b]
         b_idle = is_idle(bodies, b)
         for o in range(bodies.slot_end[None]):
             if o != b and bodies.active[o] == 1 and count >= 0:
                 if not (b_idle and is_idle(bodies, o)):
-                    ro = _grown_radius(bodies, o, margin)
-                    if (bodies.position[o] - xb).norm_sqr() < (rb + ro) ** 2:
+                    closing = pair_motion(bodies, statics, b, o, dt)
+                    reach = rb + bodies.bounding_radius[o] + margin * bodies.max_particle_radius[o] + closing
+                    if (bodies.position[o] - xb).norm_sqr() < reach * reach:
                         if count < bodies.max_neighbors:
                             bodies.neighbors[b, count] = o
+                            bodies.neighbor_motion[b, count] = closing
                             count += 1
+                            if is_idle(bodies, o):
+                                idle_neighbor = 1
+                            ti.atomic_max(grid.max_motion[None], closing)
                         else:
                             count = -1
+                            idle_neighbor = 1
         if not b_idle:
-            near = near_static(statics, xb, rb)
+            near = near_static(statics, xb, _grown_radius(bodies, b, margin))
         if count != 0:
             ti.atomic_max(grid.typical_radius[None], bodies.typical_particle_radius[b])
-            ti.atomic_max(grid.max_motion[None], bodies.motion[b])
+            if count < 0:  # neighbour list overflowed: every pair may be tested
+                ti.atomic_max(grid.max_motion[None], 2.0 * bodies.motion[b])
     bodies.neighbor_count[b] = count
+    bodies.idle_neighbor[b] = idle_neighbor
     bodies.near_body[b] = 1 if count != 0 else 0
     bodies.near_static[b] = near
 
@@ -127,9 +143,10 @@ def _body_neighbors(bodies: ti.template(), statics: ti.template(), grid: ti.temp
 def body_cull(bodies: ti.template(), statics: ti.template(), grid: ti.template(), margin, dt):
     """Two passes over bodies. First: rotation matrix and motion bound of each body this
     substep. Second: its neighbour list (grown bounding spheres overlap, at least one of
-    the two awake; O(bodies^2), fine for the thousand-odd bodies a scene holds), whether it
-    reaches a static collider, and the grid cell size (the reach of two typical particles
-    among bodies that have a neighbour: 2 r_typical (1 + margin / 2) + 2 x motion).
+    the two awake, grown by how far the pair can close this substep; O(bodies^2), fine for
+    the thousand-odd bodies a scene holds), whether it reaches a static collider, and the
+    grid cell size (the reach of two typical particles among bodies that have a neighbour:
+    2 r_typical (1 + margin / 2) + the largest pair closing).
     Serial on the CPU (see ``runtime.SERIAL_SMALL_LOOPS``), parallel elsewhere."""
     grid.typical_radius[None] = 1e-6
     grid.max_motion[None] = 0.0
@@ -139,13 +156,13 @@ def body_cull(bodies: ti.template(), statics: ti.template(), grid: ti.template()
             for b in range(bodies.slot_end[None]):
                 _body_motion(bodies, statics, b, dt)
             for b in range(bodies.slot_end[None]):
-                _body_neighbors(bodies, statics, grid, b, margin)
+                _body_neighbors(bodies, statics, grid, b, margin, dt)
     else:
         for b in range(bodies.slot_end[None]):
             _body_motion(bodies, statics, b, dt)
         for b in range(bodies.slot_end[None]):
-            _body_neighbors(bodies, statics, grid, b, margin)
-    grid.cell_size[None] = 2.0 * grid.typical_radius[None] * (1.0 + 0.5 * margin) + 2.0 * grid.max_motion[None]
+            _body_neighbors(bodies, statics, grid, b, margin, dt)
+    grid.cell_size[None] = 2.0 * grid.typical_radius[None] * (1.0 + 0.5 * margin) + grid.max_motion[None]
 
 
 @ti.func
@@ -175,8 +192,7 @@ def _particle_cell(bodies: ti.template(), particles: ti.template(), grid: ti.tem
                     o = bodies.neighbors[b, k]
                     local = bodies.rotation[o].transpose() @ (x - bodies.position[o])
                     q = ti.math.clamp(local, bodies.local_lower[o], bodies.local_upper[o])
-                    grow = ((r + bodies.max_particle_radius[o]) * (1.0 + 0.5 * margin)
-                            + bodies.motion[b] + bodies.motion[o])
+                    grow = (r + bodies.max_particle_radius[o]) * (1.0 + 0.5 * margin) + bodies.neighbor_motion[b, k]
                     if (local - q).norm_sqr() < grow * grow:
                         act = 1
             if act == 1:
@@ -207,18 +223,19 @@ def particle_cells(bodies: ti.template(), particles: ti.template(), grid: ti.tem
 
 @ti.func
 def bucket_scan(grid: ti.template()):
-    """Serial exclusive prefix sum of bucket counts into start/end/cursor; zeroes counts
-    for the next substep."""
+    """Serial exclusive prefix sum of bucket counts into start/cursor (start[size] = the
+    total); zeroes counts for the next substep."""
     ti.loop_config(serialize=True)
     for _ in range(1):  # one serial task
         running = 0
-        for h in range(grid.table_size[None]):
+        size = grid.table_size[None]
+        for h in range(size):
             count = grid.bucket_count[h]
             grid.bucket_start[h] = running
             grid.bucket_cursor[h] = running
             running += count
-            grid.bucket_end[h] = running
             grid.bucket_count[h] = 0
+        grid.bucket_start[size] = running
 
 
 @ti.func

@@ -4,15 +4,21 @@ with an atomic counter into fixed-capacity ``Contacts``; contacts beyond the cap
 counted in ``overflow`` (reported by the World), never silently lost.
 
 Contacts are speculative: they are made when the gap is below ``margin`` x the mean radius
-plus how far both bodies can move in this substep (``bodies.motion``), and the solver lets
-the gap close but not go negative in one substep (Catto, "Speculative contacts", GDC 2013).
-So nothing tunnels, however long the substep: a fast body makes its contact before it
-arrives.
+plus how far it can close in this substep, and the solver lets the gap close but not go
+negative in one substep (Catto, "Speculative contacts", GDC 2013). So nothing tunnels,
+however long the substep: a fast body makes its contact before it arrives. How far a gap
+can close is measured per pair of points, along the contact normal (``_speculative``: the
+two points' approach speed x dt, plus the rotations' curvature and gravity over dt^2), not
+by the two bodies' whole motion bounds: a pair moving apart, or side by side, makes no
+speculative contact. With the body bounds, ~95 % of the contacts were speculative ones
+that never carried an impulse (13 rings: response 0.14 -> 0.10 s per run, and 2 -> 0.3 ms
+per substep at 6.7 ms substeps, where the body bounds made 10-15 thousand contacts).
 """
 
 
 import taichi as ti
 
+from .. import runtime
 from ..dynamics.bounds import is_idle
 from .grid import cell_hash
 
@@ -78,6 +84,38 @@ class Contacts:
 
 
 @ti.func
+def _point_velocity(bodies: ti.template(), b, x):
+    """Velocity [m/s] of the point ``x`` [m] moving with body ``b`` (0 when idle), and
+    the bound on how far the point strays from its straight path over a substep, per dt^2:
+    |w|^2 |arm| / 2 (rotation) [m/s^2]."""
+    v = vec3(0.0)
+    curve = 0.0
+    if not is_idle(bodies, b):
+        arm = x - bodies.position[b]
+        w = bodies.angular_velocity[b]
+        v = bodies.linear_velocity[b] + w.cross(arm)
+        curve = 0.5 * w.norm_sqr() * arm.norm()
+    return v, curve
+
+
+@ti.func
+def _speculative(bodies: ti.template(), statics: ti.template(), a, xa, b, xb, n, dt):
+    """How far [m] the gap between the point ``xa`` of body ``a`` and the point ``xb`` of
+    body ``b`` (-1: a static collider) may close along ``n`` (from b into a) this substep:
+    their approach speed x dt, plus the rotation's departure from straight paths and
+    gravity's velocity gain over the substep (|g| dt^2). A receding pair closes nothing,
+    so it makes no speculative contact: the contact is made only within the margin."""
+    va, curve_a = _point_velocity(bodies, a, xa)
+    vb = vec3(0.0)
+    curve_b = 0.0
+    if b >= 0:
+        vb, curve_b = _point_velocity(bodies, b, xb)
+    approach = -(va - vb).dot(n)
+    return (ti.max(approach, 0.0) * dt
+            + (curve_a + curve_b + statics.gravity[None].norm()) * dt * dt)
+
+
+@ti.func
 def _append(contacts: ti.template(), particles: ti.template(), query, key, a, b, static_index, normal, point,
             separation, radius, friction, restitution):
     c = ti.atomic_add(contacts.count[None], 1)
@@ -118,7 +156,7 @@ def clear_contacts(contacts: ti.template()):
 
 @ti.func
 def _sphere_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.template(),
-                     contacts: ti.template(), margin, sleep_time, i, a):
+                     statics: ti.template(), contacts: ti.template(), margin, sleep_time, dt, i, a):
     """Sphere-sphere contacts of active particle ``i`` (awake body ``a``) with the active
     particles of other bodies in its cell box grown by one cell. A pair is made once: from
     the lower slot when both bodies are awake, from the awake side otherwise, and only in
@@ -132,65 +170,109 @@ def _sphere_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.t
     if (lower_i == upper_i).all():  # the common case: 27 cells
         # No partner centre lies further than this: its radius is at most the typical one
         # beyond its own cell box, and both bodies move at most max_motion.
-        reach = (ri + grid.typical_radius[None]) * (1.0 + 0.5 * margin) + 2.0 * grid.max_motion[None]
+        reach = (ri + grid.typical_radius[None]) * (1.0 + 0.5 * margin) + grid.max_motion[None]
         # Plain nested loops, not unrolled: 27 inlined copies of the cell scan made this
         # kernel take ~90 s to compile on the CPU backend.
         for dx in range(-1, 2):
             for dy in range(-1, 2):
                 for dz in range(-1, 2):
-                    _scan_cell(bodies, particles, grid, contacts, margin, sleep_time, i, a, xi, ri, lower_i,
+                    _scan_cell(bodies, particles, grid, statics, contacts, margin, sleep_time, dt, i, a, xi, ri, lower_i,
                                lower_i + ti.math.ivec3(dx, dy, dz), reach)
     else:  # a large particle scans its whole box grown by one cell
         for cx, cy, cz in ti.ndrange((lower_i[0] - 1, upper_i[0] + 2), (lower_i[1] - 1, upper_i[1] + 2),
                                      (lower_i[2] - 1, upper_i[2] + 2)):
-            _scan_cell(bodies, particles, grid, contacts, margin, sleep_time, i, a, xi, ri, lower_i,
+            _scan_cell(bodies, particles, grid, statics, contacts, margin, sleep_time, dt, i, a, xi, ri, lower_i,
                        ti.math.ivec3(cx, cy, cz), 1e30)
 
 
 @ti.func
-def _scan_cell(bodies: ti.template(), particles: ti.template(), grid: ti.template(), contacts: ti.template(),
-               margin, sleep_time, i, a, xi, ri, lower_i, cell, reach):
-    """Candidates of particle ``i`` in one cell (skipped when the cell lies beyond ``reach``)."""
+def _scan_cell(bodies: ti.template(), particles: ti.template(), grid: ti.template(), statics: ti.template(),
+               contacts: ti.template(), margin, sleep_time, dt, i, a, xi, ri, lower_i, cell, reach):
+    """Candidates of particle ``i`` in one cell (skipped when the cell lies beyond ``reach``).
+
+    A partner j of another body is wanted when j > i (both awake: the lower slot makes the
+    pair) or its body is idle. Body ``a`` holds the slots [start, end) and i lies in them,
+    so the first kind are exactly the entries with j >= end and the second the idle ones
+    with j < start or j >= end. Where the bucket is in ascending slot order (serial
+    scatter, the CPU) the scan reads only those: backwards from the bucket's end down to
+    the first j < end, then, when ``a`` has an idle neighbour, forwards from its start up
+    to the first j >= start. Most of a bucket is ``a``'s own particles (63 % of the
+    candidates of the 13-ring pile), which so are never read. Elsewhere every entry is
+    read and filtered."""
     size = grid.cell_size[None]
     nearest = ti.math.clamp(xi, ti.cast(cell, ti.f32) * size, ti.cast(cell + 1, ti.f32) * size)
     if (nearest - xi).norm_sqr() < reach * reach:
         h = cell_hash(cell, grid.table_size[None])
-        for k in range(grid.bucket_start[h], ti.min(grid.bucket_end[h], grid.entry_capacity)):
-            b = grid.sorted_body[k]
-            j = grid.sorted_particle[k]
-            if b != a and (j > i or is_idle(bodies, b)):
-                rj = particles.radius[j]
-                d = xi - particles.world_position[j]
-                dist = d.norm()
-                mean_r = 0.5 * (ri + rj)
-                gap = dist - ri - rj
-                if gap < margin * mean_r + bodies.motion[a] + bodies.motion[b]:
-                    lower_j = particles.cell[j]
-                    # j really occupies this cell (not a hash collision), and this is the
-                    # first cell both boxes share in scan order.
-                    if ((lower_j <= cell).all() and (cell <= particles.cell_hi[j]).all()
-                            and (ti.max(lower_i - 1, lower_j) == cell).all()):
-                        n = vec3(0.0, 0.0, 1.0)
-                        if dist > 1e-9:
-                            n = d / dist
-                        point = particles.world_position[j] + n * (rj + 0.5 * gap)
-                        mu = ti.sqrt(bodies.friction[a] * bodies.friction[b])
-                        e = ti.max(bodies.restitution[a], bodies.restitution[b])
-                        _append(contacts, particles, i, j, a, b, -1, n, point, gap, ti.min(ri, rj), mu, e)
-                        if bodies.sleeping[b] == 1 and bodies.sleep_timer[a] < sleep_time:
-                            bodies.wake_request[b] = 1
+        first = grid.bucket_start[h]
+        last = ti.min(grid.bucket_start[h + 1], grid.entry_capacity)
+        if ti.static(runtime.SERIAL_SMALL_LOOPS):
+            start = bodies.particle_start[a]
+            end = start + bodies.particle_count[a]
+            lower_too = bodies.idle_neighbor[a]
+            k = last - 1
+            step = -1
+            while True:
+                if step == -1 and (k < first or grid.sorted_particle[k] < end):
+                    if lower_too == 0:
+                        break
+                    k = first
+                    step = 1
+                if step == 1 and (k >= last or grid.sorted_particle[k] >= start):
+                    break
+                b = grid.sorted_body[k]
+                if step == -1 or is_idle(bodies, b):
+                    _test_pair(bodies, particles, statics, contacts, margin, sleep_time, dt, grid.max_motion[None], i, a, xi, ri, lower_i, cell,
+                               grid.sorted_particle[k], b)
+                k += step
+        else:
+            for k in range(first, last):
+                b = grid.sorted_body[k]
+                j = grid.sorted_particle[k]
+                if b != a and (j > i or is_idle(bodies, b)):
+                    _test_pair(bodies, particles, statics, contacts, margin, sleep_time, dt, grid.max_motion[None], i, a, xi, ri, lower_i, cell, j, b)
+
+
+@ti.func
+def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.template(), contacts: ti.template(),
+               margin, sleep_time, dt, max_motion,
+               i, a, xi, ri, lower_i, cell, j, b):
+    """Contact of particle ``i`` (body ``a``) with candidate ``j`` (body ``b``) found in
+    ``cell``, when their gap is within the speculative reach."""
+    rj = particles.radius[j]
+    d = xi - particles.world_position[j]
+    dist = d.norm()
+    mean_r = 0.5 * (ri + rj)
+    gap = dist - ri - rj
+    if gap < margin * mean_r + max_motion:
+        lower_j = particles.cell[j]
+        n = vec3(0.0, 0.0, 1.0)
+        if dist > 1e-9:
+            n = d / dist
+        # j really occupies this cell (not a hash collision), this is the first cell
+        # both boxes share in scan order, and the gap may close within the margin this
+        # substep (the body bounds above are the cheap, coarser test).
+        if ((lower_j <= cell).all() and (cell <= particles.cell_hi[j]).all()
+                and (ti.max(lower_i - 1, lower_j) == cell).all()
+                and gap < margin * mean_r + _speculative(bodies, statics, a, xi, b, particles.world_position[j], n, dt)):
+            point = particles.world_position[j] + n * (rj + 0.5 * gap)
+            mu = ti.sqrt(bodies.friction[a] * bodies.friction[b])
+            e = ti.max(bodies.restitution[a], bodies.restitution[b])
+            _append(contacts, particles, i, j, a, b, -1, n, point, gap, ti.min(ri, rj), mu, e)
+            if bodies.sleeping[b] == 1 and bodies.sleep_timer[a] < sleep_time:
+                bodies.wake_request[b] = 1
 
 
 @ti.func
 def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
-                     contacts: ti.template(), margin, i, a):
+                     contacts: ti.template(), margin, dt, i, a):
     """Sphere-plane and sphere-box contacts of particle ``i`` of awake body ``a`` (normal
     out of the collider, i.e. into the body)."""
     x = particles.world_position[i]
     r = particles.radius[i]
     for k in range(statics.plane_count[None]):
         gap = x[2] - r - statics.plane_height[k]
-        if gap < margin * r + bodies.motion[a]:
+        if gap < margin * r + bodies.motion[a] and gap < margin * r + _speculative(
+                bodies, statics, a, x, -1, x, vec3(0.0, 0.0, 1.0), dt):
             point = vec3(x[0], x[1], statics.plane_height[k])
             mu = ti.sqrt(bodies.friction[a] * statics.plane_friction[k])
             e = ti.max(bodies.restitution[a], statics.plane_restitution[k])
@@ -221,8 +303,8 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
                     n_local[m] = side
                     q[m] = half[m] * side
                     gap = -depth[m] - r
-        if gap < margin * r + bodies.motion[a]:
-            n = rot @ n_local
+        n = rot @ n_local
+        if gap < margin * r + bodies.motion[a] and gap < margin * r + _speculative(bodies, statics, a, x, -1, x, n, dt):
             point = statics.box_center[k] + rot @ q
             mu = ti.sqrt(bodies.friction[a] * statics.box_friction[k])
             e = ti.max(bodies.restitution[a], statics.box_restitution[k])
@@ -231,7 +313,7 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
 
 @ti.func
 def particle_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.template(),
-                      statics: ti.template(), contacts: ti.template(), margin, sleep_time):
+                      statics: ti.template(), contacts: ti.template(), margin, sleep_time, dt):
     """One pass over the particles of awake bodies: sphere-sphere contacts of active
     particles, sphere-plane and sphere-box contacts of bodies near a static collider."""
     for i in range(particles.slot_end[None]):
@@ -239,6 +321,6 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.
         if a >= 0:
             if not is_idle(bodies, a):
                 if particles.active[i] == 1:
-                    _sphere_contacts(bodies, particles, grid, contacts, margin, sleep_time, i, a)
+                    _sphere_contacts(bodies, particles, grid, statics, contacts, margin, sleep_time, dt, i, a)
                 if bodies.near_static[a] == 1:
-                    _static_contacts(bodies, particles, statics, contacts, margin, i, a)
+                    _static_contacts(bodies, particles, statics, contacts, margin, dt, i, a)

@@ -22,7 +22,7 @@ def collide(bodies: ti.template(), statics: ti.template(), particles: ti.templat
     grid.bucket_scan(hash_grid)
     grid.bucket_scatter(particles, hash_grid)
     narrowphase.clear_contacts(contacts)
-    narrowphase.particle_contacts(bodies, particles, hash_grid, statics, contacts, margin, sleep_time)
+    narrowphase.particle_contacts(bodies, particles, hash_grid, statics, contacts, margin, sleep_time, dt)
 
 
 @ti.kernel

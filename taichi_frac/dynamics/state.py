@@ -44,8 +44,8 @@ class Bodies:
         touched: i32 1 = the body has a contact this substep (free-flying bodies are moved
             by the exact ballistic step). Writer: prepare_contacts.
         bounding_radius: [m] max |offset| + radius over the body's particles.
-        mean_particle_radius, max_particle_radius, typical_particle_radius (95th
-            percentile): [m] of its collision particles (substep refinement, contact
+        mean_particle_radius, max_particle_radius, typical_particle_radius (the
+            median): [m] of its collision particles (substep refinement, contact
             margins, grid cell size).
         local_lower, local_upper: vec3 [m] body-frame box holding every collision sphere.
         particle_start, particle_count: i32 its contiguous range of particle slots.
@@ -57,7 +57,11 @@ class Bodies:
         neighbor_count, neighbors (capacity, max_neighbors): bodies whose grown bounding
             spheres overlap its own (one of the two awake); more than max_neighbors sets
             neighbor_count = -1 (then every particle of the body is tested).
-            Writer of rotation ... neighbors: body_cull (broadphase).
+        neighbor_motion (capacity, max_neighbors): [m] how far the gap to each neighbour
+            may close this substep (``bounds.pair_motion``).
+        idle_neighbor: i32 1 = a neighbour is asleep or fixed (or the list overflowed):
+            the narrowphase then also looks for partners in lower particle slots.
+            Writer of rotation ... idle_neighbor: body_cull (broadphase).
     """
 
     def __init__(self, capacity: int, max_neighbors: int = 32):
@@ -94,9 +98,11 @@ class Bodies:
         self.motion = ti.field(ti.f32, shape=capacity)
         self.neighbor_count = ti.field(ti.i32, shape=capacity)
         self.neighbors = ti.field(ti.i32, shape=(capacity, max_neighbors))
+        self.neighbor_motion = ti.field(ti.f32, shape=(capacity, max_neighbors))
         self.particle_start = ti.field(ti.i32, shape=capacity)
         self.particle_count = ti.field(ti.i32, shape=capacity)
         self.near_body = ti.field(ti.i32, shape=capacity)
+        self.idle_neighbor = ti.field(ti.i32, shape=capacity)
         self.near_static = ti.field(ti.i32, shape=capacity)
         # Scalar: one past the highest slot in use (loops run to it).
         self.slot_end = ti.field(ti.i32, shape=())
