@@ -122,3 +122,31 @@ def test_ring_fragment_count_grows_with_crack_count_and_repeats():
     # The documented settings: n = 1, 3, 5 give 2, 5 and about 10 fragments.
     assert counts[0] == 2 and counts[2] == 5 and 9 <= counts[4] <= 12, counts
     assert ring_counts([3, 5]) == [counts[2], counts[4]]  # same seed, same answer
+
+
+@pytest.mark.parametrize("strength", [1.0e6, 1.0e9], ids=["cracks", "no-crack"])
+def test_local_first_analysis_matches_the_full_field(strength):
+    """analyze_impact(full_field=False) (the simulation's call) computes the stress first at
+    the particles within reach of the contact: the same analysis point, Rankine decision,
+    cracks and stress there as the full field; the whole field only when it cracks."""
+    model = ring_model()
+    material = Material(name="m", density=2400.0, young_modulus=70e9, poisson_ratio=0.2, tensile_strength=strength)
+    options = FractureOptions(crack_count=3, seed=4)
+    full = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, material, options)
+    fast = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, material, options, full_field=False)
+    assert full.field_particles is None
+    np.testing.assert_array_equal(fast.analysis_particle, full.analysis_particle)
+    assert len(fast.cracks) == len(full.cracks) == (3 if strength == 1.0e6 else 0)
+    for a, b in zip(fast.cracks, full.cracks):
+        np.testing.assert_allclose(a.normal, b.normal, rtol=0, atol=1e-12)
+        assert a.extent == pytest.approx(b.extent, rel=1e-12)
+    np.testing.assert_allclose(fast.group_stress, full.group_stress, rtol=1e-12, atol=1e-6)
+    if strength == 1.0e6:  # cracked: the whole field was computed
+        assert fast.field_particles is None
+        np.testing.assert_allclose(fast.particle_stress, full.particle_stress, rtol=1e-12, atol=1e-6)
+    else:  # only the particles within reach of the contact, a small part of the ring
+        local = fast.field_particles
+        assert 0 < len(local) < model.tet_count / 10
+        np.testing.assert_allclose(fast.particle_stress[local], full.particle_stress[local], rtol=1e-12, atol=1e-6)
+        assert np.isnan(fast.particle_principal_stress).sum() == model.tet_count - len(local)
+        assert fast.peak_principal_stress <= full.peak_principal_stress

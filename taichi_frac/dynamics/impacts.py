@@ -34,10 +34,10 @@ class Impacts:
 
     Fields (writer: record_impacts): body (i32), other (i32 body slot, -1 ground, -2 static
     box), point (vec3 [m] world, impulse-weighted mean contact point), normal (vec3 unit
-    world, into ``body``), impulse (vec3 [N s] on ``body``), force (vec3 [N] on ``body``,
-    see the module docstring), duration ([s] Hertz contact time, 0 for a sustained
-    contact), speed ([m/s] approach speed), dt ([s] substep length), substep (i32 index
-    within the advance). Scalars: count, overflow.
+    world, into ``body``, impulse-weighted mean contact normal), impulse (vec3 [N s] on
+    ``body``), force (vec3 [N] on ``body``, see the module docstring), duration ([s]
+    Hertz contact time, 0 for a sustained contact), speed ([m/s] approach speed), dt ([s]
+    substep length), substep (i32 index within the advance). Scalars: count, overflow.
     Pair table, shape (table_size,): pair_a, pair_b, pair_static (keys, -9 = empty),
     pair_impulse, pair_normal, pair_point_sum (vec3), pair_weight, pair_speed (largest
     approach speed of its contacts); pair_used (slots in use).
@@ -131,7 +131,10 @@ def record_impacts(bodies: ti.template(), contacts: ti.template(), impacts: ti.t
                 a = contacts.body_a[c]
                 b = contacts.body_b[c]
                 s = contacts.static_index[c]
-                normal = jn * contacts.normal[c]
+                # Weighted by the whole impulse, not jn alone: the restitution sweeps may
+                # leave a contact with friction impulse and jn = 0, and a pair of only such
+                # contacts summed to a zero normal (a NaN normal in the fracture stage).
+                normal = weight * contacts.normal[c]
                 if b >= 0 and b < a:  # one key per body pair: lower slot first
                     a, b = b, a
                     impulse = -impulse

@@ -142,6 +142,24 @@ def _wake(bodies: ti.template(), slot: ti.i32):
 
 
 @ti.kernel
+def _pack_impacts(impacts: ti.template(), n: ti.i32, rows: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+    """Impact rows 0..n-1 into ``rows`` (n, 18): body, other, point, normal, impulse,
+    force, duration, speed, dt, substep (the layout World.impacts unpacks)."""
+    for k in range(n):
+        rows[k, 0] = impacts.body[k]
+        rows[k, 1] = impacts.other[k]
+        for c in ti.static(range(3)):
+            rows[k, 2 + c] = impacts.point[k][c]
+            rows[k, 5 + c] = impacts.normal[k][c]
+            rows[k, 8 + c] = impacts.impulse[k][c]
+            rows[k, 11 + c] = impacts.force[k][c]
+        rows[k, 14] = impacts.duration[k]
+        rows[k, 15] = impacts.speed[k]
+        rows[k, 16] = impacts.dt[k]
+        rows[k, 17] = impacts.substep[k]
+
+
+@ti.kernel
 def _reset_advance_counters(contacts: ti.template(), impacts: ti.template(), grid: ti.template()):
     grid.overflow[None] = 0
     contacts.overflow[None] = 0
@@ -408,14 +426,15 @@ class World:
         duration (K,) [s] Hertz contact time
         (0: sustained), speed (K,) [m/s] approach speed, dt (K,) [s], substep (K,)."""
         n = min(int(self.impact_buffer.count[None]), self.capacity.max_impacts)
-        ib = self.impact_buffer
+        # The n rows in one launch: reading each field whole (16k rows x 10 fields) took
+        # 2.5 ms a frame in the glass scene.
+        rows = np.zeros((n, 18), dtype=np.float64)
+        if n:
+            _pack_impacts(self.impact_buffer, n, rows)
         return dict(
-            body=ib.body.to_numpy()[:n], other=ib.other.to_numpy()[:n],
-            point=ib.point.to_numpy()[:n].astype(np.float64), normal=ib.normal.to_numpy()[:n].astype(np.float64),
-            impulse=ib.impulse.to_numpy()[:n].astype(np.float64), force=ib.force.to_numpy()[:n].astype(np.float64),
-            duration=ib.duration.to_numpy()[:n].astype(np.float64), speed=ib.speed.to_numpy()[:n].astype(np.float64),
-            dt=ib.dt.to_numpy()[:n].astype(np.float64),
-            substep=ib.substep.to_numpy()[:n],
+            body=rows[:, 0].astype(np.int32), other=rows[:, 1].astype(np.int32), point=rows[:, 2:5],
+            normal=rows[:, 5:8], impulse=rows[:, 8:11], force=rows[:, 11:14], duration=rows[:, 14],
+            speed=rows[:, 15], dt=rows[:, 16], substep=rows[:, 17].astype(np.int32),
         )
 
     def particle_state(self, body: int) -> dict:
