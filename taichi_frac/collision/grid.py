@@ -16,8 +16,12 @@ sum of their own motion bounds doubled the cells' edge at every first impact). A
 several cells is kept only in the first of them in scan order (the per-axis max of the
 two boxes' lower corners), so every pair is made exactly once.
 Only *active* particles enter the grid: those of a body with a neighbour (``body_cull``)
-that lie inside that neighbour's grown body-frame box (``particle_cells``), so two rings
-touching at one spot grid and test only the particles around that spot.
+that lie inside that neighbour's grown body-frame box and one of its grown cluster spheres
+(``particle_cells``; up to ``MAX_CLUSTERS`` spheres that each enclose a group of the body's
+collision spheres, see ``World.add_body``), so two rings touching at one spot grid and
+test only the particles around that spot. (The box alone holds a ring's hole: on the
+13-ring pile's first impacts 1,990 of 5,733 particles were active with the box, ~1,000 with
+16 cluster spheres.)
 """
 
 
@@ -194,7 +198,16 @@ def _particle_cell(bodies: ti.template(), particles: ti.template(), grid: ti.tem
                     q = ti.math.clamp(local, bodies.local_lower[o], bodies.local_upper[o])
                     grow = (r + bodies.max_particle_radius[o]) * (1.0 + 0.5 * margin) + bodies.neighbor_motion[b, k]
                     if (local - q).norm_sqr() < grow * grow:
-                        act = 1
+                        # Inside the box: now o's cluster spheres (each encloses its member
+                        # spheres), which leave out the holes and hollows a box holds.
+                        reach = r * (1.0 + 0.5 * margin) + 0.5 * margin * bodies.max_particle_radius[o] \
+                            + bodies.neighbor_motion[b, k]
+                        for m in range(bodies.cluster_count[o]):
+                            if act == 0:
+                                sphere = bodies.cluster[o, m]
+                                limit = sphere[3] + reach
+                                if (local - ti.math.vec3(sphere[0], sphere[1], sphere[2])).norm_sqr() < limit * limit:
+                                    act = 1
             if act == 1:
                 lower, upper = cell_box(grid, x, r, margin)
                 particles.cell[p] = lower

@@ -130,23 +130,23 @@ def _is_near(bodies: ti.template(), statics: ti.template(), b, grow, frame_dt, m
 
 
 @ti.kernel
-def substep_count(bodies: ti.template(), statics: ti.template(), margin: ti.f32, frame_dt: ti.f32,
+def substep_count(f: ti.template(), margin: ti.f32, frame_dt: ti.f32,
                   substeps: ti.i32, motion_fraction: ti.f32) -> ti.i32:
     """Substeps this frame needs: 0 when no body is awake, 1 when every awake body is in
     free flight (exact ballistic steps; fast spin is integrated in pieces by
     integrate_positions); otherwise the largest over the bodies that may touch something
     this frame (bounding sphere grown by a frame's motion reaches another body or a static
     collider) of ``substeps``, or more so that the body moves at most ``motion_fraction``
-    of its mean particle radius per substep."""
+    of its mean particle radius per substep. ``f``: the World's ``stages.WorldFields``."""
     need = 0
     if ti.static(runtime.SERIAL_SMALL_LOOPS):
         ti.loop_config(serialize=True)
         for _ in range(1):
-            for b in range(bodies.slot_end[None]):
-                need = ti.max(need, _substeps_of(bodies, statics, b, margin, frame_dt, substeps, motion_fraction))
+            for b in range(f.bodies.slot_end[None]):
+                need = ti.max(need, _substeps_of(f.bodies, f.statics, b, margin, frame_dt, substeps, motion_fraction))
     else:
-        for b in range(bodies.slot_end[None]):
-            ti.atomic_max(need, _substeps_of(bodies, statics, b, margin, frame_dt, substeps, motion_fraction))
+        for b in range(f.bodies.slot_end[None]):
+            ti.atomic_max(need, _substeps_of(f.bodies, f.statics, b, margin, frame_dt, substeps, motion_fraction))
     return need
 
 

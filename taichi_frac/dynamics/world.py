@@ -21,7 +21,7 @@ from ..model import BodyModel
 from . import impacts as impact_kernels
 from . import integrate, stages
 from .options import CapacityError, DynamicsOptions, WorldCapacity
-from .state import Bodies, Particles, Statics
+from .state import MAX_CLUSTERS, Bodies, Particles, Statics
 
 STAGES = ("collision", "response")
 
@@ -65,7 +65,8 @@ def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32,
                 inverse_mass: ti.f32, friction: ti.f32, restitution: ti.f32, fixed: ti.i32,
                 compliance: ti.f32, contact_radius: ti.f32,
                 start: ti.i32, offsets: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                radii: ti.types.ndarray(dtype=ti.f32, ndim=1), typical_radius: ti.f32):
+                radii: ti.types.ndarray(dtype=ti.f32, ndim=1), typical_radius: ti.f32,
+                clusters: ti.types.ndarray(dtype=ti.f32, ndim=2)):
     """Fill one body slot and its particle range. ``pose``: (13,) position, orientation
     wxyz, linear velocity, angular velocity."""
     for _ in range(1):
@@ -109,6 +110,9 @@ def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32,
         bodies.local_lower[slot] = lower
         bodies.local_upper[slot] = upper
         bodies.motion[slot] = 0.0
+        bodies.cluster_count[slot] = clusters.shape[0]
+        for m in range(clusters.shape[0]):
+            bodies.cluster[slot, m] = ti.math.vec4(clusters[m, 0], clusters[m, 1], clusters[m, 2], clusters[m, 3])
     for k in range(radii.shape[0]):
         p = start + k
         particles.body[p] = slot
@@ -160,12 +164,44 @@ def _pack_impacts(impacts: ti.template(), n: ti.i32, rows: ti.types.ndarray(dtyp
 
 
 @ti.kernel
-def _reset_advance_counters(contacts: ti.template(), impacts: ti.template(), grid: ti.template()):
-    grid.overflow[None] = 0
-    contacts.overflow[None] = 0
-    contacts.peak[None] = 0
-    impacts.count[None] = 0
-    impacts.overflow[None] = 0
+def _reset_advance_counters(f: ti.template()):
+    f.grid.overflow[None] = 0
+    f.contacts.overflow[None] = 0
+    f.contacts.peak[None] = 0
+    f.impacts.count[None] = 0
+    f.impacts.overflow[None] = 0
+
+
+@ti.kernel
+def _advance_counters(f: ti.template()) -> ti.types.vector(5, ti.i32):
+    """(contacts in the last substep, peak, lost to capacity, grid entries lost, impact
+    rows lost) in one launch instead of five field reads."""
+    return ti.Vector([f.contacts.count[None], f.contacts.peak[None], f.contacts.overflow[None],
+                      f.grid.overflow[None], f.impacts.overflow[None]], dt=ti.i32)
+
+
+def cluster_spheres(offsets: np.ndarray, radii: np.ndarray, count: int) -> np.ndarray:
+    """(K, 4) spheres (centre [m], radius [m]) that together enclose every sphere
+    (``offsets`` (N,3) [m], ``radii`` (N,) [m]), K = min(count, N): seeds by farthest-point
+    sampling, each sphere at the mean of the spheres nearest its seed, its radius reaching
+    the far side of every member (|offset - centre| + radius)."""
+    offsets = np.asarray(offsets, dtype=np.float64)
+    radii = np.asarray(radii, dtype=np.float64)
+    k_count = min(count, len(offsets))
+    seeds = [int(np.argmax(np.linalg.norm(offsets - offsets.mean(axis=0), axis=1)))]
+    nearest = np.linalg.norm(offsets - offsets[seeds[0]], axis=1)
+    while len(seeds) < k_count and nearest.max() > 0.0:  # (coincident centres: fewer seeds)
+        seeds.append(int(np.argmax(nearest)))
+        nearest = np.minimum(nearest, np.linalg.norm(offsets - offsets[seeds[-1]], axis=1))
+    k_count = len(seeds)
+    label = np.argmin(((offsets[:, None, :] - offsets[seeds][None, :, :]) ** 2).sum(axis=2), axis=1)
+    spheres = np.zeros((k_count, 4))
+    for k in range(k_count):
+        members = label == k  # the seed itself is a member: never empty
+        centre = offsets[members].mean(axis=0)
+        spheres[k, :3] = centre
+        spheres[k, 3] = np.max(np.linalg.norm(offsets[members] - centre, axis=1) + radii[members])
+    return spheres
 
 
 class World:
@@ -188,6 +224,8 @@ class World:
         self.grid = grid_kernels.HashGrid(cap.max_boundary_particles)
         self.contacts = narrowphase.Contacts(cap.max_contacts)
         self.impact_buffer = impact_kernels.Impacts(cap.max_impacts, cap.max_contacts)
+        self.fields = stages.WorldFields(self.bodies, self.statics, self.particles, self.grid, self.contacts,
+                                         self.impact_buffer)
         self.particles.body.fill(-1)
         self.statics.gravity[None] = tuple(map(float, self.options.gravity))
         self.stats = WorldStats()
@@ -243,7 +281,8 @@ class World:
         _write_body(self.bodies, self.particles, slot, pose, inertia.astype(np.float32),
                     inverse_inertia.astype(np.float32), float(inverse_mass), float(friction),
                     float(restitution), int(fixed), float(compliance), float(contact_radius), start, np.ascontiguousarray(offsets, dtype=np.float32),
-                    np.ascontiguousarray(radii, dtype=np.float32), float(np.percentile(radii, 50)))
+                    np.ascontiguousarray(radii, dtype=np.float32), float(np.percentile(radii, 50)),
+                    cluster_spheres(offsets, radii, MAX_CLUSTERS).astype(np.float32))
         self._body_range[slot] = (start, count)
         self.breakable = getattr(self, "breakable", {})
         self.breakable[slot] = bool(breakable)
@@ -344,8 +383,8 @@ class World:
         cells small.)"""
         t_frame = time.perf_counter()
         opt = self.options
-        _reset_advance_counters(self.contacts, self.impact_buffer, self.grid)
-        count = int(integrate.substep_count(self.bodies, self.statics, opt.contact_margin, frame_dt, int(substeps),
+        _reset_advance_counters(self.fields)
+        count = int(integrate.substep_count(self.fields, opt.contact_margin, frame_dt, int(substeps),
                                             opt.substep_motion_fraction))
         if count > 0:  # someone is awake
             if count > opt.max_substeps:
@@ -357,16 +396,15 @@ class World:
         self.stats.substeps = count
         self.stats.total_substeps += count
         self.stats.frames += 1
-        self.stats.contacts = int(self.contacts.count[None]) if count else 0
-        self.stats.peak_contacts = max(int(self.contacts.peak[None]), self.stats.contacts)
-        overflow = int(self.contacts.overflow[None])
-        grid_overflow = int(self.grid.overflow[None])
+        contacts, peak, overflow, grid_overflow, impact_overflow = (int(v) for v in _advance_counters(self.fields))
+        self.stats.contacts = contacts if count else 0
+        self.stats.peak_contacts = max(peak, self.stats.contacts)
         if grid_overflow:
             print(f"taichi-frac dynamics: {grid_overflow} grid entries lost in this frame (large particles "
                   f"occupying many cells): contacts may be missed; raise WorldCapacity(max_boundary_particles=...)")
         self.stats.contact_overflows = overflow
         self.stats.total_contact_overflows += overflow
-        self.stats.impact_overflows = int(self.impact_buffer.overflow[None])
+        self.stats.impact_overflows = impact_overflow
         if overflow:
             print(f"taichi-frac dynamics: {overflow} contacts lost in this frame: more than "
                   f"max_contacts={self.capacity.max_contacts} in a substep; raise WorldCapacity(max_contacts=...)")
@@ -374,11 +412,10 @@ class World:
 
     def _substep(self, dt: float, index: int) -> None:
         opt = self.options
-        b, p, g, c = self.bodies, self.particles, self.grid, self.contacts
         clock = self._clock()
-        stages.collide(b, self.statics, p, g, c, opt.contact_margin, dt, opt.sleep_time)
+        stages.collide(self.fields, opt.contact_margin, dt, opt.sleep_time)
         clock("collision")
-        stages.respond(b, self.statics, p, c, self.impact_buffer, dt, opt.solver_iterations,
+        stages.respond(self.fields, dt, opt.solver_iterations,
                        opt.restitution_iterations, 1.0 - math.exp(-opt.position_correction_rate * dt),
                        opt.allowed_penetration,
                        opt.max_correction_speed, opt.restitution_threshold, index, opt.record_force_threshold,
