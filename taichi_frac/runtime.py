@@ -49,9 +49,8 @@ def init(arch: str = "cpu", *, debug: bool = False) -> str:
         log_level=ti.WARN,
     )
     _initialised_arch = arch
-    global SERIAL_SMALL_LOOPS, SERIAL_NARROWPHASE
+    global SERIAL_SMALL_LOOPS
     SERIAL_SMALL_LOOPS = arch == "cpu"
-    SERIAL_NARROWPHASE = arch == "cpu" and (os.cpu_count() or 1) <= 4
     return arch
 
 
@@ -61,13 +60,11 @@ def init(arch: str = "cpu", *, debug: bool = False) -> str:
 # (``ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)``), set by init().
 SERIAL_SMALL_LOOPS = True
 
-# The narrowphase, the one heavy pass, runs serially on a CPU of at most 4 cores. Measured
-# on this project's 2-core CPU (Taichi 1.7.4): its parallel task gained little from the
-# second core (the two threads' contact appends share cache lines) and paid the dispatch
-# every substep; serial, the 13 unbreakable rings went from 2.59 to 2.05 ms/frame
-# (single-scale 12.4 -> 9.9) and the glass walls stayed at 7 ms/frame. Larger CPUs keep the
-# parallel pass (not measured here). Set by init().
-SERIAL_NARROWPHASE = True
+# The narrowphase, the one heavy pass, stays a parallel task. Serial, on this 2-core CPU
+# (Taichi 1.7.4, `taichi-frac bench dynamics`, three alternating runs each, ms/frame avg /
+# max): 13 rings two-scale 2.0-2.3 / 10.9-12.9 against 2.2-2.3 / 10.4-10.6 parallel, the
+# 216-fragment pile 10.9-12.5 against 9.9-11.3; only single-scale gained (6.7-7.5 against
+# 9.5-10.5: its many contacts are appended by both threads onto shared cache lines).
 
 
 def is_initialised() -> bool:

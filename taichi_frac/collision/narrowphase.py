@@ -316,9 +316,7 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.
                       statics: ti.template(), contacts: ti.template(), margin, sleep_time, dt):
     """One pass over the particles of awake bodies: sphere-sphere contacts of active
     particles, sphere-plane and sphere-box contacts of bodies near a static collider.
-    Serial on a CPU of at most 4 cores (``runtime.SERIAL_NARROWPHASE``), parallel
-    elsewhere."""
-    ti.loop_config(serialize=ti.static(runtime.SERIAL_NARROWPHASE))
+    A parallel task on every arch (see ``runtime`` for the serial variant measured)."""
     for i in range(particles.slot_end[None]):
         a = particles.body[i]
         if a >= 0:

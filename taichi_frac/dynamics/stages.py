@@ -3,9 +3,8 @@
 passes (``ti.func`` loops over one index set each, defined in collision/ and dynamics/) as
 successive tasks of ONE kernel: on the CPU backend a kernel launch costs ~17 us and a
 parallel-for task 25-60 us, which is the whole budget of a pass over a few thousand
-particles, so a substep is two launches, and on a small CPU every pass runs serially
-(``runtime.SERIAL_SMALL_LOOPS``, ``runtime.SERIAL_NARROWPHASE``; then the contact order,
-and with it a run, is reproducible). Scalars are arguments; vectors live in fields (a
+particles, so a substep is two launches and one parallel task (the narrowphase); the other
+passes run serially on the CPU (``runtime.SERIAL_SMALL_LOOPS``). Scalars are arguments; vectors live in fields (a
 vector argument costs ~50 us per launch); each data-oriented container argument costs
 ~8 us of Python per launch.
 """

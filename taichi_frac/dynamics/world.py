@@ -282,7 +282,7 @@ class World:
                     inverse_inertia.astype(np.float32), float(inverse_mass), float(friction),
                     float(restitution), int(fixed), float(compliance), float(contact_radius), start, np.ascontiguousarray(offsets, dtype=np.float32),
                     np.ascontiguousarray(radii, dtype=np.float32), float(np.percentile(radii, 50)),
-                    cluster_spheres(offsets, radii, MAX_CLUSTERS).astype(np.float32))
+                    cluster_spheres(offsets, radii, min(MAX_CLUSTERS, max(1, count // 16))).astype(np.float32))
         self._body_range[slot] = (start, count)
         self.breakable = getattr(self, "breakable", {})
         self.breakable[slot] = bool(breakable)
