@@ -45,17 +45,37 @@ def _fragment_model():
     return build_body_model(vertices, tets, 2400.0, boundary_group_size=4)
 
 
-def _rings(ctx: BenchContext, scene, single: bool) -> dict:
+def _rings(ctx: BenchContext, scene, single: bool, repeat: int) -> dict:
+    """``repeat`` runs of the rings; the median of their average and of their slowest
+    frame [ms] (a pile of rings is chaotic and contacts are appended in thread order, so
+    one run of single-scale differed from the next by up to 1.6x), the other columns from
+    the median run."""
     from .tables import run_scene
 
     label = "single-scale" if single else "two-scale"
-    sim, summary, counts = run_scene(ctx, scene, f"13 rings {label}", fracture=False, single_scale=single)
-    world = sim.world
-    bodies = world.body_ids
-    state = world.body_state(bodies)
-    return dict(summary=summary, particles=counts["collision"], substeps=counts["substeps_per_frame"],
-                overflows=world.stats.total_contact_overflows, asleep=int(state["sleeping"].sum()),
-                bodies=len(bodies), depth=deepest_below_ground(world, bodies))
+    runs = []
+    for _ in range(repeat):
+        sim, summary, counts = run_scene(ctx, scene, f"13 rings {label}", fracture=False, single_scale=single)
+        world = sim.world
+        bodies = world.body_ids
+        state = world.body_state(bodies)
+        runs.append(dict(mean=summary.ms_per_frame["mean"], max=summary.ms_per_frame["max"],
+                         frames=summary.frames, particles=counts["collision"], substeps=counts["substeps_per_frame"],
+                         overflows=world.stats.total_contact_overflows, asleep=int(state["sleeping"].sum()),
+                         bodies=len(bodies), depth=deepest_below_ground(world, bodies)))
+    means = [r["mean"] for r in runs]
+    maxes = [r["max"] for r in runs]
+    median_run = runs[int(np.argsort(means)[len(runs) // 2])]
+    return dict(median_run, mean=float(np.median(means)), max=float(np.median(maxes)), means=means, maxes=maxes)
+
+
+def _rings_row(label: str, r: dict) -> list:
+    spread = ""
+    if len(r["means"]) > 1:
+        spread = (f" ({min(r['means']):.1f}-{max(r['means']):.1f} / "
+                  f"{min(r['maxes']):.1f}-{max(r['maxes']):.1f})")
+    return [label, f"{r['particles']:,}", ms_pair(r["mean"], r["max"]) + spread, f"{r['substeps']:.1f}",
+            f"{r['asleep']} / {r['bodies']}", f"{1e3 * r['depth']:.3f}", r["overflows"]]
 
 
 def _fragment_pile(ctx: BenchContext, scene, count: int, seconds: float) -> dict:
@@ -102,41 +122,34 @@ def run_dynamics(args) -> int:
     sim = scene.simulation
     t0 = time.perf_counter()
     warm_up(ctx)
-    two = _rings(ctx, scene, single=False)
-    one = _rings(ctx, scene, single=True)
+    two = _rings(ctx, scene, single=False, repeat=args.repeat)
+    one = _rings(ctx, scene, single=True, repeat=args.repeat)
     # The same unbreakable rings refined to 3 particle radii of motion per substep instead
     # of the scene's: what unbreakable bodies can afford (see the scene file's notes).
     coarse_scene = load_scene(args.scene, (args.set or []) + [f"simulation.substep_motion_fraction={COARSE_FRACTION}"])
-    coarse = _rings(ctx, coarse_scene, single=False)
+    coarse = _rings(ctx, coarse_scene, single=False, repeat=args.repeat)
     drops = {n: grouping.measure_drop(ctx, grouping.drop_scene(n)) for n in (4, 1)}
     pile = _fragment_pile(ctx, scene, args.fragments, args.seconds)
-    t_two, t_one = two["summary"].ms_per_frame, one["summary"].ms_per_frame
     d4, d1 = drops[4], drops[1]
     lines = [
         f"`{args.scene}`{' with ' + ', '.join(args.set) if args.set else ''}: rings unbreakable, "
-        f"{two['summary'].frames} frames of {1e3 * sim.frame_dt:g} ms, {sim.substeps} substeps where bodies touch "
+        f"{two['frames']} frames of {1e3 * sim.frame_dt:g} ms, {sim.substeps} substeps where bodies touch "
         f"(more while one moves over {sim.substep_motion_fraction:g} particle radius per substep), "
         f"{sim.solver_iterations} solver sweeps; arch {args.arch}.",
         "",
-        md_table(["scene", "collision particles", "ms/frame avg / max", "substeps/frame", "asleep at end",
-                  "deepest below ground [mm]", "contacts lost"], [
-            ["13 rings, two-scale", f"{two['particles']:,}", ms_pair(t_two["mean"], t_two["max"]),
-             f"{two['substeps']:.1f}", f"{two['asleep']} / {two['bodies']}", f"{1e3 * two['depth']:.3f}",
-             two["overflows"]],
-            ["13 rings, single-scale", f"{one['particles']:,}", ms_pair(t_one["mean"], t_one["max"]),
-             f"{one['substeps']:.1f}", f"{one['asleep']} / {one['bodies']}", f"{1e3 * one['depth']:.3f}",
-             one["overflows"]],
-            [f"13 rings, two-scale, {COARSE_FRACTION:g} particle radii per substep", f"{coarse['particles']:,}",
-             ms_pair(coarse["summary"].ms_per_frame["mean"], coarse["summary"].ms_per_frame["max"]),
-             f"{coarse['substeps']:.1f}", f"{coarse['asleep']} / {coarse['bodies']}",
-             f"{1e3 * coarse['depth']:.3f}", coarse["overflows"]],
+        md_table(["scene", "collision particles",
+                  "ms/frame avg / max" + (f", median of {args.repeat} runs (range)" if args.repeat > 1 else ""),
+                  "substeps/frame", "asleep at end", "deepest below ground [mm]", "contacts lost"], [
+            _rings_row("13 rings, two-scale", two),
+            _rings_row("13 rings, single-scale", one),
+            _rings_row(f"13 rings, two-scale, {COARSE_FRACTION:g} particle radii per substep", coarse),
             [f"{args.fragments} fragments ({pile['tets']} tets each), two-scale, {args.seconds:g} s",
              f"{pile['particles']:,}", ms_pair(pile["avg"], pile["max"]), "", f"{pile['asleep']} / {args.fragments}",
              f"{1e3 * pile['depth']:.3f}", pile["overflows"]],
         ]),
         "",
-        f"Two-scale is **{t_one['mean'] / t_two['mean']:.1f}x** faster than single-scale on average "
-        f"({t_one['max'] / t_two['max']:.1f}x on the slowest frame).",
+        f"Two-scale is **{one['mean'] / two['mean']:.1f}x** faster than single-scale on average "
+        f"({one['max'] / two['max']:.1f}x on the slowest frame; medians of {args.repeat} runs each).",
         "",
         md_table(["what two-scale changes against single-scale", "two-scale (n = 4)", "single-scale (n = 1)",
                   "difference"], [
@@ -168,5 +181,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="override a scene value, e.g. --set simulation.substeps=4 (repeatable)")
     p.add_argument("--fragments", type=int, default=216, help="fragments in the pile (default 216)")
     p.add_argument("--seconds", type=float, default=3.0, help="simulated time of the pile [s] (default 3)")
+    p.add_argument("--repeat", type=int, default=3,
+                   help="runs of each rings row; the table shows their medians (default 3)")
     p.add_argument("--arch", default="cpu")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
