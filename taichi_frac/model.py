@@ -13,6 +13,7 @@ Layers:
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -153,7 +154,8 @@ def group_surface_particles(
     # The greedy walk below is sequential; on a fragment's few hundred particles plain
     # Python lists beat numpy's per-call overhead (~4x on a ring's 2,562).
     pos = positions[surface].tolist()
-    rows = [indices[indptr[k]:indptr[k + 1]].tolist() for k in range(s_count)]
+    flat, ptr = indices.tolist(), indptr.tolist()
+    rows = [flat[ptr[k]:ptr[k + 1]] for k in range(s_count)]  # (one tolist, not one per row)
     free = [True] * s_count
     visited = [False] * s_count
     groups, dropped = [], []
@@ -347,13 +349,14 @@ def ray_exit_distance(vertices, faces, origin, direction, reach):
     corners = vertices[faces]  # (F,3,3)
     centre = corners.mean(axis=1)
     spread = float(np.linalg.norm(corners - centre[:, None, :], axis=2).max())
-    near = cKDTree(centre).query_ball_point(origin, reach + spread)
-    counts = np.fromiter((len(n) for n in near), dtype=np.int64, count=len(near))
+    near = cKDTree(centre).query_ball_point(origin, reach + spread, return_sorted=False)
+    counts = np.fromiter(map(len, near), dtype=np.int64, count=len(near))
     result = np.full(len(origin), np.inf)
-    if counts.sum() == 0:
+    total = int(counts.sum())
+    if total == 0:
         return result
     ray = np.repeat(np.arange(len(origin)), counts)
-    face = np.concatenate([np.asarray(n, dtype=np.int64) for n in near if len(n)])
+    face = np.fromiter(itertools.chain.from_iterable(near), dtype=np.int64, count=total)
     o, d = origin[ray], direction[ray]
     v0 = corners[face, 0]
     e1, e2 = corners[face, 1] - v0, corners[face, 2] - v0
