@@ -53,11 +53,22 @@ def integrate_velocities(bodies: ti.template(), statics: ti.template(), dt):
 
 @ti.func
 def _integrate_position(bodies: ti.template(), gravity, b, dt, max_rotation, sleep_linear_speed, sleep_angular_speed,
-                        sleep_time):
+                        sleep_time, max_correction_speed):
     if bodies.active[b] == 1 and bodies.sleeping[b] == 0 and bodies.fixed[b] == 0:
         v = bodies.linear_velocity[b]
         w = bodies.angular_velocity[b]
-        step = (v + bodies.pseudo_linear_velocity[b]) * dt
+        # The split impulse's push-out, held to max_correction_speed at every point of the
+        # body: each contact asks for at most that speed, but a body overlapped from all
+        # sides (a fracture's piece inside its sibling's collision spheres) has push-outs
+        # that fight, and solving them pumped its pseudo velocity to ~4 m/s (a chip driven
+        # 17 mm into the floor in one 4 ms substep).
+        v_pseudo = bodies.pseudo_linear_velocity[b]
+        w_pseudo = bodies.pseudo_angular_velocity[b]
+        fastest = v_pseudo.norm() + w_pseudo.norm() * bodies.bounding_radius[b]
+        if fastest > max_correction_speed:
+            v_pseudo *= max_correction_speed / fastest
+            w_pseudo *= max_correction_speed / fastest
+        step = (v + v_pseudo) * dt
         if bodies.touched[b] == 0:
             # No contact: the exact constant-gravity step x += v0 dt + g dt^2 / 2 (v is
             # already v0 + g dt), so free flight is exact at any substep length.
@@ -69,7 +80,6 @@ def _integrate_position(bodies: ti.template(), gravity, b, dt, max_rotation, sle
         q = bodies.orientation[b]
         rot = quat_to_matrix(q)
         momentum = rot @ (bodies.inertia_body[b] @ (rot.transpose() @ w))
-        w_pseudo = bodies.pseudo_angular_velocity[b]
         pieces = ti.max(1, ti.cast(ti.ceil((w + w_pseudo).norm() * dt / max_rotation), ti.i32))
         h = dt / pieces
         for _ in range(pieces):
@@ -97,7 +107,7 @@ def _integrate_position(bodies: ti.template(), gravity, b, dt, max_rotation, sle
 
 @ti.func
 def integrate_positions(bodies: ti.template(), statics: ti.template(), dt, max_rotation, sleep_linear_speed,
-                        sleep_angular_speed, sleep_time):
+                        sleep_angular_speed, sleep_time, max_correction_speed):
     """Pass over bodies: positions and orientations from the new velocities (rotation in
     pieces of at most ``max_rotation`` [rad]); sleeping."""
     gravity = statics.gravity[None]
@@ -106,11 +116,11 @@ def integrate_positions(bodies: ti.template(), statics: ti.template(), dt, max_r
         for _ in range(1):
             for b in range(bodies.slot_end[None]):
                 _integrate_position(bodies, gravity, b, dt, max_rotation, sleep_linear_speed, sleep_angular_speed,
-                                    sleep_time)
+                                    sleep_time, max_correction_speed)
     else:
         for b in range(bodies.slot_end[None]):
             _integrate_position(bodies, gravity, b, dt, max_rotation, sleep_linear_speed, sleep_angular_speed,
-                                sleep_time)
+                                sleep_time, max_correction_speed)
 
 
 @ti.func

@@ -72,8 +72,9 @@ class DynamicsOptions:
             with a fixed 0.2 per substep, a 10 ms substep left 5x more of a penetration
             standing for a frame).
         allowed_penetration: penetration left alone (slop), fraction of particle radius [-].
-        max_correction_speed: cap on the split-impulse push-out speed [m/s] (deeply
-            overlapped bodies separate gently instead of exploding).
+        max_correction_speed: cap on the split-impulse push-out speed [m/s], per contact
+            and at every point of a body (deeply overlapped bodies separate gently instead
+            of exploding; a piece overlapped from all sides is not pumped faster).
         restitution_threshold: approach speeds below this do not bounce [m/s].
         single_scale: default of ``add_body(single_scale=None)``: collide with the physics
             surface particles instead of the boundary layer.

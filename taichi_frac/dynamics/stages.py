@@ -55,4 +55,4 @@ def respond(f: ti.template(),
     solver.store_impulses(f.particles, f.contacts)
     impacts.record_impacts(f.bodies, f.contacts, f.impacts, dt, substep, force_threshold, impact_speed)
     integrate.integrate_positions(f.bodies, f.statics, dt, max_rotation, sleep_linear_speed, sleep_angular_speed,
-                                  sleep_time)
+                                  sleep_time, max_correction_speed)
