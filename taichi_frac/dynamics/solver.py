@@ -29,9 +29,9 @@ mat3 = ti.math.mat3
 # constraint (no normal impulse, so no friction), only the split impulse's push-out. The
 # centre-to-centre normal of so deep an overlap says little about the surfaces, and the
 # pieces of a fracture are born so: the collision spheres on both sides of a crack face
-# overlap by up to two radii. Constrained, their ~50 arbitrary normals kicked an 11 g chip
-# to ~4 m/s and 19 mm into the floor within one 4 ms substep; an impact's penetration stays
-# below ~0.3 of a radius.
+# overlap by up to two radii (an impact's penetration stays below ~0.3 of a radius).
+# Measured on the 13 rings with fracture (40 frames, worst depth below the floor in
+# physics-particle radii, three runs): 0.23-0.35 with, 0.43-0.64 without.
 DEEP_OVERLAP = 0.5
 
 
