@@ -52,15 +52,6 @@ def _pseudo_velocity_at(bodies: ti.template(), b, arm):
 
 
 @ti.func
-def _inverse_mass_along(bodies: ti.template(), b, arm, direction):
-    k = 0.0
-    if b >= 0:
-        rn = arm.cross(direction)
-        k = bodies.solver_inverse_mass[b] + rn.dot(bodies.solver_inverse_inertia[b] @ rn)
-    return k
-
-
-@ti.func
 def _apply(bodies: ti.template(), b, arm, impulse):
     if b >= 0:
         bodies.linear_velocity[b] += bodies.solver_inverse_mass[b] * impulse
@@ -68,13 +59,27 @@ def _apply(bodies: ti.template(), b, arm, impulse):
 
 
 @ti.func
-def _angular_response(bodies: ti.template(), b, arm, direction):
-    """Angular velocity change of body ``b`` per unit impulse along ``direction`` at ``arm``
-    [rad/s per N s] (0 for a static collider)."""
-    r = vec3(0.0)
+def _body_response(bodies: ti.template(), b, arm, n, t1, t2):
+    """Body ``b``'s angular velocity change per unit impulse along n, t1 and t2 at ``arm``
+    [rad/s per N s], and its inverse effective mass along each (vec3: 1/m + (r x d) .
+    I^-1 (r x d)) [1/kg]; zeros for a static collider. Each I^-1 (r x d) is formed once
+    and serves both (formed twice, the mat-vecs doubled Taichi's front-end work on the
+    respond kernel, paid in every new process)."""
+    rn = vec3(0.0)
+    r1 = vec3(0.0)
+    r2 = vec3(0.0)
+    k = vec3(0.0)
     if b >= 0:
-        r = bodies.solver_inverse_inertia[b] @ arm.cross(direction)
-    return r
+        inverse_inertia = bodies.solver_inverse_inertia[b]
+        cn = arm.cross(n)
+        c1 = arm.cross(t1)
+        c2 = arm.cross(t2)
+        rn = inverse_inertia @ cn
+        r1 = inverse_inertia @ c1
+        r2 = inverse_inertia @ c2
+        m = bodies.solver_inverse_mass[b]
+        k = vec3(m + cn.dot(rn), m + c1.dot(r1), m + c2.dot(r2))
+    return rn, r1, r2, k
 
 
 @ti.func
@@ -161,8 +166,6 @@ def _prepare_contact(bodies: ti.template(), contacts: ti.template(), c):
         arm_b = contacts.point[c] - bodies.position[b]
     contacts.arm_a[c] = arm_a
     contacts.arm_b[c] = arm_b
-    k = _inverse_mass_along(bodies, a, arm_a, n) + _inverse_mass_along(bodies, b, arm_b, n)
-    contacts.normal_mass[c] = 1.0 / k if k > 0.0 else 0.0
     # Friction directions t1, t2 (any orthonormal pair across n) and every direction's
     # angular response, so a sweep needs no inertia matrix (Catto 2005; Box2D, Bullet).
     t1 = vec3(1.0, 0.0, 0.0)
@@ -172,15 +175,17 @@ def _prepare_contact(bodies: ti.template(), contacts: ti.template(), c):
     t2 = n.cross(t1)
     contacts.tangent1[c] = t1
     contacts.tangent2[c] = t2
-    contacts.response_a[c, 0] = _angular_response(bodies, a, arm_a, n)
-    contacts.response_a[c, 1] = _angular_response(bodies, a, arm_a, t1)
-    contacts.response_a[c, 2] = _angular_response(bodies, a, arm_a, t2)
-    contacts.response_b[c, 0] = _angular_response(bodies, b, arm_b, n)
-    contacts.response_b[c, 1] = _angular_response(bodies, b, arm_b, t1)
-    contacts.response_b[c, 2] = _angular_response(bodies, b, arm_b, t2)
-    k1 = _inverse_mass_along(bodies, a, arm_a, t1) + _inverse_mass_along(bodies, b, arm_b, t1)
-    k2 = _inverse_mass_along(bodies, a, arm_a, t2) + _inverse_mass_along(bodies, b, arm_b, t2)
-    contacts.tangent_mass[c] = ti.math.vec2(1.0 / k1 if k1 > 0.0 else 0.0, 1.0 / k2 if k2 > 0.0 else 0.0)
+    ra_n, ra_1, ra_2, ka = _body_response(bodies, a, arm_a, n, t1, t2)
+    rb_n, rb_1, rb_2, kb = _body_response(bodies, b, arm_b, n, t1, t2)
+    contacts.response_a[c, 0] = ra_n
+    contacts.response_a[c, 1] = ra_1
+    contacts.response_a[c, 2] = ra_2
+    contacts.response_b[c, 0] = rb_n
+    contacts.response_b[c, 1] = rb_1
+    contacts.response_b[c, 2] = rb_2
+    k = ka + kb  # inverse effective masses along n, t1, t2
+    contacts.normal_mass[c] = 1.0 / k[0] if k[0] > 0.0 else 0.0
+    contacts.tangent_mass[c] = ti.math.vec2(1.0 / k[1] if k[1] > 0.0 else 0.0, 1.0 / k[2] if k[2] > 0.0 else 0.0)
     contacts.approach_speed[c] = (_velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b)).dot(n)
     contacts.pseudo_impulse[c] = 0.0
 
