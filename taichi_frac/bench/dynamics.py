@@ -5,7 +5,7 @@
   ms per 20 ms frame (average / max), substeps per frame, contacts lost to capacity, bodies
   asleep at the end, the deepest collision sphere below the ground at the end; and
   two-scale again with coarser refinement (``COARSE_FRACTION`` particle radii of motion per
-  substep instead of the scene's 2), what unbreakable rings can afford;
+  substep instead of the scene's 1.5), what unbreakable rings can afford;
 - what two-scale costs against single-scale: the report's single-ring drop
   (``grouping.measure_drop``: rest height against the exact 0.025 m, rebound, first-impact
   impulse, penetration) with boundary grouping n = 4 against n = 1 (the rings' rest
@@ -28,9 +28,8 @@ from .common import SCENES, BenchContext, deepest_below_ground, md_table, ms_pai
 
 #: Motion per substep [particle radii] of the table's coarse-stepping row. Measured with
 #: the rings unbreakable (worst collision-sphere depth below the floor during a 3 s run):
-#: 0.16 radii against 0.036 at the scene's 2; with fracture, small chips went 0.63-0.87
-#: physics-particle radii into the floor (the scene test allows 1), so the scene keeps 2
-#: (scenes/thirteen_rings.toml).
+#: 0.16 radii; with fracture, small chips went up to 0.87 physics-particle radii into the
+#: floor (the scene test allows 1), so the scene keeps 1.5 (scenes/thirteen_rings.toml).
 COARSE_FRACTION = 3.0
 
 

@@ -48,8 +48,11 @@ class Contacts:
     Written by the narrowphase (the impulses the same pair had last substep: warm start)
     and the solver: normal_impulse ([N s] accumulated, >= 0), tangent_impulse (vec3
     [N s]), pseudo_impulse (split impulse, [N s]).
+    Written by order_contacts: order (i32), the contact slots in the order the solver,
+    the impulse cache and the impact records visit them (sorted by querying particle).
     Scalars: count (may exceed capacity: the excess is ``overflow``), overflow (summed over
-    an advance, reset by the World), peak (largest count since the World reset it).
+    an advance, reset by the World), peak (largest count since the World reset it),
+    order_epoch (sorts so far).
     """
 
     def __init__(self, capacity: int):
@@ -78,6 +81,8 @@ class Contacts:
         self.pseudo_impulse = ti.field(ti.f32, shape=capacity)
         self.query = ti.field(ti.i32, shape=capacity)
         self.key = ti.field(ti.i32, shape=capacity)
+        self.order = ti.field(ti.i32, shape=capacity)
+        self.order_epoch = ti.field(ti.i32, shape=())
         self.count = ti.field(ti.i32, shape=())
         self.overflow = ti.field(ti.i32, shape=())
         self.peak = ti.field(ti.i32, shape=())
@@ -325,3 +330,35 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.
                     _sphere_contacts(bodies, particles, grid, statics, contacts, margin, sleep_time, dt, i, a)
                 if bodies.near_static[a] == 1:
                     _static_contacts(bodies, particles, statics, contacts, margin, dt, i, a)
+
+
+@ti.func
+def order_contacts(particles: ti.template(), contacts: ti.template()):
+    """Serial counting sort of the contacts by querying particle into ``contacts.order``,
+    the order the solver visits them. The parallel narrowphase appends them in whatever
+    order its threads run, and a Gauss-Seidel solve depends on the visiting order, so two
+    runs of a scene differed. A particle's own contacts are appended by one thread in
+    program order, so a stable sort by particle makes the order, and the run, reproducible.
+    Particles are counted under a per-sort stamp, so no array is cleared; the cost is one
+    serial pass over the particle slots and three over the contacts."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        n = ti.min(contacts.count[None], contacts.capacity)
+        epoch = contacts.order_epoch[None] + 1
+        contacts.order_epoch[None] = epoch
+        for c in range(n):
+            q = contacts.query[c]
+            if particles.order_stamp[q] != epoch:
+                particles.order_stamp[q] = epoch
+                particles.order_start[q] = 0
+            particles.order_start[q] += 1
+        running = 0
+        for p in range(particles.slot_end[None]):
+            if particles.order_stamp[p] == epoch:
+                k = particles.order_start[p]
+                particles.order_start[p] = running
+                running += k
+        for c in range(n):
+            q = contacts.query[c]
+            contacts.order[particles.order_start[q]] = c
+            particles.order_start[q] += 1

@@ -123,7 +123,8 @@ def record_impacts(bodies: ti.template(), contacts: ti.template(), impacts: ti.t
     for _ in range(1):  # one serial task
         mask = impacts.table_size - 1
         used = 0
-        for c in range(ti.min(contacts.count[None], contacts.capacity)):
+        for m in range(ti.min(contacts.count[None], contacts.capacity)):
+            c = contacts.order[m]  # (the solver's order: sums reproducible run to run)
             jn = contacts.normal_impulse[c]
             impulse = jn * contacts.normal[c] + contacts.tangent_impulse[c]
             weight = impulse.norm()

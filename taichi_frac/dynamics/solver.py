@@ -105,10 +105,10 @@ def prepare_contacts(bodies: ti.template(), contacts: ti.template(), warm_start)
     (Catto, "Iterative Dynamics with Temporal Coherence", GDC 2005)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
-        for c in range(ti.min(contacts.count[None], contacts.capacity)):
-            _prepare_contact(bodies, contacts, c)
-        for c in range(ti.min(contacts.count[None], contacts.capacity)):
-            _warm_start(bodies, contacts, c, warm_start)
+        for k in range(ti.min(contacts.count[None], contacts.capacity)):
+            _prepare_contact(bodies, contacts, contacts.order[k])
+        for k in range(ti.min(contacts.count[None], contacts.capacity)):
+            _warm_start(bodies, contacts, contacts.order[k], warm_start)
 
 
 @ti.func
@@ -137,7 +137,8 @@ def store_impulses(particles: ti.template(), contacts: ti.template()):
     for _ in range(1):
         following = 1 - particles.parity[None]
         epoch = particles.cache_epoch[None] + 1
-        for c in range(ti.min(contacts.count[None], contacts.capacity)):
+        for m in range(ti.min(contacts.count[None], contacts.capacity)):
+            c = contacts.order[m]
             i = contacts.query[c]
             if particles.cache_stamp[following, i] != epoch:
                 particles.cache_stamp[following, i] = epoch
@@ -263,7 +264,7 @@ def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
             # (One loop over both passes: two inlined copies of the update doubled the
             # respond kernel's compile time, which every new process pays.)
             for k in range(2 * count):
-                c = k % count
+                c = contacts.order[k % count]
                 if (contacts.body_b[c] < 0) == (k >= count):
                     _solve_contact(bodies, contacts, c, dt, position_correction, allowed_penetration,
                                    max_correction_speed)
@@ -273,7 +274,8 @@ def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
         # is not bought by pushing a struck body into the floor (a bounce-only pass pushed
         # a resting ring struck by a falling one up to a particle radius into the ground).
         bouncing = 0
-        for c in range(count):
+        for m in range(count):
+            c = contacts.order[m]
             gap = contacts.separation[c]
             target = ti.select(gap > -DEEP_OVERLAP * contacts.radius[c], -ti.max(gap, 0.0) / dt, -1e30)
             v0 = contacts.approach_speed[c]
@@ -283,7 +285,8 @@ def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
             contacts.restitution_target[c] = target
         if bouncing == 1:
             for sweep in range(restitution_iterations):
-                for c in range(count):
+                for m in range(count):
+                    c = contacts.order[m]
                     a = contacts.body_a[c]
                     b = contacts.body_b[c]
                     n = contacts.normal[c]

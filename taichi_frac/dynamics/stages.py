@@ -3,8 +3,9 @@
 passes (``ti.func`` loops over one index set each, defined in collision/ and dynamics/) as
 successive tasks of ONE kernel: on the CPU backend a kernel launch costs ~17 us and a
 parallel-for task 25-60 us, which is the whole budget of a pass over a few thousand
-particles, so a substep is two launches and one parallel task (the narrowphase); the other
-passes run serially on the CPU (``runtime.SERIAL_SMALL_LOOPS``). Scalars are arguments; vectors live in fields (a
+particles, so a substep is two launches and one parallel task (the narrowphase, whose
+contacts ``order_contacts`` then sorts so that runs are reproducible); the other passes
+run serially on the CPU (``runtime.SERIAL_SMALL_LOOPS``). Scalars are arguments; vectors live in fields (a
 vector argument costs ~50 us per launch); each data-oriented container argument costs
 ~8 us of Python per launch.
 """
@@ -39,6 +40,7 @@ def collide(f: ti.template(), margin: ti.f32, dt: ti.f32, sleep_time: ti.f32):
     grid.bucket_scatter(f.particles, f.grid)
     narrowphase.clear_contacts(f.contacts)
     narrowphase.particle_contacts(f.bodies, f.particles, f.grid, f.statics, f.contacts, margin, sleep_time, dt)
+    narrowphase.order_contacts(f.particles, f.contacts)
 
 
 @ti.kernel

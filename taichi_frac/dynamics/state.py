@@ -130,6 +130,9 @@ class Particles:
             unless it is larger than the typical radius). Writer: broadphase.
         active: i32 1 = the particle lies inside a neighbour body's grown box this substep,
             so it is put in the grid and queried. Writer: broadphase.
+        order_stamp, order_start: i32, the contacts' counting sort by querying particle
+            (narrowphase.order_contacts): the sort that counted the particle last, and
+            where its contacts start in ``Contacts.order``.
         Contact cache (warm starting), two halves (previous / next substep), ``parity``
         names the previous one: cache_count (2, P) contacts kept for particle P as the
         querying side; cache_key (2, P, CACHE_SLOTS) partner (particle slot >= 0, -1 - k
@@ -157,6 +160,8 @@ class Particles:
         self.cache_stamp = ti.field(ti.i32, shape=(2, capacity))
         self.parity = ti.field(ti.i32, shape=())
         self.cache_epoch = ti.field(ti.i32, shape=())
+        self.order_stamp = ti.field(ti.i32, shape=capacity)
+        self.order_start = ti.field(ti.i32, shape=capacity)
         self.slot_end = ti.field(ti.i32, shape=())
 
 
