@@ -60,12 +60,6 @@ def init(arch: str = "cpu", *, debug: bool = False) -> str:
 # (``ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)``), set by init().
 SERIAL_SMALL_LOOPS = True
 
-# The narrowphase, the one heavy pass, stays a parallel task. Serial, on this 2-core CPU
-# (Taichi 1.7.4, `taichi-frac bench dynamics`, three alternating runs each, ms/frame avg /
-# max): 13 rings two-scale 2.0-2.3 / 10.9-12.9 against 2.2-2.3 / 10.4-10.6 parallel, the
-# 216-fragment pile 10.9-12.5 against 9.9-11.3; only single-scale gained (6.7-7.5 against
-# 9.5-10.5: its many contacts are appended by both threads onto shared cache lines).
-
 
 def is_initialised() -> bool:
     return _initialised_arch is not None

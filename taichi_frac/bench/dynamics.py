@@ -47,9 +47,10 @@ def _fragment_model():
 
 def _rings(ctx: BenchContext, scene, single: bool, repeat: int) -> dict:
     """``repeat`` runs of the rings; the median of their average and of their slowest
-    frame [ms] (a pile of rings is chaotic and contacts are appended in thread order, so
-    one run of single-scale differed from the next by up to 1.6x), the other columns from
-    the median run."""
+    frame [ms], the other columns from the median run. The runs compute the same motion
+    (the contacts are visited in a reproducible order) but not in the same time: the
+    slowest frame of one run ranged 6.8-14.8 ms in three runs (before the contacts were
+    sorted, single-scale runs also differed in their motion, by up to 1.6x in time)."""
     from .tables import run_scene
 
     label = "single-scale" if single else "two-scale"

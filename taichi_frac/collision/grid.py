@@ -11,7 +11,8 @@ Cells are sized for the *typical* particle (``typical_particle_radius``: a body'
 radius), not the largest, so one outsized boundary sphere does not inflate every cell,
 plus the farthest any neighbouring pair of bodies can close in the substep
 (``bounds.pair_motion``, relative: two rings falling side by side close nothing, where the
-sum of their own motion bounds doubled the cells' edge at every first impact). A particle larger than that occupies the box of cells its extra reach covers
+sum of their own motion bounds doubled the cells' edge at every first impact). A particle
+larger than the typical one occupies the box of cells its extra reach covers
 (``cell`` .. ``cell_hi``); a query scans its own box grown by one cell, and a pair seen in
 several cells is kept only in the first of them in scan order (the per-axis max of the
 two boxes' lower corners), so every pair is made exactly once.

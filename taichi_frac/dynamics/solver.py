@@ -36,6 +36,16 @@ DEEP_OVERLAP = 0.5
 
 
 @ti.func
+def _held_speed(contacts: ti.template(), c, dt):
+    """Normal relative speed [m/s] contact ``c`` holds the bodies to: a speculative
+    contact may close its gap this substep, no more (-gap / dt); a penetrating one may not
+    close further (0); a deep overlap (DEEP_OVERLAP) holds nothing (-1e30: it may close
+    freely, only the split impulse pushes it out)."""
+    gap = contacts.separation[c]
+    return ti.select(gap > -DEEP_OVERLAP * contacts.radius[c], -ti.max(gap, 0.0) / dt, -1e30)
+
+
+@ti.func
 def _velocity_at(bodies: ti.template(), b, arm):
     v = vec3(0.0)
     if b >= 0:
@@ -202,10 +212,9 @@ def _solve_contact(bodies: ti.template(), contacts: ti.template(), c, dt, positi
     arm_b = contacts.arm_b[c]
     mass_n = contacts.normal_mass[c]
     gap = contacts.separation[c]
-    # Normal: a speculative contact may close its gap this substep, no more. A deep overlap
-    # holds no velocity constraint (see DEEP_OVERLAP): its target lets it close freely.
+    # Normal: a speculative contact may close its gap this substep, no more.
     v_rel = _velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b)
-    target = ti.select(gap > -DEEP_OVERLAP * contacts.radius[c], -ti.max(gap, 0.0) / dt, -1e30)
+    target = _held_speed(contacts, c, dt)
     old = contacts.normal_impulse[c]
     new = ti.max(old + mass_n * (target - v_rel.dot(n)), 0.0)
     contacts.normal_impulse[c] = new
@@ -276,8 +285,7 @@ def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
         bouncing = 0
         for m in range(count):
             c = contacts.order[m]
-            gap = contacts.separation[c]
-            target = ti.select(gap > -DEEP_OVERLAP * contacts.radius[c], -ti.max(gap, 0.0) / dt, -1e30)
+            target = _held_speed(contacts, c, dt)
             v0 = contacts.approach_speed[c]
             if contacts.restitution[c] > 0.0 and v0 < -restitution_threshold and contacts.normal_impulse[c] > 0.0:
                 target = -contacts.restitution[c] * v0

@@ -5,9 +5,9 @@ successive tasks of ONE kernel: on the CPU backend a kernel launch costs ~17 us 
 parallel-for task 25-60 us, which is the whole budget of a pass over a few thousand
 particles, so a substep is two launches and one parallel task (the narrowphase, whose
 contacts ``order_contacts`` then sorts so that runs are reproducible); the other passes
-run serially on the CPU (``runtime.SERIAL_SMALL_LOOPS``). Scalars are arguments; vectors live in fields (a
-vector argument costs ~50 us per launch); each data-oriented container argument costs
-~8 us of Python per launch.
+run serially on the CPU (``runtime.SERIAL_SMALL_LOOPS``). Scalars are arguments; vectors
+live in fields (a vector argument costs ~50 us per launch); each data-oriented container
+argument costs ~8 us of Python per launch, so the kernels take ``WorldFields``.
 """
 
 import taichi as ti
