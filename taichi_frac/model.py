@@ -66,6 +66,12 @@ class BodyModel:
         source_tet: (T,) index of each tet in the root solid's tet mesh (identity for a
             root body): lets a fragment tell crack faces from original surface.
         boundary_group_size: the n used to build the boundary layer.
+        particle_spacing: [m] mean V^(1/3) of the root solid's tets: the discretisation's
+            particle spacing, which sets the SPH smoothing length (fracture). A fragment
+            inherits its root's, so a particle keeps its neighbours when its body breaks.
+        root: the root solid's model for a fragment (``source_tet`` indexes its tets),
+            None for a root; derived data keyed by the root (the SPH neighbour lists) is
+            restricted to a fragment instead of rebuilt.
         boundary_contact_position: (N,3) [m] where each boundary particle's sphere (radius
             boundary_radius) sits for collisions: moved inward along the group's outward
             normal until its outermost point lies on the true surface (so the coarse layer
@@ -99,11 +105,20 @@ class BodyModel:
     source_tet: np.ndarray
     boundary_group_size: int
     boundary_contact_position: np.ndarray | None = None
+    particle_spacing: float | None = None
+    root: BodyModel | None = None
 
     @property
     def collision_position(self) -> np.ndarray:
         """(N,3) [m] centres of the boundary spheres used for collision."""
         return self.boundary_position if self.boundary_contact_position is None else self.boundary_contact_position
+
+    @property
+    def spacing(self) -> float:
+        """[m] ``particle_spacing``, or this model's own mean V^(1/3) when it is None."""
+        if self.particle_spacing is not None:
+            return float(self.particle_spacing)
+        return float(np.mean(np.cbrt(self.tet_volume)))
 
     @property
     def tet_count(self) -> int:
@@ -221,10 +236,43 @@ def build_body_model(
     vol = signed_volumes(vertices, tets)
     if np.any(vol <= 0):
         raise ValueError(f"{int(np.sum(vol <= 0))} degenerate (zero-volume) tets")
+    return _assemble(vertices, tets, vol, tet_neighbors(tets), density, boundary_group_size, keep_leftovers,
+                     np.arange(len(tets)) if source_tet is None else np.asarray(source_tet),
+                     spacing=float(np.mean(np.cbrt(vol))), root=None)
+
+
+def build_fragment_model(
+    parent: BodyModel,
+    tets: np.ndarray,
+    *,
+    boundary_group_size: int = 4,
+    keep_leftovers: bool = True,
+) -> BodyModel:
+    """The model of the piece of ``parent`` made of its tets ``tets`` (ascending indices),
+    in the parent's body frame as source frame. The same model ``build_body_model`` would
+    build from ``parent.vertices`` and ``parent.tets[tets]`` (the parent's tets are already
+    positively oriented), except that the topology is restricted from the parent's instead
+    of rebuilt, and the SPH discretisation (``particle_spacing``, ``root``) is inherited."""
+    tets = np.asarray(tets, dtype=np.int64)
+    if tets.ndim != 1 or len(tets) == 0 or np.any(np.diff(tets) <= 0):
+        raise ValueError("tets must be a non-empty ascending array of the parent's tet indices")
+    vertices, sub, _ = compact_vertices(parent.vertices, parent.tets[tets])
+    local = np.full(parent.tet_count, -1, dtype=np.int64)
+    local[tets] = np.arange(len(tets))
+    across = parent.tet_neighbor[tets]
+    neighbor = np.where(across >= 0, local[np.maximum(across, 0)], -1).astype(parent.tet_neighbor.dtype)
+    return _assemble(vertices, sub, parent.tet_volume[tets], neighbor, parent.density, boundary_group_size,
+                     keep_leftovers, parent.source_tet[tets], spacing=parent.spacing,
+                     root=parent.root if parent.root is not None else parent)
+
+
+def _assemble(vertices, tets, vol, neighbor, density, boundary_group_size, keep_leftovers, source_tet, *,
+              spacing, root) -> BodyModel:
+    """The model of clean, positively oriented ``tets`` (T,4) over ``vertices`` (V,3) [m,
+    source frame] with volumes ``vol`` (T,) [m^3] and face neighbours ``neighbor`` (T,4)."""
     props = tet_mass_properties(vertices, tets, density)
     com = props.center_of_mass
     vertices = vertices - com
-    neighbor = tet_neighbors(tets)
     faces, face_tet, face_local = boundary_faces(tets, neighbor)
     centroids = vertices[tets].mean(axis=1)
     mass = density * vol
@@ -274,9 +322,11 @@ def build_body_model(
         mass=props.mass,
         inertia=props.inertia,
         com_in_source=com,
-        source_tet=(np.arange(len(tets)) if source_tet is None else np.asarray(source_tet)).astype(np.int32),
+        source_tet=np.asarray(source_tet).astype(np.int32),
         boundary_group_size=int(boundary_group_size),
         boundary_contact_position=contact_pos,
+        particle_spacing=float(spacing),
+        root=root,
     )
 
 

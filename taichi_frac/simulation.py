@@ -166,6 +166,12 @@ class Simulation:
             model, report = obj.prepare()
             prepared.append((obj, model))
             self.prepare_reports.append(report)
+            if obj.breakable and self.fracture_enabled:
+                # The SPH neighbour lists are part of a breakable body's static model (the
+                # paper's preprocessing); its fragments' are restricted from them.
+                from .fracture.cracks import model_neighbor_lists, smoothing_length
+
+                model_neighbor_lists(model, smoothing_length(model, obj.fracture))
         self.prepare_seconds = time.perf_counter() - t0
 
         breakable = [m for o, m in prepared if o.breakable and self.fracture_enabled]

@@ -116,6 +116,34 @@ def test_refracture_composes_source_tets(ring_split):
     assert not any(f.breakable for f in last)  # generation 2 > max_generations 1
 
 
+def test_fragment_model_restricted_from_parent_matches_a_fresh_build(ring_split):
+    """build_fragment_model restricts the parent's topology; build_body_model rebuilds it
+    from the tet subset: the same model. The SPH neighbour lists restricted from the root's
+    are those a grid search over the fragment's particles finds at the root's h."""
+    from taichi_frac.fracture.cracks import model_neighbor_lists, smoothing_length
+    from taichi_frac.fracture.sph import neighbor_lists
+    from taichi_frac.model import build_body_model
+
+    model, opts, _, _, frags = ring_split
+    h = smoothing_length(model, opts)
+    for f in frags[:3]:
+        fresh = build_body_model(model.vertices, model.tets[f.parent_tets], model.density,
+                                 boundary_group_size=PARTICLES.boundary_group_size, source_tet=f.source_tets)
+        for name in ("tets", "tet_neighbor", "bonds", "surface_faces", "surface_face_tet", "surface_particles",
+                     "boundary_members", "boundary_member_offsets", "source_tet"):
+            np.testing.assert_array_equal(getattr(f.model, name), getattr(fresh, name), err_msg=name)
+        for name in ("vertices", "tet_volume", "particle_position", "collision_position", "boundary_radius",
+                     "inertia"):
+            np.testing.assert_allclose(getattr(f.model, name), getattr(fresh, name), rtol=1e-9, atol=1e-15,
+                                       err_msg=name)
+        assert f.model.root is model and f.model.spacing == model.spacing
+        assert smoothing_length(f.model, opts) == h
+        offsets, indices = model_neighbor_lists(f.model, h)
+        grid_offsets, grid_indices = neighbor_lists(f.model.particle_position, h)
+        np.testing.assert_array_equal(offsets, grid_offsets)
+        np.testing.assert_array_equal(indices, grid_indices)
+
+
 def corner_cracks(model, tet):
     """Crack discs on the faces of ``tet`` shared with neighbours: isolates it (and maybe a
     few tets beside it)."""
