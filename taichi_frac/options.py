@@ -212,6 +212,8 @@ class SimulationOptions:
             than this ... [m/s]
         sleep_angular_speed: ... and that turns slower than this [rad/s] ...
         sleep_time: ... for this long goes to sleep [s].
+        rolling_resistance: lever arm of the contacts' rolling resistance as a fraction of
+            the collision-sphere radius [-] (see ``DynamicsOptions``); 0: off.
         arch: Taichi backend: cpu, cuda, vulkan, metal or gpu.
     """
 
@@ -226,6 +228,7 @@ class SimulationOptions:
     sleep_linear_speed: float = 0.01
     sleep_angular_speed: float = 1.0
     sleep_time: float = 0.5
+    rolling_resistance: float = 0.1
     arch: str = "cpu"
 
     def __post_init__(self):
@@ -243,6 +246,7 @@ class SimulationOptions:
         check_range("simulation", "sleep_linear_speed", self.sleep_linear_speed, 0.0, None)
         check_range("simulation", "sleep_angular_speed", self.sleep_angular_speed, 0.0, None)
         check_range("simulation", "sleep_time", self.sleep_time, 0.0, None)
+        check_range("simulation", "rolling_resistance", self.rolling_resistance, 0.0, 10.0)
         if self.arch not in ("cpu", "cuda", "vulkan", "metal", "gpu"):
             raise OptionError(f"simulation.arch = {self.arch!r}: use cpu, cuda, vulkan, metal or gpu")
 

@@ -52,6 +52,28 @@ def test_block_on_incline_sticks_or_slides_per_coulomb(mu, slides):
         assert abs(moved) < 1e-3
 
 
+@pytest.mark.parametrize("rolling", [0.0, 0.1])
+def test_rolling_sphere_slows_as_rolling_resistance_says(rolling):
+    """A sphere rolling without slipping on the ground, resisted by a couple of
+    rolling x R x N: (I + m R^2) dw/dt = -rolling R m g, so it decelerates at
+    a = rolling m g R^2 / (I + m R^2) (5/7 rolling g for a uniform sphere) while static
+    friction keeps it rolling; with no rolling resistance it rolls on at v0."""
+    radius, v0, t = 0.05, 0.5, 0.4
+    world = fresh_world(rolling_resistance=rolling, sleep_time=100.0)
+    model = with_spheres(sphere_model(radius), [0.0, 0.0, 0.0], radius)
+    world.add_ground(0.0, friction=0.5, restitution=0.0)
+    body = world.add_body(model, (0, 0, radius), (1, 0, 0, 0), (v0, 0, 0), (0, v0 / radius, 0),
+                          friction=0.5, restitution=0.0)
+    for _ in range(20):
+        world.advance(0.02, 10)
+    state = world.body_state([body])
+    inertia = float(np.mean(np.diag(model.inertia)))  # tet sphere: isotropic within 1 %
+    a = rolling * model.mass * G * radius ** 2 / (inertia + model.mass * radius ** 2)
+    v, w = state["linear_velocity"][0], state["angular_velocity"][0]
+    assert v[0] == pytest.approx(v0 - a * t, rel=0.02)
+    assert w[1] * radius == pytest.approx(v[0], rel=0.01)  # still rolling, not sliding
+
+
 def test_ring_dropped_on_ground_comes_to_rest():
     world = fresh_world()
     model = ring_model()

@@ -47,7 +47,8 @@ class Contacts:
     query (i32 particle that made it), key (i32 partner key, see Particles' contact cache).
     Written by the narrowphase (the impulses the same pair had last substep: warm start)
     and the solver: normal_impulse ([N s] accumulated, >= 0), tangent_impulse (vec3
-    [N s]), pseudo_impulse (split impulse, [N s]).
+    [N s]), pseudo_impulse (split impulse, [N s]); rolling_impulse (vec3 [N m s], the
+    rolling resistance's angular impulse on body_a, from zero each substep).
     Written by order_contacts: order (i32), the contact slots in the order the solver,
     the impulse cache and the impact records visit them (sorted by querying particle).
     Scalars: count (may exceed capacity: the excess is ``overflow``), overflow (summed over
@@ -79,6 +80,7 @@ class Contacts:
         self.normal_impulse = ti.field(ti.f32, shape=capacity)
         self.tangent_impulse = vec3.field(shape=capacity)
         self.pseudo_impulse = ti.field(ti.f32, shape=capacity)
+        self.rolling_impulse = vec3.field(shape=capacity)
         self.query = ti.field(ti.i32, shape=capacity)
         self.key = ti.field(ti.i32, shape=capacity)
         self.order = ti.field(ti.i32, shape=capacity)

@@ -76,6 +76,14 @@ class DynamicsOptions:
             and at every point of a body (deeply overlapped bodies separate gently instead
             of exploding; a piece overlapped from all sides is not pumped faster).
         restitution_threshold: approach speeds below this do not bounce [m/s].
+        rolling_resistance: lever arm of the rolling resistance, as a fraction of the
+            contact's (smaller) collision-sphere radius [-]: a contact carrying normal
+            impulse j resists the bodies' relative turning with an angular impulse of at
+            most rolling_resistance x radius x j. It stands for the flat faces a body's
+            spheres round off: without it a chip of two spheres rolls on the floor like a
+            dumbbell for seconds, and each touch wakes the pile it rolls into. A body much
+            larger than its spheres (a whole ring, rolling resistance coefficient
+            ~rolling_resistance x sphere radius / body radius) is barely slowed. 0: off.
         single_scale: default of ``add_body(single_scale=None)``: collide with the physics
             surface particles instead of the boundary layer.
         sleep_linear_speed, sleep_angular_speed, sleep_time: a body whose every point is
@@ -102,6 +110,7 @@ class DynamicsOptions:
     allowed_penetration: float = 0.005
     max_correction_speed: float = 1.0
     restitution_threshold: float = 0.2
+    rolling_resistance: float = 0.1
     single_scale: bool = False
     sleep_linear_speed: float = 0.01
     sleep_angular_speed: float = 1.0
@@ -124,6 +133,7 @@ class DynamicsOptions:
         check_range("dynamics", "allowed_penetration", self.allowed_penetration, 0.0, 1.0)
         check_range("dynamics", "max_correction_speed", self.max_correction_speed, 0.0, None, low_open=True)
         check_range("dynamics", "restitution_threshold", self.restitution_threshold, 0.0, None)
+        check_range("dynamics", "rolling_resistance", self.rolling_resistance, 0.0, 10.0)
         check_range("dynamics", "sleep_linear_speed", self.sleep_linear_speed, 0.0, None)
         check_range("dynamics", "sleep_angular_speed", self.sleep_angular_speed, 0.0, None)
         check_range("dynamics", "sleep_time", self.sleep_time, 0.0, None)
@@ -143,6 +153,7 @@ class DynamicsOptions:
             sleep_linear_speed=sim.sleep_linear_speed,
             sleep_angular_speed=sim.sleep_angular_speed,
             sleep_time=sim.sleep_time,
+            rolling_resistance=sim.rolling_resistance,
         )
         values.update(overrides)
         return cls(**values)

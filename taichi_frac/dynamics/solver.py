@@ -199,12 +199,48 @@ def _prepare_contact(bodies: ti.template(), contacts: ti.template(), c):
     contacts.tangent_mass[c] = ti.math.vec2(1.0 / k[1] if k[1] > 0.0 else 0.0, 1.0 / k[2] if k[2] > 0.0 else 0.0)
     contacts.approach_speed[c] = (_velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b)).dot(n)
     contacts.pseudo_impulse[c] = 0.0
+    contacts.rolling_impulse[c] = vec3(0.0)
+
+
+@ti.func
+def _inverse_inertia_times(bodies: ti.template(), b, u):
+    r = vec3(0.0)
+    if b >= 0:
+        r = bodies.solver_inverse_inertia[b] @ u
+    return r
+
+
+@ti.func
+def _roll(bodies: ti.template(), contacts: ti.template(), c, a, b, limit):
+    """Rolling resistance: an angular impulse against the two bodies' relative angular
+    velocity, its accumulated size held to ``limit`` [N m s] (a vec3 kept like the
+    friction impulse; Box2D v3's rolling resistance, in 3D)."""
+    w_rel = bodies.angular_velocity[a]
+    if b >= 0:
+        w_rel -= bodies.angular_velocity[b]
+    speed = w_rel.norm()
+    if speed > 0.0:
+        u = w_rel / speed
+        ia = _inverse_inertia_times(bodies, a, u)
+        ib = _inverse_inertia_times(bodies, b, u)
+        k = u.dot(ia) + u.dot(ib)  # relative angular speed change per unit angular impulse
+        old_r = contacts.rolling_impulse[c]
+        new_r = old_r - (speed / k) * u
+        size = new_r.norm()
+        if size > limit:
+            new_r *= limit / size
+        contacts.rolling_impulse[c] = new_r
+        d = new_r - old_r
+        bodies.angular_velocity[a] += _inverse_inertia_times(bodies, a, d)
+        if b >= 0:
+            bodies.angular_velocity[b] -= _inverse_inertia_times(bodies, b, d)
 
 
 @ti.func
 def _solve_contact(bodies: ti.template(), contacts: ti.template(), c, dt, position_correction,
-                   allowed_penetration, max_correction_speed):
-    """One Gauss-Seidel update of contact ``c``: normal, friction, split impulse."""
+                   allowed_penetration, max_correction_speed, rolling_resistance):
+    """One Gauss-Seidel update of contact ``c``: normal, friction, rolling resistance,
+    split impulse."""
     a = contacts.body_a[c]
     b = contacts.body_b[c]
     n = contacts.normal[c]
@@ -243,6 +279,8 @@ def _solve_contact(bodies: ti.template(), contacts: ti.template(), c, dt, positi
         d2 = l2 - old_t.dot(t2)
         _push(bodies, a, new_t - old_t, d1 * contacts.response_a[c, 1] + d2 * contacts.response_a[c, 2])
         _push(bodies, b, old_t - new_t, -d1 * contacts.response_b[c, 1] - d2 * contacts.response_b[c, 2])
+    if rolling_resistance > 0.0 and new > 0.0:
+        _roll(bodies, contacts, c, a, b, rolling_resistance * contacts.radius[c] * new)
     # Split impulse: push-out speed proportional to the penetration beyond slop.
     depth = -gap - allowed_penetration * contacts.radius[c]
     if depth > 0.0:
@@ -260,7 +298,7 @@ def _solve_contact(bodies: ti.template(), contacts: ti.template(), c, dt, positi
 def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
                    restitution_iterations, dt, position_correction,
                    allowed_penetration, max_correction_speed,
-                   restitution_threshold):
+                   restitution_threshold, rolling_resistance):
     """Serial Gauss-Seidel sweeps over the contacts (one task, see the module docstring)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
@@ -276,7 +314,7 @@ def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
                 c = contacts.order[k % count]
                 if (contacts.body_b[c] < 0) == (k >= count):
                     _solve_contact(bodies, contacts, c, dt, position_correction, allowed_penetration,
-                                   max_correction_speed)
+                                   max_correction_speed, rolling_resistance)
         # Restitution: a contact that was approaching faster than the threshold and carries
         # impulse gets the target normal velocity -e x its approach speed. The sweeps run
         # over every contact, the others holding their non-penetration target, so a bounce

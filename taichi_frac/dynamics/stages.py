@@ -49,11 +49,11 @@ def respond(f: ti.template(),
             allowed_penetration: ti.f32, max_correction_speed: ti.f32, restitution_threshold: ti.f32,
             substep: ti.i32, force_threshold: ti.f32, impact_speed: ti.f32, max_rotation: ti.f32,
             sleep_linear_speed: ti.f32,
-            sleep_angular_speed: ti.f32, sleep_time: ti.f32, warm_start: ti.f32):
+            sleep_angular_speed: ti.f32, sleep_time: ti.f32, warm_start: ti.f32, rolling_resistance: ti.f32):
     integrate.integrate_velocities(f.bodies, f.statics, dt)
     solver.prepare_contacts(f.bodies, f.contacts, warm_start)
     solver.solve_contacts(f.bodies, f.contacts, iterations, restitution_iterations, dt, position_correction,
-                          allowed_penetration, max_correction_speed, restitution_threshold)
+                          allowed_penetration, max_correction_speed, restitution_threshold, rolling_resistance)
     solver.store_impulses(f.particles, f.contacts)
     impacts.record_impacts(f.bodies, f.contacts, f.impacts, dt, substep, force_threshold, impact_speed)
     integrate.integrate_positions(f.bodies, f.statics, dt, max_rotation, sleep_linear_speed, sleep_angular_speed,

@@ -420,7 +420,7 @@ class World:
                        opt.allowed_penetration,
                        opt.max_correction_speed, opt.restitution_threshold, index, opt.record_force_threshold,
                        opt.impact_speed, opt.max_rotation_per_substep, opt.sleep_linear_speed,
-                       opt.sleep_angular_speed, opt.sleep_time, opt.warm_start)
+                       opt.sleep_angular_speed, opt.sleep_time, opt.warm_start, opt.rolling_resistance)
         clock("response")
 
     def _clock(self):
