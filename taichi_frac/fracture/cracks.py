@@ -54,7 +54,7 @@ from ..model import BodyModel
 from ..options import FractureOptions, Material
 from .field import point_load_displacement
 from .sph import displacement_gradient, neighbor_lists
-from .stress import principal_stresses, stress_from_gradient
+from .stress import largest_principal_stress, principal_stresses, stress_from_gradient
 
 # Analysis points are sought within this many smoothing lengths (kernel support radii,
 # fracture/sph.py) of the contact point.
@@ -308,8 +308,7 @@ def analyze_impact(
         grad = displacement_gradient(points, volumes, displacement, offsets, indices, h,
                                      corrected=options.corrected_gradient, query=query)
         stress = stress_from_gradient(grad, material.young_modulus, material.poisson_ratio)
-        values, _ = principal_stresses(stress)
-        return displacement, np.asarray(stress), np.asarray(values)[:, 0]
+        return displacement, np.asarray(stress), largest_principal_stress(stress)
 
     local = None if full_field else np.nonzero(in_reach.any(axis=0))[0]
     displacement, stress, peak = field(local)

@@ -229,6 +229,28 @@ def principal_stresses(stress):
     return values, directions
 
 
+def largest_principal_stress(stress) -> np.ndarray:
+    """The largest principal stress [Pa] (Q,) of symmetric stresses (Q,3,3) [Pa], in
+    closed form (the trigonometric solution of the characteristic cubic: Smith, "Eigenvalues
+    of a symmetric 3 x 3 matrix", CACM 4(4), 1961), vectorised in numpy: what the Rankine
+    test and a field's peak stress read, ~10x cheaper than the Jacobi eigenvectors of
+    :func:`principal_stresses`. Accurate to ~1e-8 of the stress's size (the cubic's
+    angle loses half the digits only where two principal stresses coincide)."""
+    s = _as_tensors(stress, "stress")
+    s = 0.5 * (s + s.transpose(0, 2, 1))
+    q = np.trace(s, axis1=1, axis2=2) / 3.0
+    off = s[:, 0, 1] ** 2 + s[:, 0, 2] ** 2 + s[:, 1, 2] ** 2
+    d0, d1, d2 = s[:, 0, 0] - q, s[:, 1, 1] - q, s[:, 2, 2] - q
+    p = np.sqrt((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * off) / 6.0)
+    safe = np.where(p > 0.0, p, 1.0)
+    # det((S - q I) / p) / 2, clamped to the cosine's range against rounding.
+    b00, b11, b22 = d0 / safe, d1 / safe, d2 / safe
+    b01, b02, b12 = s[:, 0, 1] / safe, s[:, 0, 2] / safe, s[:, 1, 2] / safe
+    det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02)
+    phi = np.arccos(np.clip(0.5 * det, -1.0, 1.0)) / 3.0
+    return np.where(p > 0.0, q + 2.0 * p * np.cos(phi), q)
+
+
 def rankine_flags(principal_values, tensile_strength) -> np.ndarray:
     """Rankine criterion: True where the largest principal stress exceeds the tensile
     strength [Pa] (BRIEF.md §1 step 8). ``principal_values`` is (Q,3) (largest first, as
