@@ -19,7 +19,6 @@ Every run uses the report's one World (``BenchContext.world``), so the kernels c
 from __future__ import annotations
 
 import argparse
-import math
 import time
 
 import numpy as np
@@ -38,11 +37,12 @@ def _fragment_model():
     import trimesh
 
     from ..model import build_body_model
+    from .pile import FRAGMENT_DENSITY, FRAGMENT_RADIUS
 
-    mesh = trimesh.creation.icosphere(subdivisions=1, radius=0.02)
+    mesh = trimesh.creation.icosphere(subdivisions=1, radius=FRAGMENT_RADIUS)
     gen = tetgen.TetGen(np.asarray(mesh.vertices), np.asarray(mesh.faces))
     vertices, tets = gen.tetrahedralize(order=1, maxvolume=mesh.volume / 30)[:2]
-    return build_body_model(vertices, tets, 2400.0, boundary_group_size=4)
+    return build_body_model(vertices, tets, FRAGMENT_DENSITY, boundary_group_size=4)
 
 
 def _rings(ctx: BenchContext, scene, single: bool, repeat: int) -> dict:
@@ -80,23 +80,21 @@ def _rings_row(label: str, r: dict) -> list:
 
 
 def _fragment_pile(ctx: BenchContext, scene, count: int, seconds: float) -> dict:
-    """``count`` small fragments dropped into a 0.44 m box from a loose cube lattice."""
+    """``count`` small fragments dropped into a 0.44 m box from a loose cube lattice
+    (``bench/pile.py``, the layout pybullet's pile uses too)."""
     from ..dynamics import DynamicsOptions
+    from . import pile
 
     sim = scene.simulation
     world = ctx.world()
     world.clear()
     world.set_options(DynamicsOptions.from_simulation(sim))
     world.add_ground(0.0)
-    for sign in (-1, 1):
-        world.add_static_box((sign * 0.22, 0, 0.3), (0.02, 0.24, 0.3))
-        world.add_static_box((0, sign * 0.22, 0.3), (0.24, 0.02, 0.3))
+    for centre, half in pile.WALLS:
+        world.add_static_box(centre, half)
     fragment = _fragment_model()
-    side = math.ceil(count ** (1 / 3))
-    rng = np.random.default_rng(2)
-    cells = np.stack(np.meshgrid(*(np.arange(side),) * 3, indexing="ij"), -1).reshape(-1, 3)[:count]
-    bodies = [world.add_body(fragment, (c - [side / 2 - 0.5, side / 2 - 0.5, -0.5]) * 0.05 + rng.normal(0, 0.003, 3),
-                             (1, 0, 0, 0), (0, 0, 0), rng.normal(0, 2.0, 3)) for c in cells]
+    positions, spins = pile.layout(count)
+    bodies = [world.add_body(fragment, x, (1, 0, 0, 0), (0, 0, 0), w) for x, w in zip(positions, spins)]
     frame_dt = sim.frame_dt
     world.advance(frame_dt, sim.substeps)  # compile outside the timing
     times = []
@@ -166,11 +164,28 @@ def run_dynamics(args) -> int:
         "",
         f"({time.perf_counter() - t0:.0f} s in all.)",
     ]
-    try:
-        import pybullet  # noqa: F401
-        lines.append("pybullet is importable, but no pybullet version of these scenes is written: no ratio printed.")
-    except ImportError:
-        lines.append("pybullet is not installed: no pybullet comparison.")
+    if args.no_pybullet:
+        lines.append("pybullet comparison skipped (--no-pybullet).")
+    else:
+        try:
+            import pybullet  # noqa: F401
+        except ImportError:
+            lines.append("pybullet is not installed: comparison skipped (`pip install pybullet==3.2.7`, "
+                         "or the `bench` extra).")
+        else:
+            from . import pybullet_ref
+
+            models = {}  # our collision spheres for pybullet; identical objects share one model
+            for obj in scene.objects:
+                key = (obj.source, obj.scale, obj.units, obj.particles)
+                if key not in models:
+                    models[key] = obj.prepare()[0]
+            spheres = [(m.collision_position, m.boundary_radius) for m in
+                       (models[(o.source, o.scale, o.units, o.particles)] for o in scene.objects)]
+            lines += ["", pybullet_ref.comparison_table(
+                scene, spheres, rings_ms=(two["mean"], two["max"]), pile_ms=(pile["avg"], pile["max"]),
+                fragments=args.fragments, seconds=args.seconds, progress=ctx.progress,
+                rings_note=f"median of {args.repeat} runs" if args.repeat > 1 else "")]
     print("\n".join(lines))
     return 0
 
@@ -186,3 +201,5 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="runs of each rings row; the table shows their medians (default 3)")
     p.add_argument("--arch", default="cpu")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument("--no-pybullet", action="store_true",
+                   help="skip the pybullet comparison (run when pybullet is installed)")
