@@ -27,6 +27,7 @@ from .geometry.topology import (
     compact_vertices,
     orient_tets,
     signed_volumes,
+    subset_neighbors,
     tet_neighbors,
 )
 
@@ -249,27 +250,46 @@ def build_fragment_model(
     keep_leftovers: bool = True,
 ) -> BodyModel:
     """The model of the piece of ``parent`` made of its tets ``tets`` (ascending indices),
-    in the parent's body frame as source frame. The same model ``build_body_model`` would
-    build from ``parent.vertices`` and ``parent.tets[tets]`` (the parent's tets are already
-    positively oriented), except that the topology is restricted from the parent's instead
-    of rebuilt, and the SPH discretisation (``particle_spacing``, ``root``) is inherited."""
+    in the parent's body frame as source frame: the tets, mass properties and physics
+    particles ``build_body_model`` would build from ``parent.vertices`` and
+    ``parent.tets[tets]``, with the topology restricted from the parent's instead of
+    rebuilt and the SPH discretisation (``particle_spacing``, ``root``) inherited.
+
+    The boundary layer is inherited where the surface is the parent's: a parent group
+    whose members are all in the piece and touch no crack face is kept as it was (the
+    same sphere, and the same collision centre unless a crack face lies within reach of
+    its inward ray), and only the surface particles along the cracks are grouped afresh.
+    So a piece collides where its parent did the instant it is born, and the build costs
+    in proportion to the crack, not to the piece's surface."""
     tets = np.asarray(tets, dtype=np.int64)
     if tets.ndim != 1 or len(tets) == 0 or np.any(np.diff(tets) <= 0):
         raise ValueError("tets must be a non-empty ascending array of the parent's tet indices")
     vertices, sub, _ = compact_vertices(parent.vertices, parent.tets[tets])
-    local = np.full(parent.tet_count, -1, dtype=np.int64)
-    local[tets] = np.arange(len(tets))
-    across = parent.tet_neighbor[tets]
-    neighbor = np.where(across >= 0, local[np.maximum(across, 0)], -1).astype(parent.tet_neighbor.dtype)
+    neighbor = subset_neighbors(parent.tet_neighbor, tets)
+    crack_face = (parent.tet_neighbor[tets] >= 0) & (neighbor < 0)  # (T,4) faces the cut opened
+    inherited = None
+    if boundary_group_size == parent.boundary_group_size and boundary_group_size > 1:
+        local = np.full(parent.tet_count, -1, dtype=np.int64)
+        local[tets] = np.arange(len(tets))
+        off, members = parent.boundary_member_offsets, parent.boundary_members
+        owner = np.repeat(np.arange(len(off) - 1), np.diff(off))
+        mapped = local[members]
+        spoilt = np.zeros(len(off) - 1, dtype=bool)  # a member outside the piece or on a crack
+        np.logical_or.at(spoilt, owner, (mapped < 0) | crack_face[np.maximum(mapped, 0)].any(axis=1))
+        keep = np.nonzero(~spoilt)[0]
+        groups = [mapped[off[g]:off[g + 1]] for g in keep]
+        inherited = (groups, parent.collision_position[keep], crack_face)
     return _assemble(vertices, sub, parent.tet_volume[tets], neighbor, parent.density, boundary_group_size,
                      keep_leftovers, parent.source_tet[tets], spacing=parent.spacing,
-                     root=parent.root if parent.root is not None else parent)
+                     root=parent.root if parent.root is not None else parent, inherited=inherited)
 
 
 def _assemble(vertices, tets, vol, neighbor, density, boundary_group_size, keep_leftovers, source_tet, *,
-              spacing, root) -> BodyModel:
+              spacing, root, inherited=None) -> BodyModel:
     """The model of clean, positively oriented ``tets`` (T,4) over ``vertices`` (V,3) [m,
-    source frame] with volumes ``vol`` (T,) [m^3] and face neighbours ``neighbor`` (T,4)."""
+    source frame] with volumes ``vol`` (T,) [m^3] and face neighbours ``neighbor`` (T,4).
+    ``inherited``: (kept groups (lists of tet indices), their collision centres (K,3) [m,
+    source frame], crack faces (T,4) bool) from ``build_fragment_model``."""
     props = tet_mass_properties(vertices, tets, density)
     com = props.center_of_mass
     vertices = vertices - com
@@ -281,9 +301,25 @@ def _assemble(vertices, tets, vol, neighbor, density, boundary_group_size, keep_
     is_surface[face_tet] = True
     surface = np.nonzero(is_surface)[0].astype(np.int32)
 
-    groups, dropped = group_surface_particles(
-        centroids, surface, face_tet, faces, boundary_group_size, keep_leftovers
-    )
+    if inherited is None:
+        groups, dropped = group_surface_particles(
+            centroids, surface, face_tet, faces, boundary_group_size, keep_leftovers
+        )
+        kept = 0
+    else:
+        groups, kept_centres, crack_face = inherited
+        kept = len(groups)
+        covered = np.zeros(len(tets), dtype=bool)
+        if kept:
+            covered[np.concatenate(groups)] = True
+        rest = surface[~covered[surface]]
+        dropped = np.zeros(0, dtype=np.int32)
+        if len(rest):
+            on_rest = ~covered[face_tet]
+            fresh, dropped = group_surface_particles(
+                centroids, rest, face_tet[on_rest], faces[on_rest], boundary_group_size, keep_leftovers
+            )
+            groups = list(groups) + fresh
     sizes = np.array([len(g) for g in groups], dtype=np.int64)
     offsets = np.zeros(len(groups) + 1, dtype=np.int64)
     np.cumsum(sizes, out=offsets[1:])
@@ -296,7 +332,20 @@ def _assemble(vertices, tets, vol, neighbor, density, boundary_group_size, keep_
     reach = np.linalg.norm(centroids[members] - b_pos[owner], axis=1) + radius[members]
     b_radius = np.zeros(len(groups))
     np.maximum.at(b_radius, owner, reach)
-    contact_pos = contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius)
+    if inherited is None:
+        contact_pos = contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius)
+    else:
+        contact_pos = np.empty_like(b_pos)
+        contact_pos[:kept] = kept_centres - com
+        redo = np.ones(len(groups), dtype=bool)
+        redo[:kept] = _near_faces(vertices, faces[crack_face[face_tet, face_local]], b_pos[:kept],
+                                  CENTRE_REACH * b_radius[:kept])
+        which = np.nonzero(redo)[0]
+        if len(which):
+            sub = np.isin(owner, which)
+            renumber = np.cumsum(redo) - 1
+            contact_pos[which] = contact_sphere_centres(vertices, faces, face_tet, centroids, members[sub],
+                                                        renumber[owner[sub]], b_pos[which], b_radius[which])
 
     return BodyModel(
         vertices=vertices,
@@ -328,6 +377,27 @@ def _assemble(vertices, tets, vol, neighbor, density, boundary_group_size, keep_
         particle_spacing=float(spacing),
         root=root,
     )
+
+
+#: A kept boundary group's collision centre is computed again when a crack face lies
+#: within this many of its radii of its centre: the centre moves inward by less than
+#: 2 radii (``contact_sphere_centres``: at most R - h, h > -R for a surface group's own
+#: faces) and the thickness ray looks a radius beyond that.
+CENTRE_REACH = 3.0
+
+
+def _near_faces(vertices, faces, points, reach) -> np.ndarray:
+    """(P,) bool: does any of ``faces`` (F,3) come within ``reach`` (P,) [m] of ``points``
+    (P,3) [m] (face centre distance less the face's own spread; a conservative test)."""
+    if len(faces) == 0 or len(points) == 0:
+        return np.zeros(len(points), dtype=bool)
+    from scipy.spatial import cKDTree
+
+    corners = vertices[faces]
+    centre = corners.mean(axis=1)
+    spread = float(np.linalg.norm(corners - centre[:, None, :], axis=2).max())
+    distance, _ = cKDTree(centre).query(points)
+    return distance < reach + spread
 
 
 def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius):

@@ -117,31 +117,59 @@ def test_refracture_composes_source_tets(ring_split):
 
 
 def test_fragment_model_restricted_from_parent_matches_a_fresh_build(ring_split):
-    """build_fragment_model restricts the parent's topology; build_body_model rebuilds it
-    from the tet subset: the same model. The SPH neighbour lists restricted from the root's
-    are those a grid search over the fragment's particles finds at the root's h."""
+    """build_fragment_model restricts the parent's topology and keeps the parent's boundary
+    groups away from the cracks; build_body_model rebuilds everything from the tet subset.
+    The tets, topology, surface and mass properties are the same; the boundary layer is a
+    valid grouping of the same surface (each surface particle in one group, a group's
+    sphere encloses its members), keeps the parent's spheres where the surface is the
+    parent's, and its collision centres are those contact_sphere_centres computes for
+    every group afresh. The SPH neighbour lists restricted from the root's are those a
+    grid search over the fragment's particles finds at the root's h."""
     from taichi_frac.fracture.cracks import model_neighbor_lists, smoothing_length
     from taichi_frac.fracture.sph import neighbor_lists
-    from taichi_frac.model import build_body_model
+    from taichi_frac.model import build_body_model, contact_sphere_centres
 
     model, opts, _, _, frags = ring_split
     h = smoothing_length(model, opts)
-    for f in frags[:3]:
+    kept_total = 0
+    for f in frags:
+        m = f.model
         fresh = build_body_model(model.vertices, model.tets[f.parent_tets], model.density,
                                  boundary_group_size=PARTICLES.boundary_group_size, source_tet=f.source_tets)
         for name in ("tets", "tet_neighbor", "bonds", "surface_faces", "surface_face_tet", "surface_particles",
-                     "boundary_members", "boundary_member_offsets", "source_tet"):
-            np.testing.assert_array_equal(getattr(f.model, name), getattr(fresh, name), err_msg=name)
-        for name in ("vertices", "tet_volume", "particle_position", "collision_position", "boundary_radius",
-                     "inertia"):
-            np.testing.assert_allclose(getattr(f.model, name), getattr(fresh, name), rtol=1e-9, atol=1e-15,
-                                       err_msg=name)
-        assert f.model.root is model and f.model.spacing == model.spacing
-        assert smoothing_length(f.model, opts) == h
-        offsets, indices = model_neighbor_lists(f.model, h)
-        grid_offsets, grid_indices = neighbor_lists(f.model.particle_position, h)
+                     "source_tet"):
+            np.testing.assert_array_equal(getattr(m, name), getattr(fresh, name), err_msg=name)
+        for name in ("vertices", "tet_volume", "particle_position", "inertia"):
+            np.testing.assert_allclose(getattr(m, name), getattr(fresh, name), rtol=1e-9, atol=1e-15, err_msg=name)
+        # A valid grouping of the fragment's surface particles.
+        off, members = m.boundary_member_offsets, m.boundary_members
+        owner = np.repeat(np.arange(len(off) - 1), np.diff(off))
+        np.testing.assert_array_equal(np.sort(np.concatenate([members, m.dropped_surface_particles])),
+                                      m.surface_particles)
+        np.testing.assert_allclose(m.boundary_mass, np.bincount(owner, m.particle_mass[members]), rtol=1e-12)
+        reach = np.linalg.norm(m.particle_position[members] - m.boundary_position[owner], axis=1)
+        assert np.all(reach + m.particle_radius[members] <= m.boundary_radius[owner] * (1 + 1e-12))
+        # The parent's spheres, where the parent's surface is untouched.
+        parent_groups = {tuple(model.boundary_members[a:b]): k for k, (a, b) in
+                         enumerate(zip(model.boundary_member_offsets[:-1], model.boundary_member_offsets[1:]))}
+        for g in range(len(off) - 1):
+            k = parent_groups.get(tuple(f.parent_tets[members[off[g]:off[g + 1]]]))
+            if k is not None:
+                kept_total += 1
+                np.testing.assert_allclose(m.boundary_position[g] + m.com_in_source, model.boundary_position[k],
+                                           atol=1e-12)
+                assert m.boundary_radius[g] == pytest.approx(model.boundary_radius[k], rel=1e-12)
+        # Collision centres: those computed for every group afresh.
+        centres = contact_sphere_centres(m.vertices, m.surface_faces, m.surface_face_tet, m.particle_position,
+                                         members, owner, m.boundary_position, m.boundary_radius)
+        np.testing.assert_allclose(m.collision_position, centres, rtol=0, atol=1e-12)
+        assert m.root is model and m.spacing == model.spacing
+        assert smoothing_length(m, opts) == h
+        offsets, indices = model_neighbor_lists(m, h)
+        grid_offsets, grid_indices = neighbor_lists(m.particle_position, h)
         np.testing.assert_array_equal(offsets, grid_offsets)
         np.testing.assert_array_equal(indices, grid_indices)
+    assert kept_total > 0.3 * sum(f.model.boundary_particle_count for f in frags)  # 294 of 589 here
 
 
 def corner_cracks(model, tet):
