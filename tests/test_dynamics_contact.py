@@ -255,8 +255,10 @@ def test_loose_pile_falls_asleep():
     an absolute spin threshold (the test is now on the fastest point, |v| + |w| R). At 2
     substeps a frame the pile needs the scenes' 24 sweeps: with 10 it creeps for seconds.
     How many sleep depends on the drop (seeds 0-5, blocks asleep of 64: contacts in the
-    narrowphase's thread order 64, 63, 53, 64, 58, 41; sorted by particle, as now, 59, 53,
-    56, 47, 57, 51; about 5 each before the fixes), so four drops are judged together."""
+    narrowphase's thread order 64, 63, 53, 64, 58, 41; sorted by particle 59, 53, 56, 47,
+    57, 51; with rolling resistance and the ground's hold on push-outs, as now, 42, 64, 64,
+    58, 64, 64 (16 drops: mean 61.3); about 5 each before the fixes), so four drops are
+    judged together."""
     asleep = []
     for seed in range(4):
         world = fresh_world(solver_iterations=24)

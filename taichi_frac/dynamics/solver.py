@@ -21,6 +21,7 @@ these sweeps include every other contact with its non-penetration target.
 import taichi as ti
 
 from .. import runtime
+from ..collision.narrowphase import GROUND
 
 vec3 = ti.math.vec3
 mat3 = ti.math.mat3
@@ -281,11 +282,20 @@ def _solve_contact(bodies: ti.template(), contacts: ti.template(), c, dt, positi
         _push(bodies, b, old_t - new_t, -d1 * contacts.response_b[c, 1] - d2 * contacts.response_b[c, 2])
     if rolling_resistance > 0.0 and new > 0.0:
         _roll(bodies, contacts, c, a, b, rolling_resistance * contacts.radius[c] * new)
-    # Split impulse: push-out speed proportional to the penetration beyond slop.
+    # Split impulse: push-out speed proportional to the penetration beyond slop. Against a
+    # ground plane it also holds the pseudo-velocity to the gap (no deeper than now), so
+    # other bodies' push-outs may not drive a body into the floor: a chip born inside a
+    # heavy sibling's spheres, pushed out of them at max_correction_speed, went from
+    # touching the floor to 1.8 physics-particle radii into it in one substep (13 rings,
+    # 150 frames, worst depth 1.81 -> 0.39 radii; with rolling resistance 0.82 -> 0.20).
+    # Not against static boxes: 64 blocks dropped into a box of four walls slept less with
+    # the walls holding too (16 drops, mean 59.3 of 64 asleep against 61.0 without the
+    # hold and 61.3 with the ground's only; two drops at 33 and 43).
     depth = -gap - allowed_penetration * contacts.radius[c]
-    if depth > 0.0:
+    if depth > 0.0 or b == GROUND:
         vp = (_pseudo_velocity_at(bodies, a, arm_a) - _pseudo_velocity_at(bodies, b, arm_b)).dot(n)
-        target_p = ti.min(position_correction * depth / dt, max_correction_speed)
+        target_p = ti.select(depth > 0.0, ti.min(position_correction * depth / dt, max_correction_speed),
+                             -ti.max(gap, 0.0) / dt)
         old_p = contacts.pseudo_impulse[c]
         new_p = ti.max(old_p + mass_n * (target_p - vp), 0.0)
         contacts.pseudo_impulse[c] = new_p
