@@ -124,6 +124,24 @@ def test_ring_fragment_count_grows_with_crack_count_and_repeats():
     assert ring_counts([3, 5]) == [counts[2], counts[4]]  # same seed, same answer
 
 
+def test_local_analysis_of_a_crack_of_given_length_needs_no_full_field():
+    """With crack_length given, a cracking impact's analysis stays local: the crack planes
+    (origin, normal, extent) are those of the full field, the stress is NaN away from the
+    contact; the simulation computes the whole field only when the cracks split the body."""
+    model = ring_model()
+    material = Material(name="m", density=2400.0, young_modulus=70e9, poisson_ratio=0.2, tensile_strength=1.0e6)
+    options = FractureOptions(crack_count=3, seed=4, crack_length=0.04)
+    full = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, material, options)
+    fast = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, material, options, full_field=False)
+    assert len(full.cracks) == len(fast.cracks) == 3
+    assert fast.field_particles is not None and 0 < len(fast.field_particles) < model.tet_count / 10
+    for a, b in zip(fast.cracks, full.cracks):
+        np.testing.assert_allclose(a.point, b.point, rtol=0, atol=0)
+        np.testing.assert_allclose(a.normal, b.normal, rtol=0, atol=1e-12)
+        assert a.extent == b.extent == 0.04
+    np.testing.assert_array_equal(cut_bonds(model, fast.cracks), cut_bonds(model, full.cracks))
+
+
 @pytest.mark.parametrize("strength", [1.0e6, 1.0e9], ids=["cracks", "no-crack"])
 def test_local_first_analysis_matches_the_full_field(strength):
     """analyze_impact(full_field=False) (the simulation's call) computes the stress first at

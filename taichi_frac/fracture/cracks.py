@@ -241,11 +241,15 @@ def analyze_impact(
     with |force| below ``options.impact_force_threshold`` are ignored.
 
     ``full_field=False`` (the simulation's choice) first computes the stress only at the
-    particles within reach of the contacts, which is all the Rankine test reads, and the
-    whole field (crack extent, the fragments' peak stress) only when a contact passes it:
-    most impacts over the force threshold crack nothing (the glass scene: 78 of 84), and
-    for them the analysis touches a few hundred particles instead of every one. The cracks
-    are the same either way (the stress at a particle depends on its neighbours only).
+    particles within reach of the contacts, which is all the Rankine test and the crack
+    planes read, and the whole field only where a crack's extent needs it (a contact
+    passes the test and ``options.crack_length`` is None: the extent is the reach of the
+    over-strength particles): most impacts over the force threshold crack nothing (the
+    glass scene: 78 of 84), and for them the analysis touches a few hundred particles
+    instead of every one. The cracks are the same either way (the stress at a particle
+    depends on its neighbours only). A local analysis has ``field_particles`` set and NaN
+    stress elsewhere; where its cracks do split the body, the fragments' peak stress needs
+    the whole field: analyse again with ``full_field=True`` (the simulation does).
     """
     points = model.particle_position
     volumes = model.tet_volume
@@ -318,8 +322,9 @@ def analyze_impact(
         particle_peak = np.full(t_count, np.nan)
         particle_peak[local] = peak
     analysis = np.argmax(np.where(in_reach, particle_peak[None, :], -np.inf), axis=1)
-    if local is not None and np.any(particle_peak[analysis] > material.tensile_strength):
-        local = None  # a crack: its extent and the fragments' peak stress read the whole field
+    if (local is not None and options.crack_length is None
+            and np.any(particle_peak[analysis] > material.tensile_strength)):
+        local = None  # a crack whose extent reads the whole field
         displacement, stress, particle_peak = field(None)
     if local is not None:
         partial = np.full((t_count, 3, 3), np.nan)
