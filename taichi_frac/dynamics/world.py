@@ -164,6 +164,23 @@ def _pack_impacts(impacts: ti.template(), n: ti.i32, rows: ti.types.ndarray(dtyp
 
 
 @ti.kernel
+def _pack_bodies(bodies: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                 rows: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+    """Bodies ``ids`` (K,) into ``rows`` (K, 15): position, orientation (wxyz), linear and
+    angular velocity, active, sleeping (the layout World.body_state unpacks)."""
+    for k in range(ids.shape[0]):
+        b = ids[k]
+        for c in ti.static(range(3)):
+            rows[k, c] = bodies.position[b][c]
+            rows[k, 7 + c] = bodies.linear_velocity[b][c]
+            rows[k, 10 + c] = bodies.angular_velocity[b][c]
+        for c in ti.static(range(4)):
+            rows[k, 3 + c] = bodies.orientation[b][c]
+        rows[k, 13] = bodies.active[b]
+        rows[k, 14] = bodies.sleeping[b]
+
+
+@ti.kernel
 def _reset_advance_counters(f: ti.template()):
     f.grid.overflow[None] = 0
     f.contacts.overflow[None] = 0
@@ -444,15 +461,21 @@ class World:
         [m], orientation (K,4) wxyz, linear_velocity (K,3) [m/s], angular_velocity (K,3)
         [rad/s], active (K,) bool, sleeping (K,) bool. float64 copies."""
         ids = np.asarray(self.body_ids if ids is None else ids, dtype=np.int64)
-        b = self.bodies
+        if len(ids) and (ids.min() < 0 or ids.max() >= self.capacity.max_bodies):
+            raise IndexError(f"body ids must lie in [0, {self.capacity.max_bodies}), got {ids.min()}..{ids.max()}")
+        # One launch for the K rows: six whole-field reads cost ~1.4 ms a call, paid per
+        # analysed impact and per written frame.
+        rows = np.zeros((len(ids), 15), dtype=np.float64)
+        if len(ids):
+            _pack_bodies(self.bodies, np.ascontiguousarray(ids, dtype=np.int32), rows)
         return dict(
             id=ids,
-            position=b.position.to_numpy()[ids].astype(np.float64),
-            orientation=b.orientation.to_numpy()[ids].astype(np.float64),
-            linear_velocity=b.linear_velocity.to_numpy()[ids].astype(np.float64),
-            angular_velocity=b.angular_velocity.to_numpy()[ids].astype(np.float64),
-            active=b.active.to_numpy()[ids].astype(bool),
-            sleeping=b.sleeping.to_numpy()[ids].astype(bool),
+            position=rows[:, 0:3],
+            orientation=rows[:, 3:7],
+            linear_velocity=rows[:, 7:10],
+            angular_velocity=rows[:, 10:13],
+            active=rows[:, 13] != 0,
+            sleeping=rows[:, 14] != 0,
         )
 
     def impacts(self) -> dict:
