@@ -214,6 +214,11 @@ class SimulationOptions:
         sleep_time: ... for this long goes to sleep [s].
         rolling_resistance: lever arm of the contacts' rolling resistance as a fraction of
             the collision-sphere radius [-] (see ``DynamicsOptions``); 0: off.
+        resimulate_fractures: a frame in which a body breaks is simulated again from its
+            start with the pieces in the body's place, so the impact that broke it meets
+            the pieces (a projectile goes on through what it breaks, the pieces of a
+            dropped ring land each on its own) instead of the whole body, which the rigid
+            solver has already bounced. Costs a second simulation of each such frame.
         arch: Taichi backend: cpu, cuda, vulkan, metal or gpu.
     """
 
@@ -229,6 +234,7 @@ class SimulationOptions:
     sleep_angular_speed: float = 1.0
     sleep_time: float = 0.5
     rolling_resistance: float = 0.1
+    resimulate_fractures: bool = False
     arch: str = "cpu"
 
     def __post_init__(self):

@@ -78,20 +78,10 @@ class RunSummary:
     mass_initial: float = 0.0
     mass_final: float = 0.0
     mass_dropped: float = 0.0
+    resimulated_frames: int = 0
 
     def to_json(self) -> str:
         return json.dumps(self.__dict__, indent=2, default=float)
-
-
-def world_to_body(position, orientation, points=None, vectors=None):
-    """Map world points and/or direction vectors (K,3) into a body's frame."""
-    rot = quaternion_matrix(orientation)  # body -> world; row vectors map back with @ rot
-    out = []
-    if points is not None:
-        out.append((np.asarray(points, dtype=np.float64) - position) @ rot)
-    if vectors is not None:
-        out.append(np.asarray(vectors, dtype=np.float64) @ rot)
-    return out[0] if len(out) == 1 else tuple(out)
 
 
 def _strongest_per_pair(impacts: dict, bodies: np.ndarray) -> dict[int, np.ndarray]:
@@ -153,6 +143,7 @@ class Simulation:
         self.times = StageTimes()
         self.records: dict[int, BodyRecord] = {}
         self.fracture_events = 0
+        self.resimulated_frames = 0
         self.mass_dropped = 0.0
         self.prepare_reports = []
         self._tet_peak_stress: dict[int, np.ndarray] = {}
@@ -275,17 +266,21 @@ class Simulation:
 
     # ------------------------------------------------------------------ fracture
 
-    def _fracture_stage(self, frame: int) -> None:
+    def _fracture_stage(self, frame: int, start=None) -> list[int]:
+        """Analyse the frame's impacts, split the bodies that crack; returns the new
+        pieces' body ids. ``start``: the World's snapshot at the frame's start; the pieces
+        are then put where their parent was then (``resimulate_fractures``)."""
         from .fracture.cracks import analyze_impact
         from .fracture.fragments import make_fragments, split_body
 
+        born: list[int] = []
         live = set(self.world.body_ids)
         breakable = np.array([b for b, r in self.records.items() if r.breakable and b in live])
         if len(breakable) == 0:
-            return
+            return born
         impacts = self.world.impacts()
         if len(impacts["body"]) == 0:
-            return
+            return born
         per_body = _strongest_per_pair(impacts, breakable)
         for body, rows in per_body.items():
             rec = self.records[body]
@@ -297,8 +292,10 @@ class Simulation:
             t = time.perf_counter()
             state = self.world.body_state([body])
             pos, quat = state["position"][0], state["orientation"][0]
-            points_b, normals_b = world_to_body(pos, quat, impacts["point"][rows], impacts["normal"][rows])
-            force_b = world_to_body(pos, quat, vectors=force)
+            # In the body's frame at the impact's substep: the body may move far by the
+            # frame's end (a struck glass wall, 17 mm).
+            points_b, normals_b = impacts["point_body"][rows], impacts["normal_body"][rows]
+            force_b = impacts["force_body"][rows]
             analysis = analyze_impact(rec.model, points_b, normals_b, force_b, rec.material, rec.fracture,
                                       full_field=False)
             self.times.fracture_analysis += time.perf_counter() - t
@@ -323,8 +320,13 @@ class Simulation:
                     [float(np.max(peak[p])) for p in split.fragment_tets]))
                 self.times.fracture_analysis += time.perf_counter() - t
                 t = time.perf_counter()
+            motion = dict(position=pos, orientation=quat, linear_velocity=state["linear_velocity"][0],
+                          angular_velocity=state["angular_velocity"][0])
+            if start is not None:
+                motion = self.world.snapshot_state(start, body)
             pieces = make_fragments(
-                rec.model, split, pos, quat, state["linear_velocity"][0], state["angular_velocity"][0],
+                rec.model, split, motion["position"], motion["orientation"], motion["linear_velocity"],
+                motion["angular_velocity"],
                 rec.material, rec.particles, options=rec.fracture, analysis=analysis, birth_frame=frame,
                 parent=body, parent_generation=rec.generation,
             )
@@ -352,6 +354,7 @@ class Simulation:
                 # The world may hand the parent's freed slot to a child: the parent's record
                 # is no longer needed (its cache id and peak stress are held above).
                 self.records[child] = child_rec
+                born.append(child)
                 tet_peak = peak_parent[piece.parent_tets]
                 self._tet_peak_stress[child] = tet_peak
                 if self.writer is not None:
@@ -360,6 +363,7 @@ class Simulation:
                                        peak=piece.peak_principal_stress,
                                        face_peak=tet_peak[piece.model.surface_face_tet])
             self.times.fragment_split += time.perf_counter() - t
+        return born
 
     def _lift_out_of_ground(self, piece):
         """Move a new fragment up out of the ground planes if its collision spheres start
@@ -397,13 +401,25 @@ class Simulation:
         try:
             if self.output_path is not None:
                 self._open_cache()
+            resimulate = self.fracture_enabled and sim.resimulate_fractures
             for frame in range(1, self.frame_count + 1):
                 t_frame = time.perf_counter()
                 t = time.perf_counter()
+                at_start = self.world.snapshot() if resimulate else None
                 self.world.advance(self.frame_dt, sim.substeps)
                 self.times.dynamics += time.perf_counter() - t
                 if self.fracture_enabled:
-                    self._fracture_stage(frame)
+                    born = self._fracture_stage(frame, at_start)
+                    if born and at_start is not None:
+                        # The frame again from its start, the pieces in their parents' place:
+                        # the bodies that did not break go back to where they were.
+                        t = time.perf_counter()
+                        live, new = set(self.world.body_ids), set(born)
+                        self.world.restore(at_start, [b for b in at_start.ids if b in live and b not in new])
+                        self.world.advance(self.frame_dt, sim.substeps)
+                        self.times.dynamics += time.perf_counter() - t
+                        self.resimulated_frames += 1
+                        self._fracture_stage(frame)  # pieces may break again, without a third pass
                 self._write_frame(frame)
                 frame_ms.append(1000.0 * (time.perf_counter() - t_frame))
                 if self.progress is not None:
@@ -443,4 +459,5 @@ class Simulation:
             mass_initial=self.initial_mass,
             mass_final=sum(self.records[b].model.mass for b in live),
             mass_dropped=self.mass_dropped,
+            resimulated_frames=self.resimulated_frames,
         )

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from test_dynamics_support import box_model, fresh_world, rotation
+from test_dynamics_support import box_model, fresh_world, rotation, sphere_model
 
 G = 9.81
 
@@ -53,3 +53,26 @@ def test_torque_free_asymmetric_body_conserves_momentum_and_energy():
         # max_rotation_per_substep inside it, so its spin shortens no one's substep.
         assert world.stats.substeps == 1
     assert max_angle > 0.5  # w really wanders (gyroscopic term active), L stays put
+
+
+def test_snapshot_restore_puts_bodies_back_exactly():
+    """World.restore returns the chosen bodies to their snapshot (pose, velocities, sleep
+    state) bit for bit and leaves the others where the run took them."""
+    world = fresh_world()
+    world.add_ground(0.0)
+    model = sphere_model(0.05)
+    a = world.add_body(model, (0, 0, 0.3), (1, 0, 0, 0), (0.5, 0, 0), (0, 2.0, 0))
+    b = world.add_body(model, (0.5, 0, 0.3), (0.8, 0.6, 0, 0), (0, 0, -1.0), (1.0, 0, 0))
+    before = world.body_state([a, b])
+    snap = world.snapshot()
+    for _ in range(5):
+        world.advance(0.02, 4)
+    moved = world.body_state([a, b])
+    world.restore(snap, [a])
+    after = world.body_state([a, b])
+    for key in ("position", "orientation", "linear_velocity", "angular_velocity", "sleeping"):
+        np.testing.assert_array_equal(after[key][0], before[key][0], err_msg=key)
+        np.testing.assert_array_equal(after[key][1], moved[key][1], err_msg=key)
+    assert not np.allclose(moved["position"][0], before["position"][0])
+    with pytest.raises(KeyError):
+        world.restore(snap, [a, 999])

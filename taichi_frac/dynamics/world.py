@@ -26,6 +26,15 @@ from .state import MAX_CLUSTERS, Bodies, Particles, Statics
 STAGES = ("collision", "response")
 
 
+@dataclass(frozen=True)
+class BodySnapshot:
+    """Motion state of the bodies ``ids`` (K,) at one moment (``World.snapshot``): rows
+    (K, 17) in ``_pack_bodies``' layout."""
+
+    ids: np.ndarray
+    rows: np.ndarray
+
+
 @dataclass
 class WorldStats:
     """Counters of a World.
@@ -147,8 +156,9 @@ def _wake(bodies: ti.template(), slot: ti.i32):
 
 @ti.kernel
 def _pack_impacts(impacts: ti.template(), n: ti.i32, rows: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-    """Impact rows 0..n-1 into ``rows`` (n, 18): body, other, point, normal, impulse,
-    force, duration, speed, dt, substep (the layout World.impacts unpacks)."""
+    """Impact rows 0..n-1 into ``rows`` (n, 27): body, other, point, normal, impulse,
+    force, duration, speed, dt, substep, point_body, normal_body, force_body (the layout
+    World.impacts unpacks)."""
     for k in range(n):
         rows[k, 0] = impacts.body[k]
         rows[k, 1] = impacts.other[k]
@@ -161,13 +171,18 @@ def _pack_impacts(impacts: ti.template(), n: ti.i32, rows: ti.types.ndarray(dtyp
         rows[k, 15] = impacts.speed[k]
         rows[k, 16] = impacts.dt[k]
         rows[k, 17] = impacts.substep[k]
+        for c in ti.static(range(3)):
+            rows[k, 18 + c] = impacts.point_body[k][c]
+            rows[k, 21 + c] = impacts.normal_body[k][c]
+            rows[k, 24 + c] = impacts.force_body[k][c]
 
 
 @ti.kernel
 def _pack_bodies(bodies: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
                  rows: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-    """Bodies ``ids`` (K,) into ``rows`` (K, 15): position, orientation (wxyz), linear and
-    angular velocity, active, sleeping (the layout World.body_state unpacks)."""
+    """Bodies ``ids`` (K,) into ``rows`` (K, 17): position, orientation (wxyz), linear and
+    angular velocity, active, sleeping, sleep timer, wake request (the layout
+    World.body_state and World.snapshot unpack)."""
     for k in range(ids.shape[0]):
         b = ids[k]
         for c in ti.static(range(3)):
@@ -178,6 +193,25 @@ def _pack_bodies(bodies: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim
             rows[k, 3 + c] = bodies.orientation[b][c]
         rows[k, 13] = bodies.active[b]
         rows[k, 14] = bodies.sleeping[b]
+        rows[k, 15] = bodies.sleep_timer[b]
+        rows[k, 16] = bodies.wake_request[b]
+
+
+@ti.kernel
+def _unpack_bodies(bodies: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                   rows: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+    """The inverse of _pack_bodies for the motion state (not ``active``)."""
+    for k in range(ids.shape[0]):
+        b = ids[k]
+        for c in ti.static(range(3)):  # (f64 rows of f32 values: exact)
+            bodies.position[b][c] = ti.cast(rows[k, c], ti.f32)
+            bodies.linear_velocity[b][c] = ti.cast(rows[k, 7 + c], ti.f32)
+            bodies.angular_velocity[b][c] = ti.cast(rows[k, 10 + c], ti.f32)
+        for c in ti.static(range(4)):
+            bodies.orientation[b][c] = ti.cast(rows[k, 3 + c], ti.f32)
+        bodies.sleeping[b] = ti.cast(rows[k, 14], ti.i32)
+        bodies.sleep_timer[b] = ti.cast(rows[k, 15], ti.f32)
+        bodies.wake_request[b] = ti.cast(rows[k, 16], ti.i32)
 
 
 @ti.kernel
@@ -465,7 +499,7 @@ class World:
             raise IndexError(f"body ids must lie in [0, {self.capacity.max_bodies}), got {ids.min()}..{ids.max()}")
         # One launch for the K rows: six whole-field reads cost ~1.4 ms a call, paid per
         # analysed impact and per written frame.
-        rows = np.zeros((len(ids), 15), dtype=np.float64)
+        rows = np.zeros((len(ids), 17), dtype=np.float64)
         if len(ids):
             _pack_bodies(self.bodies, np.ascontiguousarray(ids, dtype=np.int32), rows)
         return dict(
@@ -478,23 +512,55 @@ class World:
             sleeping=rows[:, 14] != 0,
         )
 
+    def snapshot(self) -> "BodySnapshot":
+        """The motion state of every body now (pose, velocities, sleep state), for
+        :meth:`restore`; one launch. Static data (models, colliders) is not copied."""
+        ids = np.asarray(self.body_ids, dtype=np.int32)
+        rows = np.zeros((len(ids), 17), dtype=np.float64)
+        if len(ids):
+            _pack_bodies(self.bodies, ids, rows)
+        return BodySnapshot(ids=ids, rows=rows)
+
+    def restore(self, snapshot: "BodySnapshot", ids) -> None:
+        """Put bodies ``ids`` (each in the world now and in ``snapshot``) back in their
+        motion state of ``snapshot``; the other bodies are left as they are."""
+        ids = np.asarray(ids, dtype=np.int64)
+        where = {int(b): k for k, b in enumerate(snapshot.ids)}
+        missing = [int(b) for b in ids if int(b) not in where or int(b) not in self._body_range]
+        if missing:
+            raise KeyError(f"bodies {missing} are not both in the snapshot and in the world")
+        if len(ids):
+            rows = np.ascontiguousarray(snapshot.rows[[where[int(b)] for b in ids]])
+            _unpack_bodies(self.bodies, np.ascontiguousarray(ids, dtype=np.int32), rows)
+
+    def snapshot_state(self, snapshot: "BodySnapshot", body: int) -> dict:
+        """One body's position, orientation (wxyz), linear and angular velocity in
+        ``snapshot`` (float64 arrays)."""
+        k = int(np.nonzero(snapshot.ids == body)[0][0])
+        row = snapshot.rows[k]
+        return dict(position=row[0:3], orientation=row[3:7], linear_velocity=row[7:10],
+                    angular_velocity=row[10:13])
+
     def impacts(self) -> dict:
         """Impact rows of the last advance (see docs/ARCHITECTURE.md): body (K,), other (K,)
         (-1 ground, -2 static box), point (K,3) [m], normal (K,3) unit into body, impulse
         (K,3) [N s] on body, force (K,3) [N] on body (Hertz peak force at the approach
         speed for an impact, J / dt for a sustained contact; see dynamics/impacts.py),
         duration (K,) [s] Hertz contact time
-        (0: sustained), speed (K,) [m/s] approach speed, dt (K,) [s], substep (K,)."""
+        (0: sustained), speed (K,) [m/s] approach speed, dt (K,) [s], substep (K,);
+        point_body, normal_body, force_body (K,3): point, normal and force in the body's
+        frame at that substep."""
         n = min(int(self.impact_buffer.count[None]), self.capacity.max_impacts)
         # The n rows in one launch: reading each field whole (16k rows x 10 fields) took
         # 2.5 ms a frame in the glass scene.
-        rows = np.zeros((n, 18), dtype=np.float64)
+        rows = np.zeros((n, 27), dtype=np.float64)
         if n:
             _pack_impacts(self.impact_buffer, n, rows)
         return dict(
             body=rows[:, 0].astype(np.int32), other=rows[:, 1].astype(np.int32), point=rows[:, 2:5],
             normal=rows[:, 5:8], impulse=rows[:, 8:11], force=rows[:, 11:14], duration=rows[:, 14],
             speed=rows[:, 15], dt=rows[:, 16], substep=rows[:, 17].astype(np.int32),
+            point_body=rows[:, 18:21], normal_body=rows[:, 21:24], force_body=rows[:, 24:27],
         )
 
     def particle_state(self, body: int) -> dict:
