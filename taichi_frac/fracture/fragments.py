@@ -290,7 +290,10 @@ def _impact_record(analysis: ImpactAnalysis | None, pos: np.ndarray, rot: np.nda
     if analysis is None or len(analysis.contact_point) == 0:
         return None
     k = 0
-    if analysis.group_principal_values.size:
-        k = int(np.argmax(analysis.group_principal_values[..., 0].max(axis=1)))
+    if np.any(np.isfinite(analysis.group_principal_values)):
+        # (a local analysis leaves the groups of contacts that crack nothing NaN)
+        peak = np.where(np.isfinite(analysis.group_principal_values[..., 0]), analysis.group_principal_values[..., 0],
+                        -np.inf)
+        k = int(np.argmax(peak.max(axis=1)))
     return ImpactRecord(point=pos + rot @ analysis.contact_point[k], normal=rot @ analysis.normal_in[k],
                         force=rot @ analysis.force[k])
