@@ -214,11 +214,13 @@ class SimulationOptions:
         sleep_time: ... for this long goes to sleep [s].
         rolling_resistance: lever arm of the contacts' rolling resistance as a fraction of
             the collision-sphere radius [-] (see ``DynamicsOptions``); 0: off.
-        resimulate_fractures: a frame in which a body breaks is simulated again from its
-            start with the pieces in the body's place, so the impact that broke it meets
-            the pieces (a projectile goes on through what it breaks, the pieces of a
-            dropped ring land each on its own) instead of the whole body, which the rigid
-            solver has already bounced. Costs a second simulation of each such frame.
+        resimulate_fractures: fracture inside the frame: each substep's impacts are
+            analysed as they happen, and a substep in which a body breaks is simulated
+            again with the pieces in the body's place, so the impact that broke it meets
+            the pieces (a projectile goes on through what it breaks) instead of the whole
+            body, which the rigid solver has already bounced. Costs a snapshot per substep
+            and a second run of each such substep. Off: the frame's impacts are analysed
+            after it.
         arch: Taichi backend: cpu, cuda, vulkan, metal or gpu.
     """
 

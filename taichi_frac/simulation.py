@@ -78,7 +78,7 @@ class RunSummary:
     mass_initial: float = 0.0
     mass_final: float = 0.0
     mass_dropped: float = 0.0
-    resimulated_frames: int = 0
+    resimulated_substeps: int = 0
 
     def to_json(self) -> str:
         return json.dumps(self.__dict__, indent=2, default=float)
@@ -105,6 +105,47 @@ def _strongest_per_pair(impacts: dict, bodies: np.ndarray) -> dict[int, np.ndarr
     first[1:] = (body[1:] != body[:-1]) | (other[1:] != other[:-1])
     body, rows = body[first], rows[first]
     return {int(b): np.sort(rows[body == b]) for b in np.unique(body)}
+
+
+class _FractureWatch:
+    """Fracture inside the frame (``simulation.resimulate_fractures``), as the World's
+    ``advance(watch=...)``: before each substep the bodies' motion state is kept; after
+    it, the substep's impacts are analysed, and when a body breaks, the other bodies go
+    back to their state before the substep, the pieces take the broken body's place, and
+    the substep runs again, so the impact that broke the body meets its pieces (a
+    projectile goes on through what it breaks). Impacts of the re-run are analysed too
+    (pieces may break again), without a third run."""
+
+    def __init__(self, sim: "Simulation", frame: int):
+        self.sim, self.frame = sim, frame
+        self.start = None
+        self.first = 0
+        self.rerun = False
+        self.analysed: dict = {}  # (body, other) -> largest force analysed this frame [N]
+        self.seconds = 0.0  # spent in fracture stages [s]
+
+    def before(self, k: int) -> None:
+        self.start = self.sim.world.snapshot()
+        self.first = self.sim.world.impact_count()
+
+    def after(self, k: int) -> bool:
+        world = self.sim.world
+        if world.impact_count() == self.first:
+            self.rerun = False
+            return False
+        t = time.perf_counter()
+        start = None if self.rerun else self.start
+        born = self.sim._fracture_stage(self.frame, start, self.first, self.analysed)
+        self.seconds += time.perf_counter() - t
+        if self.rerun or not born:
+            self.rerun = False
+            return False
+        live, new = set(world.body_ids), set(born)
+        world.restore(self.start, [b for b in self.start.ids if b in live and b not in new])
+        self.first = world.impact_count()
+        self.rerun = True
+        self.sim.resimulated_substeps += 1
+        return True
 
 
 class Simulation:
@@ -143,7 +184,7 @@ class Simulation:
         self.times = StageTimes()
         self.records: dict[int, BodyRecord] = {}
         self.fracture_events = 0
-        self.resimulated_frames = 0
+        self.resimulated_substeps = 0
         self.mass_dropped = 0.0
         self.prepare_reports = []
         self._tet_peak_stress: dict[int, np.ndarray] = {}
@@ -266,10 +307,13 @@ class Simulation:
 
     # ------------------------------------------------------------------ fracture
 
-    def _fracture_stage(self, frame: int, start=None) -> list[int]:
-        """Analyse the frame's impacts, split the bodies that crack; returns the new
-        pieces' body ids. ``start``: the World's snapshot at the frame's start; the pieces
-        are then put where their parent was then (``resimulate_fractures``)."""
+    def _fracture_stage(self, frame: int, start=None, first: int = 0, analysed: dict | None = None) -> list[int]:
+        """Analyse the impacts recorded since row ``first`` of this advance, split the
+        bodies that crack; returns the new pieces' body ids. ``start``: a World snapshot
+        from before those impacts; the pieces are then put where their parent was then
+        (``resimulate_fractures``: see ``_FractureWatch``). ``analysed``: (body, other) ->
+        the largest force [N] already analysed for that pair in this frame without a crack;
+        a pair's impact no stronger is not analysed again (and the dict is updated)."""
         from .fracture.cracks import analyze_impact
         from .fracture.fragments import make_fragments, split_body
 
@@ -278,7 +322,7 @@ class Simulation:
         breakable = np.array([b for b, r in self.records.items() if r.breakable and b in live])
         if len(breakable) == 0:
             return born
-        impacts = self.world.impacts()
+        impacts = self.world.impacts(first)
         if len(impacts["body"]) == 0:
             return born
         per_body = _strongest_per_pair(impacts, breakable)
@@ -289,6 +333,11 @@ class Simulation:
             if not np.any(strong):
                 continue
             rows, force = rows[strong], force[strong]
+            if analysed is not None:
+                size = np.linalg.norm(force, axis=1)
+                pairs = [(body, int(o)) for o in impacts["other"][rows]]
+                if all(size[i] <= analysed.get(p, -1.0) for i, p in enumerate(pairs)):
+                    continue  # the same touch, no stronger than one that cracked nothing
             t = time.perf_counter()
             state = self.world.body_state([body])
             pos, quat = state["position"][0], state["orientation"][0]
@@ -300,6 +349,9 @@ class Simulation:
                                       full_field=False)
             self.times.fracture_analysis += time.perf_counter() - t
             if not analysis.any_crack:
+                if analysed is not None:
+                    for i, p in enumerate(pairs):
+                        analysed[p] = max(analysed.get(p, 0.0), float(size[i]))
                 continue
             t = time.perf_counter()
             split = split_body(rec.model, analysis, rec.fracture)
@@ -333,6 +385,9 @@ class Simulation:
             peak_parent = np.maximum(self._tet_peak_stress.get(body, np.zeros(rec.model.tet_count)),
                                      analysis.particle_principal_stress)
             self.world.remove_body(body)
+            if analysed is not None:  # its slot may go to a piece: forget what it went through
+                for key in [key for key in analysed if body in key]:
+                    del analysed[key]
             if self.writer is not None:
                 self.writer.end_fragment(rec.cache_id, frame)
             self.mass_dropped += split.dropped_mass
@@ -405,21 +460,12 @@ class Simulation:
             for frame in range(1, self.frame_count + 1):
                 t_frame = time.perf_counter()
                 t = time.perf_counter()
-                at_start = self.world.snapshot() if resimulate else None
-                self.world.advance(self.frame_dt, sim.substeps)
-                self.times.dynamics += time.perf_counter() - t
-                if self.fracture_enabled:
-                    born = self._fracture_stage(frame, at_start)
-                    if born and at_start is not None:
-                        # The frame again from its start, the pieces in their parents' place:
-                        # the bodies that did not break go back to where they were.
-                        t = time.perf_counter()
-                        live, new = set(self.world.body_ids), set(born)
-                        self.world.restore(at_start, [b for b in at_start.ids if b in live and b not in new])
-                        self.world.advance(self.frame_dt, sim.substeps)
-                        self.times.dynamics += time.perf_counter() - t
-                        self.resimulated_frames += 1
-                        self._fracture_stage(frame)  # pieces may break again, without a third pass
+                watch = _FractureWatch(self, frame) if resimulate else None
+                self.world.advance(self.frame_dt, sim.substeps, watch=watch)
+                # (the watch's fracture stages are timed as analysis and split, not dynamics)
+                self.times.dynamics += time.perf_counter() - t - (watch.seconds if watch else 0.0)
+                if self.fracture_enabled and not resimulate:
+                    self._fracture_stage(frame)
                 self._write_frame(frame)
                 frame_ms.append(1000.0 * (time.perf_counter() - t_frame))
                 if self.progress is not None:
@@ -459,5 +505,5 @@ class Simulation:
             mass_initial=self.initial_mass,
             mass_final=sum(self.records[b].model.mass for b in live),
             mass_dropped=self.mass_dropped,
-            resimulated_frames=self.resimulated_frames,
+            resimulated_substeps=self.resimulated_substeps,
         )

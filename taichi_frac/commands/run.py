@@ -70,7 +70,7 @@ def print_summary(summary, file=sys.stdout) -> None:
         ("scene", s.scene), ("frames", f"{s.frames} ({s.simulated_time:.2f} s simulated)"),
         ("physics particles", s.physics_particles), ("physics surface particles", s.surface_particles),
         ("boundary particles", s.boundary_particles), ("fragments", s.fragments), ("fracture events", s.fractures),
-        ("frames simulated again", f"{s.resimulated_frames} (simulation.resimulate_fractures)"),
+        ("substeps simulated again", f"{s.resimulated_substeps} (simulation.resimulate_fractures)"),
         ("ms per frame (mean / max)", f"{s.ms_per_frame['mean']:.2f} / {s.ms_per_frame['max']:.2f}"),
         ("wall time", f"{s.wall_time:.2f} s"),
         ("mass initial / final + dropped", f"{s.mass_initial:.6g} / {s.mass_final:.6g} + {s.mass_dropped:.3g} kg"),

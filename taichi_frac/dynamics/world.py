@@ -29,10 +29,11 @@ STAGES = ("collision", "response")
 @dataclass(frozen=True)
 class BodySnapshot:
     """Motion state of the bodies ``ids`` (K,) at one moment (``World.snapshot``): rows
-    (K, 17) in ``_pack_bodies``' layout."""
+    (K, 17) in ``_pack_bodies``' layout; cache (2,) the contact cache's parity and epoch."""
 
     ids: np.ndarray
     rows: np.ndarray
+    cache: np.ndarray
 
 
 @dataclass
@@ -155,26 +156,41 @@ def _wake(bodies: ti.template(), slot: ti.i32):
 
 
 @ti.kernel
-def _pack_impacts(impacts: ti.template(), n: ti.i32, rows: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-    """Impact rows 0..n-1 into ``rows`` (n, 27): body, other, point, normal, impulse,
+def _pack_impacts(impacts: ti.template(), first: ti.i32, rows: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+    """Impact rows first..first+R-1 into ``rows`` (R, 27): body, other, point, normal, impulse,
     force, duration, speed, dt, substep, point_body, normal_body, force_body (the layout
     World.impacts unpacks)."""
-    for k in range(n):
-        rows[k, 0] = impacts.body[k]
-        rows[k, 1] = impacts.other[k]
+    for r in range(rows.shape[0]):
+        k = first + r
+        rows[r, 0] = impacts.body[k]
+        rows[r, 1] = impacts.other[k]
         for c in ti.static(range(3)):
-            rows[k, 2 + c] = impacts.point[k][c]
-            rows[k, 5 + c] = impacts.normal[k][c]
-            rows[k, 8 + c] = impacts.impulse[k][c]
-            rows[k, 11 + c] = impacts.force[k][c]
-        rows[k, 14] = impacts.duration[k]
-        rows[k, 15] = impacts.speed[k]
-        rows[k, 16] = impacts.dt[k]
-        rows[k, 17] = impacts.substep[k]
+            rows[r, 2 + c] = impacts.point[k][c]
+            rows[r, 5 + c] = impacts.normal[k][c]
+            rows[r, 8 + c] = impacts.impulse[k][c]
+            rows[r, 11 + c] = impacts.force[k][c]
+        rows[r, 14] = impacts.duration[k]
+        rows[r, 15] = impacts.speed[k]
+        rows[r, 16] = impacts.dt[k]
+        rows[r, 17] = impacts.substep[k]
         for c in ti.static(range(3)):
-            rows[k, 18 + c] = impacts.point_body[k][c]
-            rows[k, 21 + c] = impacts.normal_body[k][c]
-            rows[k, 24 + c] = impacts.force_body[k][c]
+            rows[r, 18 + c] = impacts.point_body[k][c]
+            rows[r, 21 + c] = impacts.normal_body[k][c]
+            rows[r, 24 + c] = impacts.force_body[k][c]
+
+
+@ti.func
+def _pack_body(bodies: ti.template(), b, rows: ti.template(), k):
+    for c in ti.static(range(3)):
+        rows[k, c] = bodies.position[b][c]
+        rows[k, 7 + c] = bodies.linear_velocity[b][c]
+        rows[k, 10 + c] = bodies.angular_velocity[b][c]
+    for c in ti.static(range(4)):
+        rows[k, 3 + c] = bodies.orientation[b][c]
+    rows[k, 13] = bodies.active[b]
+    rows[k, 14] = bodies.sleeping[b]
+    rows[k, 15] = bodies.sleep_timer[b]
+    rows[k, 16] = bodies.wake_request[b]
 
 
 @ti.kernel
@@ -184,23 +200,25 @@ def _pack_bodies(bodies: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim
     angular velocity, active, sleeping, sleep timer, wake request (the layout
     World.body_state and World.snapshot unpack)."""
     for k in range(ids.shape[0]):
-        b = ids[k]
-        for c in ti.static(range(3)):
-            rows[k, c] = bodies.position[b][c]
-            rows[k, 7 + c] = bodies.linear_velocity[b][c]
-            rows[k, 10 + c] = bodies.angular_velocity[b][c]
-        for c in ti.static(range(4)):
-            rows[k, 3 + c] = bodies.orientation[b][c]
-        rows[k, 13] = bodies.active[b]
-        rows[k, 14] = bodies.sleeping[b]
-        rows[k, 15] = bodies.sleep_timer[b]
-        rows[k, 16] = bodies.wake_request[b]
+        _pack_body(bodies, ids[k], rows, k)
 
 
 @ti.kernel
-def _unpack_bodies(bodies: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                   rows: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-    """The inverse of _pack_bodies for the motion state (not ``active``)."""
+def _snapshot_bodies(bodies: ti.template(), particles: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                     rows: ti.types.ndarray(dtype=ti.f64, ndim=2), cache: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+    """_pack_bodies, and the contact cache's parity and epoch into ``cache`` (2,)."""
+    for k in range(ids.shape[0]):
+        _pack_body(bodies, ids[k], rows, k)
+    cache[0] = particles.parity[None]
+    cache[1] = particles.cache_epoch[None]
+
+
+@ti.kernel
+def _restore_bodies(bodies: ti.template(), particles: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                    rows: ti.types.ndarray(dtype=ti.f64, ndim=2), cache: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+    """The inverse of _snapshot_bodies for the motion state (not ``active``) of bodies
+    ``ids``, and the contact cache's parity and epoch: the impulses stored since are no
+    longer the valid half, so a substep run again warm-starts as it did."""
     for k in range(ids.shape[0]):
         b = ids[k]
         for c in ti.static(range(3)):  # (f64 rows of f32 values: exact)
@@ -212,6 +230,8 @@ def _unpack_bodies(bodies: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, nd
         bodies.sleeping[b] = ti.cast(rows[k, 14], ti.i32)
         bodies.sleep_timer[b] = ti.cast(rows[k, 15], ti.f32)
         bodies.wake_request[b] = ti.cast(rows[k, 16], ti.i32)
+    particles.parity[None] = cache[0]
+    particles.cache_epoch[None] = cache[1]
 
 
 @ti.kernel
@@ -425,13 +445,19 @@ class World:
 
     # ---------------------------------------------------------------- stepping
 
-    def advance(self, frame_dt: float, substeps: int = 10) -> None:
+    def advance(self, frame_dt: float, substeps: int = 10, watch=None) -> None:
         """Advance one frame of ``frame_dt`` [s] in at least ``substeps`` substeps; more are
         taken when a body that may touch something during the frame would otherwise move
         further than ``substep_motion_fraction`` of its mean collision-particle radius in one
         substep, up to ``max_substeps``. (Tunnelling is prevented by the speculative
         contacts at any substep length; the refinement keeps contacts accurate and the grid
-        cells small.)"""
+        cells small.)
+
+        ``watch``: an object with ``before(k)`` and ``after(k) -> bool``, called around
+        each substep k; when ``after`` returns True the substep is run again (once, with
+        ``after`` called again): the simulation's fracture inside a frame, which restores
+        the bodies to their state before the substep and puts a broken body's pieces in
+        its place."""
         t_frame = time.perf_counter()
         opt = self.options
         _reset_advance_counters(self.fields)
@@ -443,7 +469,12 @@ class World:
                 count = opt.max_substeps
             dt = frame_dt / count
             for k in range(count):
+                if watch is not None:
+                    watch.before(k)
                 self._substep(dt, k)
+                if watch is not None and watch.after(k):
+                    self._substep(dt, k)
+                    watch.after(k)
         self.stats.substeps = count
         self.stats.total_substeps += count
         self.stats.frames += 1
@@ -512,26 +543,30 @@ class World:
             sleeping=rows[:, 14] != 0,
         )
 
+    def impact_count(self) -> int:
+        """Impact rows recorded so far in this advance (see :meth:`impacts`)."""
+        return min(int(self.impact_buffer.count[None]), self.capacity.max_impacts)
+
     def snapshot(self) -> "BodySnapshot":
         """The motion state of every body now (pose, velocities, sleep state), for
         :meth:`restore`; one launch. Static data (models, colliders) is not copied."""
         ids = np.asarray(self.body_ids, dtype=np.int32)
         rows = np.zeros((len(ids), 17), dtype=np.float64)
-        if len(ids):
-            _pack_bodies(self.bodies, ids, rows)
-        return BodySnapshot(ids=ids, rows=rows)
+        cache = np.zeros(2, dtype=np.int32)
+        _snapshot_bodies(self.bodies, self.particles, ids, rows, cache)
+        return BodySnapshot(ids=ids, rows=rows, cache=cache)
 
     def restore(self, snapshot: "BodySnapshot", ids) -> None:
         """Put bodies ``ids`` (each in the world now and in ``snapshot``) back in their
-        motion state of ``snapshot``; the other bodies are left as they are."""
+        motion state of ``snapshot``, and the contact cache (warm starting) back to that
+        moment; the other bodies are left as they are."""
         ids = np.asarray(ids, dtype=np.int64)
         where = {int(b): k for k, b in enumerate(snapshot.ids)}
         missing = [int(b) for b in ids if int(b) not in where or int(b) not in self._body_range]
         if missing:
             raise KeyError(f"bodies {missing} are not both in the snapshot and in the world")
-        if len(ids):
-            rows = np.ascontiguousarray(snapshot.rows[[where[int(b)] for b in ids]])
-            _unpack_bodies(self.bodies, np.ascontiguousarray(ids, dtype=np.int32), rows)
+        rows = np.ascontiguousarray(snapshot.rows[[where[int(b)] for b in ids]]).reshape(len(ids), 17)
+        _restore_bodies(self.bodies, self.particles, np.ascontiguousarray(ids, dtype=np.int32), rows, snapshot.cache)
 
     def snapshot_state(self, snapshot: "BodySnapshot", body: int) -> dict:
         """One body's position, orientation (wxyz), linear and angular velocity in
@@ -541,7 +576,7 @@ class World:
         return dict(position=row[0:3], orientation=row[3:7], linear_velocity=row[7:10],
                     angular_velocity=row[10:13])
 
-    def impacts(self) -> dict:
+    def impacts(self, first: int = 0) -> dict:
         """Impact rows of the last advance (see docs/ARCHITECTURE.md): body (K,), other (K,)
         (-1 ground, -2 static box), point (K,3) [m], normal (K,3) unit into body, impulse
         (K,3) [N s] on body, force (K,3) [N] on body (Hertz peak force at the approach
@@ -549,13 +584,15 @@ class World:
         duration (K,) [s] Hertz contact time
         (0: sustained), speed (K,) [m/s] approach speed, dt (K,) [s], substep (K,);
         point_body, normal_body, force_body (K,3): point, normal and force in the body's
-        frame at that substep."""
-        n = min(int(self.impact_buffer.count[None]), self.capacity.max_impacts)
-        # The n rows in one launch: reading each field whole (16k rows x 10 fields) took
+        frame at that substep. ``first``: only the rows from that one on (those of the
+        substeps since :meth:`impact_count` returned it)."""
+        n = self.impact_count()
+        first = min(max(int(first), 0), n)
+        # The rows in one launch: reading each field whole (16k rows x 10 fields) took
         # 2.5 ms a frame in the glass scene.
-        rows = np.zeros((n, 27), dtype=np.float64)
-        if n:
-            _pack_impacts(self.impact_buffer, n, rows)
+        rows = np.zeros((n - first, 27), dtype=np.float64)
+        if n > first:
+            _pack_impacts(self.impact_buffer, first, rows)
         return dict(
             body=rows[:, 0].astype(np.int32), other=rows[:, 1].astype(np.int32), point=rows[:, 2:5],
             normal=rows[:, 5:8], impulse=rows[:, 8:11], force=rows[:, 11:14], duration=rows[:, 14],
