@@ -52,7 +52,7 @@ import numpy as np
 
 from ..model import BodyModel
 from ..options import FractureOptions, Material
-from .field import point_load_displacement
+from .field import point_loads_displacement
 from .sph import displacement_gradient, neighbor_lists
 from .stress import largest_principal_stress, principal_stresses, stress_from_gradient
 
@@ -305,11 +305,8 @@ def analyze_impact(
             rows = [indices[offsets[i]:offsets[i + 1]] for i in query]
             where = np.unique(np.concatenate([query, *rows]))
         displacement = np.zeros((t_count, 3))
-        for k in range(k_count):  # loop over contacts (a handful), not particles
-            displacement[where] += point_load_displacement(
-                points[where], contact[k], normal[k], force[k], material.shear_modulus,
-                material.poisson_ratio, contact_radius=float(radius[k]),
-            )
+        displacement[where] = point_loads_displacement(points[where], contact, normal, force, material.shear_modulus,
+                                                       material.poisson_ratio, radius)
         grad = displacement_gradient(points, volumes, displacement, offsets, indices, h,
                                      corrected=options.corrected_gradient, query=query)
         stress = stress_from_gradient(grad, material.young_modulus, material.poisson_ratio)
