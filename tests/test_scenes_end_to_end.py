@@ -114,8 +114,11 @@ def test_glass_walls_break_and_pieces_break_again(world):
 
 @pytest.mark.slow
 def test_thirteen_rings_fall_and_break(world):
+    """60 frames: the rings land and break, their pieces pile up. (At frame 53 a 2.6 kg ring
+    piece strikes a 17 g chip that, without integrate.hold_above_ground, ended 1.28
+    physics-particle radii in the floor.)"""
     scene = load_scene(SCENES / "thirteen_rings.toml")
-    sim, summary, worst = run_checked(scene, world, frames=40)
+    sim, summary, worst = run_checked(scene, world, frames=60)
     assert_invariants(scene, summary, worst)
     assert summary.physics_particles > 60_000
     assert summary.fragments >= 13

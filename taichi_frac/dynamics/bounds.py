@@ -47,16 +47,25 @@ def pair_motion(bodies: ti.template(), statics: ti.template(), a, b, dt):
 
 
 @ti.func
-def near_static(statics: ti.template(), x, radius):
-    """1 when the sphere at ``x`` [m] of ``radius`` [m] reaches a ground plane or a static
-    box, else 0."""
-    near = 0
+def near_statics(statics: ti.template(), x, radius):
+    """(plane, box): 1 each when the sphere at ``x`` [m] of ``radius`` [m] reaches a
+    ground plane, resp. a static box, else 0."""
+    plane = 0
+    box = 0
     for k in range(statics.plane_count[None]):
         if x[2] - radius < statics.plane_height[k]:
-            near = 1
+            plane = 1
     for k in range(statics.box_count[None]):
         local = statics.box_rotation[k].transpose() @ (x - statics.box_center[k])
         q = ti.math.clamp(local, -statics.box_half_extents[k], statics.box_half_extents[k])
         if (local - q).norm_sqr() < radius * radius:
-            near = 1
-    return near
+            box = 1
+    return plane, box
+
+
+@ti.func
+def near_static(statics: ti.template(), x, radius):
+    """1 when the sphere at ``x`` [m] of ``radius`` [m] reaches a ground plane or a static
+    box, else 0."""
+    plane, box = near_statics(statics, x, radius)
+    return ti.max(plane, box)

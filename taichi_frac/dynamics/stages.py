@@ -58,3 +58,4 @@ def respond(f: ti.template(),
     impacts.record_impacts(f.bodies, f.contacts, f.impacts, dt, substep, force_threshold, impact_speed)
     integrate.integrate_positions(f.bodies, f.statics, dt, max_rotation, sleep_linear_speed, sleep_angular_speed,
                                   sleep_time, max_correction_speed)
+    integrate.hold_above_ground(f.bodies, f.particles, f.statics, dt)
