@@ -315,7 +315,7 @@ class Simulation:
         the largest force [N] already analysed for that pair in this frame without a crack;
         a pair's impact no stronger is not analysed again (and the dict is updated)."""
         from .fracture.cracks import analyze_impact
-        from .fracture.fragments import make_fragments, split_body
+        from .fracture.fragments import fragment_peak_stress, make_fragments, split_body
 
         born: list[int] = []
         live = set(self.world.body_ids)
@@ -339,8 +339,6 @@ class Simulation:
                 if all(size[i] <= analysed.get(p, -1.0) for i, p in enumerate(pairs)):
                     continue  # the same touch, no stronger than one that cracked nothing
             t = time.perf_counter()
-            state = self.world.body_state([body])
-            pos, quat = state["position"][0], state["orientation"][0]
             # In the body's frame at the impact's substep: the body may move far by the
             # frame's end (a struck glass wall, 17 mm).
             points_b, normals_b = impacts["point_body"][rows], impacts["normal_body"][rows]
@@ -367,18 +365,15 @@ class Simulation:
                 t = time.perf_counter()
                 analysis = analyze_impact(rec.model, points_b, normals_b, force_b, rec.material, rec.fracture,
                                           full_field=True)
-                peak = analysis.particle_principal_stress
-                split = dataclasses.replace(split, fragment_peak_stress=np.array(
-                    [float(np.max(peak[p])) for p in split.fragment_tets]))
+                split = dataclasses.replace(split, fragment_peak_stress=fragment_peak_stress(
+                    split.fragment_tets, analysis.particle_principal_stress))
                 self.times.fracture_analysis += time.perf_counter() - t
                 t = time.perf_counter()
-            motion = dict(position=pos, orientation=quat, linear_velocity=state["linear_velocity"][0],
-                          angular_velocity=state["angular_velocity"][0])
-            if start is not None:
-                motion = self.world.snapshot_state(start, body)
+            # The pieces start where the body is now, or was before the substep run again.
+            state = self.world.body_state([body]) if start is None else self.world.snapshot_state(start, [body])
             pieces = make_fragments(
-                rec.model, split, motion["position"], motion["orientation"], motion["linear_velocity"],
-                motion["angular_velocity"],
+                rec.model, split, state["position"][0], state["orientation"][0], state["linear_velocity"][0],
+                state["angular_velocity"][0],
                 rec.material, rec.particles, options=rec.fracture, analysis=analysis, birth_frame=frame,
                 parent=body, parent_generation=rec.generation,
             )

@@ -169,14 +169,13 @@ def _pack_impacts(impacts: ti.template(), first: ti.i32, rows: ti.types.ndarray(
             rows[r, 5 + c] = impacts.normal[k][c]
             rows[r, 8 + c] = impacts.impulse[k][c]
             rows[r, 11 + c] = impacts.force[k][c]
+            rows[r, 18 + c] = impacts.point_body[k][c]
+            rows[r, 21 + c] = impacts.normal_body[k][c]
+            rows[r, 24 + c] = impacts.force_body[k][c]
         rows[r, 14] = impacts.duration[k]
         rows[r, 15] = impacts.speed[k]
         rows[r, 16] = impacts.dt[k]
         rows[r, 17] = impacts.substep[k]
-        for c in ti.static(range(3)):
-            rows[r, 18 + c] = impacts.point_body[k][c]
-            rows[r, 21 + c] = impacts.normal_body[k][c]
-            rows[r, 24 + c] = impacts.force_body[k][c]
 
 
 @ti.func
@@ -249,6 +248,21 @@ def _advance_counters(f: ti.template()) -> ti.types.vector(5, ti.i32):
     rows lost) in one launch instead of five field reads."""
     return ti.Vector([f.contacts.count[None], f.contacts.peak[None], f.contacts.overflow[None],
                       f.grid.overflow[None], f.impacts.overflow[None]], dt=ti.i32)
+
+
+def _body_rows(ids: np.ndarray, rows: np.ndarray) -> dict:
+    """The dict World.body_state returns from rows (K, 17) in ``_pack_body``'s layout."""
+    return dict(id=ids, position=rows[:, 0:3], orientation=rows[:, 3:7], linear_velocity=rows[:, 7:10],
+                angular_velocity=rows[:, 10:13], active=rows[:, 13] != 0, sleeping=rows[:, 14] != 0)
+
+
+def _snapshot_rows(snapshot: BodySnapshot, ids: np.ndarray) -> np.ndarray:
+    """Rows (K, 17) of bodies ``ids`` in ``snapshot``; KeyError names those it lacks."""
+    where = {int(b): k for k, b in enumerate(snapshot.ids)}
+    missing = [int(b) for b in ids if int(b) not in where]
+    if missing:
+        raise KeyError(f"bodies {missing} are not in the snapshot")
+    return snapshot.rows[[where[int(b)] for b in ids]].reshape(len(ids), 17)
 
 
 def cluster_spheres(offsets: np.ndarray, radii: np.ndarray, count: int) -> np.ndarray:
@@ -533,15 +547,7 @@ class World:
         rows = np.zeros((len(ids), 17), dtype=np.float64)
         if len(ids):
             _pack_bodies(self.bodies, np.ascontiguousarray(ids, dtype=np.int32), rows)
-        return dict(
-            id=ids,
-            position=rows[:, 0:3],
-            orientation=rows[:, 3:7],
-            linear_velocity=rows[:, 7:10],
-            angular_velocity=rows[:, 10:13],
-            active=rows[:, 13] != 0,
-            sleeping=rows[:, 14] != 0,
-        )
+        return _body_rows(ids, rows)
 
     def impact_count(self) -> int:
         """Impact rows recorded so far in this advance (see :meth:`impacts`)."""
@@ -561,20 +567,16 @@ class World:
         motion state of ``snapshot``, and the contact cache (warm starting) back to that
         moment; the other bodies are left as they are."""
         ids = np.asarray(ids, dtype=np.int64)
-        where = {int(b): k for k, b in enumerate(snapshot.ids)}
-        missing = [int(b) for b in ids if int(b) not in where or int(b) not in self._body_range]
+        missing = [int(b) for b in ids if int(b) not in self._body_range]
         if missing:
-            raise KeyError(f"bodies {missing} are not both in the snapshot and in the world")
-        rows = np.ascontiguousarray(snapshot.rows[[where[int(b)] for b in ids]]).reshape(len(ids), 17)
+            raise KeyError(f"bodies {missing} are not in the world")
+        rows = np.ascontiguousarray(_snapshot_rows(snapshot, ids))
         _restore_bodies(self.bodies, self.particles, np.ascontiguousarray(ids, dtype=np.int32), rows, snapshot.cache)
 
-    def snapshot_state(self, snapshot: "BodySnapshot", body: int) -> dict:
-        """One body's position, orientation (wxyz), linear and angular velocity in
-        ``snapshot`` (float64 arrays)."""
-        k = int(np.nonzero(snapshot.ids == body)[0][0])
-        row = snapshot.rows[k]
-        return dict(position=row[0:3], orientation=row[3:7], linear_velocity=row[7:10],
-                    angular_velocity=row[10:13])
+    def snapshot_state(self, snapshot: "BodySnapshot", ids) -> dict:
+        """:meth:`body_state` of bodies ``ids`` as ``snapshot`` holds them."""
+        ids = np.asarray(ids, dtype=np.int64)
+        return _body_rows(ids, _snapshot_rows(snapshot, ids))
 
     def impacts(self, first: int = 0) -> dict:
         """Impact rows of the last advance (see docs/ARCHITECTURE.md): body (K,), other (K,)

@@ -155,6 +155,11 @@ def _merge_small(labels: np.ndarray, bonds: np.ndarray, cut: np.ndarray, min_siz
             return labels
 
 
+def fragment_peak_stress(pieces, principal_stress) -> np.ndarray:
+    """(F,) [Pa] the largest of ``principal_stress`` (T,) over each piece's tets."""
+    return np.array([float(np.max(principal_stress[p])) for p in pieces])
+
+
 def split_body(
     model: BodyModel,
     cracks,
@@ -203,7 +208,7 @@ def split_body(
     debris = np.array([bool(is_debris_label[uniq[r]]) for r in rank], dtype=bool)
 
     if principal_stress is not None:
-        peak = np.array([float(np.max(principal_stress[p])) for p in pieces])
+        peak = fragment_peak_stress(pieces, principal_stress)
     else:
         peak = _crack_peak_per_piece(model, cracks, cut, labels, uniq[rank])
 
