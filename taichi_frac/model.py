@@ -290,7 +290,7 @@ def _assemble(vertices, tets, vol, neighbor, density, boundary_group_size, keep_
     source frame] with volumes ``vol`` (T,) [m^3] and face neighbours ``neighbor`` (T,4).
     ``inherited``: (kept groups (lists of tet indices), their collision centres (K,3) [m,
     source frame], crack faces (T,4) bool) from ``build_fragment_model``."""
-    props = tet_mass_properties(vertices, tets, density)
+    props = tet_mass_properties(vertices, tets, density, vol)
     com = props.center_of_mass
     vertices = vertices - com
     faces, face_tet, face_local = boundary_faces(tets, neighbor)
@@ -430,21 +430,22 @@ def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner,
         return b_pos.copy()
     group_of_tet = np.full(len(centroids), -1, dtype=np.int64)
     group_of_tet[members] = owner
-    corners = vertices[faces]  # (F,3,3)
-    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    outward = np.sign(((corners.mean(axis=1) - centroids[face_tet]) * normal).sum(axis=1))
-    normal *= outward[:, None]  # away from the owning tet, whatever the winding
     group = group_of_tet[face_tet]
-    mine = group >= 0
+    mine = np.nonzero(group >= 0)[0]  # the faces of these groups' members (all, or a few)
+    group = group[mine]
+    corners = vertices[faces[mine]]  # (Fm,3,3)
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    outward = np.sign(((corners.mean(axis=1) - centroids[face_tet[mine]]) * normal).sum(axis=1))
+    normal *= outward[:, None]  # away from the owning tet, whatever the winding
     n_sum = np.zeros((n_groups, 3))
-    np.add.at(n_sum, group[mine], normal[mine])
+    np.add.at(n_sum, group, normal)
     length = np.linalg.norm(n_sum, axis=1)
     has_normal = length > 1e-12 * max(float(length.max()), 1e-300)
     n_unit = np.where(has_normal[:, None], n_sum / np.maximum(length, 1e-300)[:, None], 0.0)
-    rel = corners[mine] - b_pos[group[mine]][:, None, :]  # (Fm,3,3) face vertices from the centre
-    heights = (rel * n_unit[group[mine]][:, None, :]).sum(axis=2)
+    rel = corners - b_pos[group][:, None, :]  # (Fm,3,3) face vertices from the centre
+    heights = (rel * n_unit[group][:, None, :]).sum(axis=2)
     h = np.full(n_groups, np.inf)
-    np.minimum.at(h, group[mine], -heights.max(axis=1))
+    np.minimum.at(h, group, -heights.max(axis=1))
     h = -h  # largest height of the group's faces above its centre
     member_rel = centroids[members] - b_pos[owner]
     along = (member_rel * n_unit[owner]).sum(axis=1)

@@ -77,6 +77,21 @@ def test_glass_walls_about_20000_particles_and_a_fast_projectile():
     assert all(w.position[2] - 0.25 >= 0 for w in walls)
 
 
+def test_overrides_set_values_and_none_restores_the_default():
+    """--set KEY=VALUE parses VALUE as TOML; ``none`` removes the key (the option's default)."""
+    base = load_scene(SCENES / "thirteen_rings.toml")
+    assert base.objects[0].fracture.crack_length == 0.25
+    scene = load_scene(SCENES / "thirteen_rings.toml", ["ring00.fracture.crack_length=none",
+                                                        "ring01.fracture.crack_count=4",
+                                                        "ring02.material.tensile_strength=4e6"])
+    assert scene.objects[0].fracture.crack_length is None is FractureOptions().crack_length
+    assert scene.objects[1].fracture.crack_count == 4
+    assert scene.objects[2].material.tensile_strength == 4.0e6
+    assert scene.objects[3] == base.objects[3]
+    with pytest.raises(OptionError, match="no entry named 'ring99'"):
+        load_scene(SCENES / "thirteen_rings.toml", ["objects.ring99.fracture.crack_count=2"])
+
+
 def test_toml_and_python_api_give_the_same_scene(tmp_path):
     path = _write(tmp_path, """
 name = "same"

@@ -107,6 +107,11 @@ def readme_text(sections: list[Section], markdown_path: Path, readme_part: Path)
         if rows:
             lines += ["Table 2, ms per 20 ms frame (average / maximum):", "",
                       md_table(["scene", "fracture on", "fracture off", "fragments"], rows), ""]
+        variants = [row for row in h.get("variants", []) if row[1] != "the scene's"]
+        if variants:
+            lines += ["The same scenes with other crack controls (fracture on):", "",
+                      md_table(["scene", "crack controls", "fragments", "fracture events", "ms per frame"],
+                               variants, "llrrr"), ""]
     if "grouping" in by_key:
         per_n = by_key["grouping"].headline["per_n"]
         lines += ["Boundary grouping n (13 rings, unbreakable; rest-height error of a dropped ring):", "",

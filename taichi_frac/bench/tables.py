@@ -35,12 +35,24 @@ PAPER_TABLE2 = {
 @dataclass
 class SceneCase:
     """A scene of the tables: ``label`` is the paper's row name (a key of PAPER_TABLE1, or
-    any name for a scene the paper does not have); ``timed`` puts it in Table 2."""
+    any name for a scene the paper does not have); ``timed`` puts it in Table 2.
+    ``variants``: (name, scene) pairs of other crack controls, run with fracture on for the
+    table of fragments against time."""
 
     label: str
     scene: object
     timed: bool = False
     note: str = ""
+    variants: tuple = ()
+
+
+#: The glass walls at more cracks per impact: nearer the paper's 217 fragments, at more cost.
+GLASS_MORE_CRACKS = ["wall0.fracture.crack_count=8", "wall1.fracture.crack_count=6", "wall2.fracture.crack_count=5"]
+#: The 13 rings with the five rings of one crack, or of short cracks, cut too short to split
+#: them (the scene's controls before it gave them cracks across the ring).
+RINGS_SHORT_CRACKS = ["ring00.fracture.crack_length=none", "ring05.fracture.crack_length=0.07",
+                      "ring09.fracture.crack_length=none", "ring10.fracture.crack_length=0.09",
+                      "ring12.fracture.crack_length=none"]
 
 
 def default_cases() -> list[SceneCase]:
@@ -49,10 +61,14 @@ def default_cases() -> list[SceneCase]:
     ring = SCENES / "single_ring.toml"
     return [
         SceneCase("single ring, control 1", load_scene(ring, ["ring.fracture.crack_count=1"]), note="crack_count 1"),
-        SceneCase("single ring, control 2", load_scene(ring, ["ring.fracture.crack_count=2"]), note="crack_count 2"),
-        SceneCase("single ring, control 3", load_scene(ring, ["ring.fracture.crack_count=4"]), note="crack_count 4"),
-        SceneCase("3 glass walls", load_scene(SCENES / "glass_walls.toml"), timed=True),
-        SceneCase("13 rings", load_scene(SCENES / "thirteen_rings.toml"), timed=True),
+        SceneCase("single ring, control 2", load_scene(ring, ["ring.fracture.crack_count=3"]), note="crack_count 3"),
+        SceneCase("single ring, control 3", load_scene(ring, ["ring.fracture.crack_count=5"]), note="crack_count 5"),
+        SceneCase("3 glass walls", load_scene(SCENES / "glass_walls.toml"), timed=True,
+                  variants=(("crack_count 8, 6, 5 (the scene: 4, 3, 2)",
+                             load_scene(SCENES / "glass_walls.toml", GLASS_MORE_CRACKS)),)),
+        SceneCase("13 rings", load_scene(SCENES / "thirteen_rings.toml"), timed=True,
+                  variants=(("five rings cut short (one cut, or none, across the tube)",
+                             load_scene(SCENES / "thirteen_rings.toml", RINGS_SHORT_CRACKS)),)),
     ]
 
 
@@ -123,6 +139,20 @@ def run(ctx: BenchContext, cases: list[SceneCase] | None = None, frames: int | N
         ctx.progress(f"table 2: {case.label}: fracture on {summary.ms_per_frame['mean']:.1f} ms/frame, "
                      f"off {off.ms_per_frame['mean']:.1f}, single-scale {single.ms_per_frame['mean']:.1f}")
 
+    variants = []
+    for case in cases:
+        if not case.timed:
+            continue
+        summary, _ = runs[case.label]["on"]
+        variants.append([case.label, "the scene's", summary.fragments, summary.fractures,
+                         ms_pair(summary.ms_per_frame["mean"], summary.ms_per_frame["max"])])
+        for name, scene in case.variants:
+            _, other, _ = run_scene(ctx, scene, f"{case.label}, {name}", frames=frames)
+            variants.append([case.label, name, other.fragments, other.fractures,
+                             ms_pair(other.ms_per_frame["mean"], other.ms_per_frame["max"])])
+            ctx.progress(f"variants: {case.label}, {name}: {other.fragments} fragments, "
+                         f"{other.ms_per_frame['mean']:.1f} ms/frame")
+
     parts = [
         "Each scene runs through `Simulation(scene, output=False, world=shared_world)` and its "
         "`RunSummary`; paper values from `../shared/paper/BRIEF.md` section 4. Cells are **ours / paper**. "
@@ -151,6 +181,15 @@ def run(ctx: BenchContext, cases: list[SceneCase] | None = None, frames: int | N
                       "fracture analysis", "fragment split",
                       "fracture events", "fragments"], stages, "lrrrrrrrrr"),
         ]
+    if any(row[1] != "the scene's" for row in variants):
+        parts += [
+            "",
+            "Fragments against time: the same scenes with other crack controls (fracture on). More "
+            "pieces cost more, mostly in the dynamics of the pieces that fly and pile up.",
+            "",
+            md_table(["scene", "crack controls", "fragments", "fracture events", "ms per frame, average / maximum"],
+                     variants, "llrrr"),
+        ]
     figures, headline = [], {}
     if table2:
         path, link = _plot_table2(ctx, table2_rows(cases, runs))
@@ -161,7 +200,7 @@ def run(ctx: BenchContext, cases: list[SceneCase] | None = None, frames: int | N
                     for label in runs if "off" in runs[label]}
     parts += ["", f"*Part time: {time.perf_counter() - t0:.0f} s.*"]
     return Section("tables", "Tables 1 and 2 beside the paper", "\n".join(parts), figures,
-                   headline | {"runs": runs})
+                   headline | {"runs": runs, "variants": variants})
 
 
 def table2_rows(cases, runs) -> list[tuple[str, list[tuple[str, float, float]]]]:

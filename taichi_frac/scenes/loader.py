@@ -176,6 +176,8 @@ def apply_overrides(data: dict, overrides, *, where: str = "scene") -> dict:
     ``objects.NAME``. A material given as a preset name becomes ``{preset = NAME}`` when one
     of its fields is overridden. VALUE is parsed as TOML (``3``, ``2e6``, ``true``,
     ``[0, 0, 1]``, ``"porcelain"``); text that is not valid TOML is taken as a string.
+    VALUE ``none`` removes the key, so the option takes its default (TOML has no null:
+    ``ring.fracture.crack_length=none`` lets the crack run as far as the stress says).
     """
     import copy
 
@@ -216,5 +218,8 @@ def apply_overrides(data: dict, overrides, *, where: str = "scene") -> dict:
             node = child
         if isinstance(node, list):
             raise OptionError(f"{where}: override {key!r} names a list; add the entry's name or index")
-        node[parts[-1]] = value
+        if isinstance(raw, str) and raw.lower() == "none":
+            node.pop(parts[-1], None)
+        else:
+            node[parts[-1]] = value
     return data
