@@ -273,19 +273,22 @@ def cluster_spheres(offsets: np.ndarray, radii: np.ndarray, count: int) -> np.nd
     offsets = np.asarray(offsets, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
     k_count = min(count, len(offsets))
-    seeds = [int(np.argmax(np.linalg.norm(offsets - offsets.mean(axis=0), axis=1)))]
-    nearest = np.linalg.norm(offsets - offsets[seeds[0]], axis=1)
+    seeds = [int(np.argmax(((offsets - offsets.mean(axis=0)) ** 2).sum(axis=1)))]
+    nearest = ((offsets - offsets[seeds[0]]) ** 2).sum(axis=1)  # squared: the same argmax
     while len(seeds) < k_count and nearest.max() > 0.0:  # (coincident centres: fewer seeds)
         seeds.append(int(np.argmax(nearest)))
-        nearest = np.minimum(nearest, np.linalg.norm(offsets - offsets[seeds[-1]], axis=1))
+        np.minimum(nearest, ((offsets - offsets[seeds[-1]]) ** 2).sum(axis=1), out=nearest)
     k_count = len(seeds)
     label = np.argmin(((offsets[:, None, :] - offsets[seeds][None, :, :]) ** 2).sum(axis=2), axis=1)
+    # Per-sphere mean and reach over its members, by sorting on the label (one pass, not
+    # one masked pass per sphere: ~4x cheaper on a ring's 400 spheres).
+    order = np.argsort(label, kind="stable")
+    sizes = np.bincount(label, minlength=k_count)  # the seed itself is a member: never empty
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
     spheres = np.zeros((k_count, 4))
-    for k in range(k_count):
-        members = label == k  # the seed itself is a member: never empty
-        centre = offsets[members].mean(axis=0)
-        spheres[k, :3] = centre
-        spheres[k, 3] = np.max(np.linalg.norm(offsets[members] - centre, axis=1) + radii[members])
+    spheres[:, :3] = np.add.reduceat(offsets[order], starts, axis=0) / sizes[:, None]
+    reach = np.sqrt(((offsets - spheres[label, :3]) ** 2).sum(axis=1)) + radii
+    spheres[:, 3] = np.maximum.reduceat(reach[order], starts)
     return spheres
 
 
