@@ -18,7 +18,8 @@ def register(subparsers) -> None:
                    help="Taichi backend (default: the scene's simulation.arch, cpu)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value, e.g. --set ring.fracture.crack_count=3 "
-                        "--set ring.material.tensile_strength=2e6 --set simulation.duration=1 (repeatable)")
+                        "--set ring.material.tensile_strength=2e6 --set simulation.duration=1 (repeatable); "
+                        "VALUE none restores the default, e.g. --set ring.fracture.crack_length=none")
     p.add_argument("--frames", type=int, help="simulate only this many frames (default: duration x fps)")
     p.add_argument("--no-fracture", action="store_true", help="treat every body as unbreakable")
     p.add_argument("--single-scale", action="store_true",
