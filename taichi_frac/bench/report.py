@@ -107,7 +107,7 @@ def readme_text(sections: list[Section], markdown_path: Path, readme_part: Path)
         if rows:
             lines += ["Table 2, ms per 20 ms frame (average / maximum):", "",
                       md_table(["scene", "fracture on", "fracture off", "fragments"], rows), ""]
-        variants = [row for row in h.get("variants", []) if row[1] != "the scene's"]
+        variants = [row for row in h.get("variants", []) if row[1] != tables.SCENE_ROW]
         if variants:
             lines += ["The same scenes with other crack controls (fracture on):", "",
                       md_table(["scene", "crack controls", "fragments", "fracture events", "ms per frame"],

@@ -55,27 +55,30 @@ RINGS_SHORT_CRACKS = ["ring00.fracture.crack_length=none", "ring05.fracture.crac
                       "ring12.fracture.crack_length=none"]
 
 
-def other_seeds(path, shift: int) -> list[str]:
+#: The name of a timed scene's own row in the table of fragments against time.
+SCENE_ROW = "the scene's"
+
+
+def other_seeds(scene, shift: int) -> list[str]:
     """Overrides that shift every breakable object's crack seed by ``shift``: the same
     scene with other crack directions, to show how far its counts and times spread."""
-    from ..scenes import load_scene
-
-    return [f"{o.name}.fracture.seed={o.fracture.seed + shift}" for o in load_scene(path).breakable_objects]
+    return [f"{o.name}.fracture.seed={o.fracture.seed + shift}" for o in scene.breakable_objects]
 
 
 def default_cases() -> list[SceneCase]:
     from ..scenes import load_scene
 
     ring, glass, rings = SCENES / "single_ring.toml", SCENES / "glass_walls.toml", SCENES / "thirteen_rings.toml"
+    glass_scene, rings_scene = load_scene(glass), load_scene(rings)
     return [
         SceneCase("single ring, control 1", load_scene(ring, ["ring.fracture.crack_count=1"]), note="crack_count 1"),
         SceneCase("single ring, control 2", load_scene(ring, ["ring.fracture.crack_count=3"]), note="crack_count 3"),
         SceneCase("single ring, control 3", load_scene(ring, ["ring.fracture.crack_count=5"]), note="crack_count 5"),
-        SceneCase("3 glass walls", load_scene(glass), timed=True, variants=(
-            *[(f"the scene's, seeds + {k}", load_scene(glass, other_seeds(glass, k))) for k in (3, 6)],
+        SceneCase("3 glass walls", glass_scene, timed=True, variants=(
+            *[(f"{SCENE_ROW}, seeds + {k}", load_scene(glass, other_seeds(glass_scene, k))) for k in (3, 6)],
             ("crack_count 8, 6, 5 (the scene: 4, 3, 2)", load_scene(glass, GLASS_MORE_CRACKS)))),
-        SceneCase("13 rings", load_scene(rings), timed=True, variants=(
-            *[(f"the scene's, seeds + {k}", load_scene(rings, other_seeds(rings, k))) for k in (13, 26)],
+        SceneCase("13 rings", rings_scene, timed=True, variants=(
+            *[(f"{SCENE_ROW}, seeds + {k}", load_scene(rings, other_seeds(rings_scene, k))) for k in (13, 26)],
             ("five rings cut short (one cut, or none, across the tube)", load_scene(rings, RINGS_SHORT_CRACKS)))),
     ]
 
@@ -152,7 +155,7 @@ def run(ctx: BenchContext, cases: list[SceneCase] | None = None, frames: int | N
         if not case.timed:
             continue
         summary, _ = runs[case.label]["on"]
-        variants.append([case.label, "the scene's", summary.fragments, summary.fractures,
+        variants.append([case.label, SCENE_ROW, summary.fragments, summary.fractures,
                          ms_pair(summary.ms_per_frame["mean"], summary.ms_per_frame["max"])])
         for name, scene in case.variants:
             _, other, _ = run_scene(ctx, scene, f"{case.label}, {name}", frames=frames)
@@ -189,7 +192,7 @@ def run(ctx: BenchContext, cases: list[SceneCase] | None = None, frames: int | N
                       "fracture analysis", "fragment split",
                       "fracture events", "fragments"], stages, "lrrrrrrrrr"),
         ]
-    if any(row[1] != "the scene's" for row in variants):
+    if any(row[1] != SCENE_ROW for row in variants):
         parts += [
             "",
             "Fragments against time: the same scenes with other crack seeds (other crack directions: "

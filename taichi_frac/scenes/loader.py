@@ -218,7 +218,7 @@ def apply_overrides(data: dict, overrides, *, where: str = "scene") -> dict:
             node = child
         if isinstance(node, list):
             raise OptionError(f"{where}: override {key!r} names a list; add the entry's name or index")
-        if isinstance(raw, str) and raw.lower() == "none":
+        if raw.lower() == "none":
             node.pop(parts[-1], None)
         else:
             node[parts[-1]] = value
