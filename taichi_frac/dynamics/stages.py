@@ -1,8 +1,9 @@
 """The two stage kernels of a substep: ``collide`` (broadphase and narrowphase) and
 ``respond`` (gravity, contact impulses, impact records, integration). Each runs its
 passes (``ti.func`` loops over one index set each, defined in collision/ and dynamics/) as
-successive tasks of ONE kernel: on the CPU backend a kernel launch costs ~17 us and a
-parallel-for task 25-60 us, which is the whole budget of a pass over a few thousand
+successive tasks of ONE kernel: on the CPU backend a kernel launch costs ~17 us (and
+~2.3 us per scalar argument: ``respond`` reads the solver options from ``StepParams``
+fields) and a parallel-for task 25-60 us, which is the whole budget of a pass over a few thousand
 particles, so a substep is two launches and one parallel task (the narrowphase, whose
 contacts ``order_contacts`` then sorts so that runs are reproducible); the other passes
 run serially on the CPU (``runtime.SERIAL_SMALL_LOOPS``). Scalars are arguments; vectors
@@ -23,7 +24,8 @@ class WorldFields:
     isinstance, which goes through the class's attribute hook), and a substep launches two
     kernels."""
 
-    def __init__(self, bodies, statics, particles, grid, contacts, impacts):
+    def __init__(self, bodies, statics, particles, grid, contacts, impacts, params):
+        self.params = params  # StepParams: the solver options respond reads
         self.bodies = bodies
         self.statics = statics
         self.particles = particles
@@ -44,18 +46,18 @@ def collide(f: ti.template(), margin: ti.f32, dt: ti.f32, sleep_time: ti.f32):
 
 
 @ti.kernel
-def respond(f: ti.template(),
-            dt: ti.f32, iterations: ti.i32, restitution_iterations: ti.i32, position_correction: ti.f32,
-            allowed_penetration: ti.f32, max_correction_speed: ti.f32, restitution_threshold: ti.f32,
-            substep: ti.i32, force_threshold: ti.f32, impact_speed: ti.f32, max_rotation: ti.f32,
-            sleep_linear_speed: ti.f32,
-            sleep_angular_speed: ti.f32, sleep_time: ti.f32, warm_start: ti.f32, rolling_resistance: ti.f32):
+def respond(f: ti.template(), dt: ti.f32, substep: ti.i32, position_correction: ti.f32):
+    """``position_correction``: fraction of the penetration removed this substep,
+    1 - exp(-position_correction_rate dt) (computed by the caller in f64)."""
+    p = f.params
     integrate.integrate_velocities(f.bodies, f.statics, dt)
-    solver.prepare_contacts(f.bodies, f.contacts, warm_start)
-    solver.solve_contacts(f.bodies, f.contacts, iterations, restitution_iterations, dt, position_correction,
-                          allowed_penetration, max_correction_speed, restitution_threshold, rolling_resistance)
+    solver.prepare_contacts(f.bodies, f.contacts, p.warm_start[None])
+    solver.solve_contacts(f.bodies, f.contacts, p.iterations[None], p.restitution_iterations[None], dt,
+                          position_correction, p.allowed_penetration[None], p.max_correction_speed[None],
+                          p.restitution_threshold[None], p.rolling_resistance[None])
     solver.store_impulses(f.particles, f.contacts)
-    impacts.record_impacts(f.bodies, f.contacts, f.impacts, dt, substep, force_threshold, impact_speed)
-    integrate.integrate_positions(f.bodies, f.statics, dt, max_rotation, sleep_linear_speed, sleep_angular_speed,
-                                  sleep_time, max_correction_speed)
+    impacts.record_impacts(f.bodies, f.contacts, f.impacts, dt, substep, p.force_threshold[None],
+                           p.impact_speed[None])
+    integrate.integrate_positions(f.bodies, f.statics, dt, p.max_rotation[None], p.sleep_linear_speed[None],
+                                  p.sleep_angular_speed[None], p.sleep_time[None], p.max_correction_speed[None])
     integrate.hold_above_ground(f.bodies, f.particles, f.statics, dt)

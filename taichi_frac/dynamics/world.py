@@ -21,7 +21,7 @@ from ..model import BodyModel
 from . import impacts as impact_kernels
 from . import integrate, stages
 from .options import CapacityError, DynamicsOptions, WorldCapacity
-from .state import MAX_CLUSTERS, Bodies, Particles, Statics
+from .state import MAX_CLUSTERS, Bodies, KeptMotion, Particles, Statics, StepParams
 
 STAGES = ("collision", "response")
 
@@ -34,6 +34,15 @@ class BodySnapshot:
     ids: np.ndarray
     rows: np.ndarray
     cache: np.ndarray
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """The motion state of the bodies ``ids`` (K,) at one moment, kept on the device
+    (``World.checkpoint``): valid until the World's next checkpoint. ``token`` names it."""
+
+    ids: np.ndarray
+    token: int
 
 
 @dataclass
@@ -212,6 +221,20 @@ def _snapshot_bodies(bodies: ti.template(), particles: ti.template(), ids: ti.ty
     cache[1] = particles.cache_epoch[None]
 
 
+@ti.func
+def _unpack_body(bodies: ti.template(), b, rows: ti.template(), k):
+    """The inverse of _pack_body for the motion state (not ``active``) of body ``b``."""
+    for c in ti.static(range(3)):  # (f64 rows of f32 values: exact)
+        bodies.position[b][c] = ti.cast(rows[k, c], ti.f32)
+        bodies.linear_velocity[b][c] = ti.cast(rows[k, 7 + c], ti.f32)
+        bodies.angular_velocity[b][c] = ti.cast(rows[k, 10 + c], ti.f32)
+    for c in ti.static(range(4)):
+        bodies.orientation[b][c] = ti.cast(rows[k, 3 + c], ti.f32)
+    bodies.sleeping[b] = ti.cast(rows[k, 14], ti.i32)
+    bodies.sleep_timer[b] = ti.cast(rows[k, 15], ti.f32)
+    bodies.wake_request[b] = ti.cast(rows[k, 16], ti.i32)
+
+
 @ti.kernel
 def _restore_bodies(bodies: ti.template(), particles: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
                     rows: ti.types.ndarray(dtype=ti.f64, ndim=2), cache: ti.types.ndarray(dtype=ti.i32, ndim=1)):
@@ -219,18 +242,41 @@ def _restore_bodies(bodies: ti.template(), particles: ti.template(), ids: ti.typ
     ``ids``, and the contact cache's parity and epoch: the impulses stored since are no
     longer the valid half, so a substep run again warm-starts as it did."""
     for k in range(ids.shape[0]):
-        b = ids[k]
-        for c in ti.static(range(3)):  # (f64 rows of f32 values: exact)
-            bodies.position[b][c] = ti.cast(rows[k, c], ti.f32)
-            bodies.linear_velocity[b][c] = ti.cast(rows[k, 7 + c], ti.f32)
-            bodies.angular_velocity[b][c] = ti.cast(rows[k, 10 + c], ti.f32)
-        for c in ti.static(range(4)):
-            bodies.orientation[b][c] = ti.cast(rows[k, 3 + c], ti.f32)
-        bodies.sleeping[b] = ti.cast(rows[k, 14], ti.i32)
-        bodies.sleep_timer[b] = ti.cast(rows[k, 15], ti.f32)
-        bodies.wake_request[b] = ti.cast(rows[k, 16], ti.i32)
+        _unpack_body(bodies, ids[k], rows, k)
     particles.parity[None] = cache[0]
     particles.cache_epoch[None] = cache[1]
+
+
+@ti.kernel
+def _keep_bodies(f: ti.template(), kept: ti.template()):
+    """Every body slot's motion state and the contact cache's parity and epoch into
+    ``kept`` (a KeptMotion). One serial task: a parallel one over ~100 bodies cost more to
+    dispatch than the copy, and copying to the host (``_snapshot_bodies``) took ~0.2-0.5 ms
+    with its array arguments, paid before every substep of a scene that re-runs broken
+    substeps."""
+    ti.loop_config(serialize=True)
+    for b in range(f.bodies.slot_end[None]):
+        _pack_body(f.bodies, b, kept.rows, b)
+    kept.cache[0] = f.particles.parity[None]
+    kept.cache[1] = f.particles.cache_epoch[None]
+
+
+@ti.kernel
+def _restore_kept(f: ti.template(), kept: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+    """_restore_bodies from ``kept`` (slot b in row b)."""
+    for k in range(ids.shape[0]):
+        _unpack_body(f.bodies, ids[k], kept.rows, ids[k])
+    f.particles.parity[None] = kept.cache[0]
+    f.particles.cache_epoch[None] = kept.cache[1]
+
+
+@ti.kernel
+def _pack_kept(kept: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
+               rows: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+    """Rows of ``kept`` for bodies ``ids`` (K,) into ``rows`` (K, 17)."""
+    for k in range(ids.shape[0]):
+        for c in ti.static(range(17)):
+            rows[k, c] = kept.rows[ids[k], c]
 
 
 @ti.kernel
@@ -313,7 +359,10 @@ class World:
         self.contacts = narrowphase.Contacts(cap.max_contacts)
         self.impact_buffer = impact_kernels.Impacts(cap.max_impacts, cap.max_contacts)
         self.fields = stages.WorldFields(self.bodies, self.statics, self.particles, self.grid, self.contacts,
-                                         self.impact_buffer)
+                                         self.impact_buffer, StepParams())
+        self._params_of = None  # the options object the StepParams fields hold
+        self.kept = KeptMotion(cap.max_bodies)
+        self._checkpoint_token = 0
         self.particles.body.fill(-1)
         self.statics.gravity[None] = tuple(map(float, self.options.gravity))
         self.stats = WorldStats()
@@ -511,16 +560,30 @@ class World:
 
     def _substep(self, dt: float, index: int) -> None:
         opt = self.options
+        if self._params_of is not opt:
+            self._write_params(opt)
         clock = self._clock()
         stages.collide(self.fields, opt.contact_margin, dt, opt.sleep_time)
         clock("collision")
-        stages.respond(self.fields, dt, opt.solver_iterations,
-                       opt.restitution_iterations, 1.0 - math.exp(-opt.position_correction_rate * dt),
-                       opt.allowed_penetration,
-                       opt.max_correction_speed, opt.restitution_threshold, index, opt.record_force_threshold,
-                       opt.impact_speed, opt.max_rotation_per_substep, opt.sleep_linear_speed,
-                       opt.sleep_angular_speed, opt.sleep_time, opt.warm_start, opt.rolling_resistance)
+        stages.respond(self.fields, dt, index, 1.0 - math.exp(-opt.position_correction_rate * dt))
         clock("response")
+
+    def _write_params(self, opt: DynamicsOptions) -> None:
+        """The options ``respond`` reads into its StepParams fields (once per options object:
+        they are frozen, and replaced whole by :meth:`set_options`)."""
+        params = self.fields.params
+        values = dict(
+            iterations=opt.solver_iterations, restitution_iterations=opt.restitution_iterations,
+            allowed_penetration=opt.allowed_penetration,
+            max_correction_speed=opt.max_correction_speed, restitution_threshold=opt.restitution_threshold,
+            force_threshold=opt.record_force_threshold, impact_speed=opt.impact_speed,
+            max_rotation=opt.max_rotation_per_substep, sleep_linear_speed=opt.sleep_linear_speed,
+            sleep_angular_speed=opt.sleep_angular_speed, sleep_time=opt.sleep_time, warm_start=opt.warm_start,
+            rolling_resistance=opt.rolling_resistance,
+        )
+        for name, value in values.items():
+            getattr(params, name)[None] = value
+        self._params_of = opt
 
     def _clock(self):
         last = [time.perf_counter()]
@@ -565,7 +628,15 @@ class World:
         _snapshot_bodies(self.bodies, self.particles, ids, rows, cache)
         return BodySnapshot(ids=ids, rows=rows, cache=cache)
 
-    def restore(self, snapshot: "BodySnapshot", ids) -> None:
+    def checkpoint(self) -> Checkpoint:
+        """The motion state of every body now, kept on the device for :meth:`restore` and
+        :meth:`snapshot_state` (one small launch; nothing is copied to the host). Valid
+        until the next checkpoint; :meth:`snapshot` keeps any number, at a host copy each."""
+        _keep_bodies(self.fields, self.kept)
+        self._checkpoint_token += 1
+        return Checkpoint(ids=np.asarray(self.body_ids, dtype=np.int32), token=self._checkpoint_token)
+
+    def restore(self, snapshot: "BodySnapshot | Checkpoint", ids) -> None:
         """Put bodies ``ids`` (each in the world now and in ``snapshot``) back in their
         motion state of ``snapshot``, and the contact cache (warm starting) back to that
         moment; the other bodies are left as they are."""
@@ -573,13 +644,31 @@ class World:
         missing = [int(b) for b in ids if int(b) not in self._body_range]
         if missing:
             raise KeyError(f"bodies {missing} are not in the world")
+        if isinstance(snapshot, Checkpoint):
+            _restore_kept(self.fields, self.kept, self._checkpoint_ids(snapshot, ids))
+            return
         rows = np.ascontiguousarray(_snapshot_rows(snapshot, ids))
         _restore_bodies(self.bodies, self.particles, np.ascontiguousarray(ids, dtype=np.int32), rows, snapshot.cache)
 
-    def snapshot_state(self, snapshot: "BodySnapshot", ids) -> dict:
+    def snapshot_state(self, snapshot: "BodySnapshot | Checkpoint", ids) -> dict:
         """:meth:`body_state` of bodies ``ids`` as ``snapshot`` holds them."""
         ids = np.asarray(ids, dtype=np.int64)
+        if isinstance(snapshot, Checkpoint):
+            rows = np.zeros((len(ids), 17), dtype=np.float64)
+            _pack_kept(self.kept, self._checkpoint_ids(snapshot, ids), rows)
+            return _body_rows(ids, rows)
         return _body_rows(ids, _snapshot_rows(snapshot, ids))
+
+    def _checkpoint_ids(self, checkpoint: Checkpoint, ids: np.ndarray) -> np.ndarray:
+        """``ids`` as i32 for a kernel; raises if ``checkpoint`` is stale or lacks one."""
+        if checkpoint.token != self._checkpoint_token:
+            raise ValueError(f"checkpoint {checkpoint.token} is stale: the World has taken checkpoint "
+                             f"{self._checkpoint_token} since, and keeps only the latest (use World.snapshot() "
+                             f"to keep several)")
+        missing = np.setdiff1d(ids, checkpoint.ids)
+        if len(missing):
+            raise KeyError(f"bodies {missing.tolist()} are not in the checkpoint")
+        return np.ascontiguousarray(ids, dtype=np.int32)
 
     def impacts(self, first: int = 0) -> dict:
         """Impact rows of the last advance (see docs/ARCHITECTURE.md): body (K,), other (K,)
