@@ -211,7 +211,8 @@ class SimulationOptions:
         sleep_linear_speed: a body whose every point (|v| + |w| x bounding radius) is slower
             than this ... [m/s]
         sleep_angular_speed: ... and that turns slower than this [rad/s] ...
-        sleep_time: ... for this long goes to sleep [s].
+        sleep_time: ... for this long goes to sleep [s], together with the bodies it
+            touches (when they have all been slow that long).
         rolling_resistance: lever arm of the contacts' rolling resistance as a fraction of
             the collision-sphere radius [-] (see ``DynamicsOptions``); 0: off.
         resimulate_fractures: fracture inside the frame: each substep's impacts are

@@ -280,3 +280,45 @@ def test_loose_pile_falls_asleep():
     assert np.mean(asleep) >= 0.8 * len(bodies), asleep
     assert min(asleep) >= 0.6 * len(bodies), asleep
 
+
+
+def test_touching_bodies_sleep_together():
+    """A body slow for sleep_time sleeps only when every awake body it touches has been
+    slow that long too (then they sleep in the same substep); one settling next to it
+    keeps it awake. (Slept alone, its contacts turned rigid under the settling neighbour,
+    whose jolt woke it again: three ring pieces kept each other awake for 1.5 s.)"""
+    world = fresh_world()
+    world.add_ground(0.0)
+    block = box_model(0.1, 0.1, 0.05)
+    half = -lowest_point(block)  # (the collision spheres stand out of the box)
+    side = float(np.max(block.collision_position[:, 0] + block.boundary_radius))
+    low = world.add_body(block, (0, 0, half), (1, 0, 0, 0), (0, 0, 0), (0, 0, 0))
+    high = world.add_body(block, (2 * side + 1e-4, 0, half), (1, 0, 0, 0), (0, 0, 0), (0, 0, 0))  # side by side
+    for _ in range(10):  # settle, touching (the sleep timers run from here)
+        world.advance(0.02, 2)
+    n = world.stats.contacts
+    pairs = set(zip(world.contacts.body_a.to_numpy()[:n], world.contacts.body_b.to_numpy()[:n]))
+    assert (low, high) in pairs or (high, low) in pairs  # they touch each other
+    assert not world.body_state([low, high])["sleeping"].any()
+    sleep_time = world.options.sleep_time
+
+    def timers(values):
+        t = world.bodies.sleep_timer.to_numpy()
+        t[[low, high]] = values
+        world.bodies.sleep_timer.from_numpy(t)
+
+    timers([10 * sleep_time, 0.0])  # low is ready, high (which it touches) is not
+    world.advance(0.02, 1)
+    assert not world.body_state([low, high])["sleeping"].any()
+    timers([10 * sleep_time, sleep_time - 1e-4])  # both ready within this substep
+    world.advance(0.02, 1)
+    assert world.body_state([low, high])["sleeping"].all()
+    alone = world.add_body(block, (0, 1.0, half), (1, 0, 0, 0), (0, 0, 0), (0, 0, 0))
+    for _ in range(10):
+        world.advance(0.02, 2)
+    timers([0.0, 0.0])
+    t = world.bodies.sleep_timer.to_numpy()
+    t[alone] = 10 * sleep_time  # a body touching nothing but the ground sleeps alone
+    world.bodies.sleep_timer.from_numpy(t)
+    world.advance(0.02, 1)
+    assert world.body_state([alone])["sleeping"].all()

@@ -89,7 +89,8 @@ class DynamicsOptions:
         sleep_linear_speed, sleep_angular_speed, sleep_time: a body whose every point is
             slower than sleep_linear_speed [m/s] (|v| + |w| x bounding radius) and that turns
             slower than sleep_angular_speed [rad/s], for sleep_time [s], sleeps (velocity
-            zeroed, no integration) until woken.
+            zeroed, no integration) until woken; bodies touching each other sleep
+            together, when every one of them has been slow that long.
         record_force_threshold: impact rows are kept when their force exceeds this [N].
         impact_speed: contacts approaching faster than this [m/s] are impacts, whose force
             is the Hertz peak of their impulse (see dynamics/impacts.py); slower ones are

@@ -1,5 +1,5 @@
 """The two stage kernels of a substep: ``collide`` (broadphase and narrowphase) and
-``respond`` (gravity, contact impulses, impact records, integration). Each runs its
+``respond`` (gravity, contact impulses, impact records, integration, sleeping). Each runs its
 passes (``ti.func`` loops over one index set each, defined in collision/ and dynamics/) as
 successive tasks of ONE kernel: on the CPU backend a kernel launch costs ~17 us (and
 ~2.3 us per scalar argument: ``respond`` reads the solver options from ``StepParams``
@@ -59,5 +59,6 @@ def respond(f: ti.template(), dt: ti.f32, substep: ti.i32, position_correction: 
     impacts.record_impacts(f.bodies, f.contacts, f.impacts, dt, substep, p.force_threshold[None],
                            p.impact_speed[None])
     integrate.integrate_positions(f.bodies, f.statics, dt, p.max_rotation[None], p.sleep_linear_speed[None],
-                                  p.sleep_angular_speed[None], p.sleep_time[None], p.max_correction_speed[None])
+                                  p.sleep_angular_speed[None], p.max_correction_speed[None])
+    integrate.sleep_together(f.bodies, f.contacts, p.sleep_time[None])
     integrate.hold_above_ground(f.bodies, f.particles, f.statics, dt)

@@ -44,6 +44,8 @@ class Bodies:
             impacts.py). Writer: add_body.
         active: i32 1 = slot in use. fixed: i32 1 = never moves. Writer: add_body/remove_body.
         sleeping: i32 1 = asleep. sleep_timer: [s] time spent slow. Writer: integrate, wake.
+        sleep_blocked: i32 1 = an awake body it touches has not been slow for sleep_time
+            (so it may not sleep this substep). Writer: integrate.sleep_together.
         wake_request: i32 set by the narrowphase when an awake moving body touches a
             sleeping one; applied at the start of the next substep's broadphase (body_cull).
         touched: i32 1 = the body has a contact this substep (free-flying bodies are moved
@@ -93,6 +95,7 @@ class Bodies:
         self.fixed = ti.field(ti.i32, shape=capacity)
         self.sleeping = ti.field(ti.i32, shape=capacity)
         self.sleep_timer = ti.field(ti.f32, shape=capacity)
+        self.sleep_blocked = ti.field(ti.i32, shape=capacity)
         self.wake_request = ti.field(ti.i32, shape=capacity)
         self.touched = ti.field(ti.i32, shape=capacity)
         self.bounding_radius = ti.field(ti.f32, shape=capacity)
