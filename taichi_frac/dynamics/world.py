@@ -88,6 +88,7 @@ def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32,
                 clusters: ti.types.ndarray(dtype=ti.f32, ndim=2)):
     """Fill one body slot and its particle range. ``pose``: (13,) position, orientation
     wxyz, linear velocity, angular velocity."""
+    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for _ in range(1):
         bodies.position[slot] = ti.math.vec3(pose[0], pose[1], pose[2])
         bodies.orientation[slot] = ti.math.vec4(pose[3], pose[4], pose[5], pose[6]).normalized()
@@ -132,6 +133,7 @@ def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32,
         bodies.cluster_count[slot] = clusters.shape[0]
         for m in range(clusters.shape[0]):
             bodies.cluster[slot, m] = ti.math.vec4(clusters[m, 0], clusters[m, 1], clusters[m, 2], clusters[m, 3])
+    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for k in range(radii.shape[0]):
         p = start + k
         particles.body[p] = slot
@@ -146,6 +148,7 @@ def _clear_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32, s
     bodies.active[slot] = 0
     bodies.near_body[slot] = 0
     bodies.near_static[slot] = 0
+    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for k in range(count):
         particles.body[start + k] = -1
 
@@ -169,6 +172,7 @@ def _pack_impacts(impacts: ti.template(), first: ti.i32, rows: ti.types.ndarray(
     """Impact rows first..first+R-1 into ``rows`` (R, 27): body, other, point, normal, impulse,
     force, duration, speed, dt, substep, point_body, normal_body, force_body (the layout
     World.impacts unpacks)."""
+    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for r in range(rows.shape[0]):
         k = first + r
         rows[r, 0] = impacts.body[k]
@@ -207,6 +211,7 @@ def _pack_bodies(bodies: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim
     """Bodies ``ids`` (K,) into ``rows`` (K, 17): position, orientation (wxyz), linear and
     angular velocity, active, sleeping, sleep timer, wake request (the layout
     World.body_state and World.snapshot unpack)."""
+    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for k in range(ids.shape[0]):
         _pack_body(bodies, ids[k], rows, k)
 
@@ -215,6 +220,7 @@ def _pack_bodies(bodies: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim
 def _snapshot_bodies(bodies: ti.template(), particles: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
                      rows: ti.types.ndarray(dtype=ti.f64, ndim=2), cache: ti.types.ndarray(dtype=ti.i32, ndim=1)):
     """_pack_bodies, and the contact cache's parity and epoch into ``cache`` (2,)."""
+    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for k in range(ids.shape[0]):
         _pack_body(bodies, ids[k], rows, k)
     cache[0] = particles.parity[None]
@@ -241,6 +247,7 @@ def _restore_bodies(bodies: ti.template(), particles: ti.template(), ids: ti.typ
     """The inverse of _snapshot_bodies for the motion state (not ``active``) of bodies
     ``ids``, and the contact cache's parity and epoch: the impulses stored since are no
     longer the valid half, so a substep run again warm-starts as it did."""
+    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for k in range(ids.shape[0]):
         _unpack_body(bodies, ids[k], rows, k)
     particles.parity[None] = cache[0]
@@ -254,7 +261,7 @@ def _keep_bodies(f: ti.template(), kept: ti.template()):
     dispatch than the copy, and copying to the host (``_snapshot_bodies``) took ~0.2-0.5 ms
     with its array arguments, paid before every substep of a scene that re-runs broken
     substeps."""
-    ti.loop_config(serialize=True)
+    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for b in range(f.bodies.slot_end[None]):
         _pack_body(f.bodies, b, kept.rows, b)
     kept.cache[0] = f.particles.parity[None]
@@ -264,6 +271,7 @@ def _keep_bodies(f: ti.template(), kept: ti.template()):
 @ti.kernel
 def _restore_kept(f: ti.template(), kept: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1)):
     """_restore_bodies from ``kept`` (slot b in row b)."""
+    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for k in range(ids.shape[0]):
         _unpack_body(f.bodies, ids[k], kept.rows, ids[k])
     f.particles.parity[None] = kept.cache[0]
@@ -274,6 +282,7 @@ def _restore_kept(f: ti.template(), kept: ti.template(), ids: ti.types.ndarray(d
 def _pack_kept(kept: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
                rows: ti.types.ndarray(dtype=ti.f64, ndim=2)):
     """Rows of ``kept`` for bodies ``ids`` (K,) into ``rows`` (K, 17)."""
+    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for k in range(ids.shape[0]):
         for c in ti.static(range(17)):
             rows[k, c] = kept.rows[ids[k], c]
