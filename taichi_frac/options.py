@@ -148,6 +148,11 @@ class FractureOptions:
             analysed at all [N].
         crack_length: how far a crack runs from its analysis point [m]; None means as far as
             the stress along the crack plane exceeds the tensile strength.
+        ring_crack_count: concentric cracks around each cracking analysis point, besides
+            the n planar ones: spheres about the point whose radii split the crack length
+            (or, with crack_length None, the contact's longest crack) into equal steps,
+            cutting the wedges into rings, as a pane hit by a ball breaks. 0 (the default,
+            and the paper's model) makes none.
         min_fragment_particles: a piece with fewer physics particles is "small".
         small_fragment_policy: what happens to small pieces: "merge" into the neighbouring
             fragment they share most faces with, kept as unbreakable "debris", or "drop".
@@ -164,6 +169,7 @@ class FractureOptions:
     seed: int = 0
     impact_force_threshold: float = 0.0
     crack_length: float | None = None
+    ring_crack_count: int = 0
     min_fragment_particles: int = 8
     small_fragment_policy: str = "merge"
     smoothing_length_factor: float = 2.0
@@ -178,6 +184,7 @@ class FractureOptions:
         check_range("fracture", "impact_force_threshold", self.impact_force_threshold, 0.0, None)
         if self.crack_length is not None:
             check_range("fracture", "crack_length", self.crack_length, 0.0, None, low_open=True)
+        check_range("fracture", "ring_crack_count", self.ring_crack_count, 0, 64)
         check_range("fracture", "min_fragment_particles", self.min_fragment_particles, 1, 1_000_000)
         if self.small_fragment_policy not in SMALL_FRAGMENT_POLICIES:
             raise OptionError(

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from _fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL, ring_model
-from taichi_frac.fracture.cracks import CrackPlane, analyze_impact, cut_bonds, group_neighbors, tangent_frame
+from taichi_frac.fracture.cracks import (CrackPlane, RingCrack, analyze_impact, cut_bonds, group_neighbors,
+                                        tangent_frame)
 from taichi_frac.fracture.fragments import split_body
 from taichi_frac.fracture.sph import displacement_gradient
 from taichi_frac.model import build_body_model
@@ -45,6 +46,53 @@ def test_cut_bonds_by_plane_and_extent():
     assert cut_bonds(model, [parallel]).tolist() == [False]  # segment lies along the plane side
     split = split_body(model, [across], FractureOptions(min_fragment_particles=1))
     assert split.fragment_count == 2 and [t.tolist() for t in split.fragment_tets] == [[0], [1]]
+
+
+def test_ring_crack_cuts_the_bonds_across_its_sphere():
+    """A RingCrack cuts a bond when one centroid lies inside its sphere and the other not;
+    on the ring, a sphere about a point of the tube cuts out exactly the tets whose
+    centroids lie within its radius (checked against the distances, independently of the
+    bonds)."""
+    model = two_tets()
+    top, bottom = model.particle_position
+    assert cut_bonds(model, [RingCrack(point=top, radius=0.3, peak_stress=1.0)]).tolist() == [True]
+    assert cut_bonds(model, [RingCrack(point=top, radius=0.6, peak_stress=1.0)]).tolist() == [False]  # both in
+    assert cut_bonds(model, [RingCrack(point=top + 5.0, radius=0.6, peak_stress=1.0)]).tolist() == [False]
+    ring = ring_model()
+    centre, radius = np.array([0.1, 0.0, 0.0]), 0.03
+    split = split_body(ring, [RingCrack(point=centre, radius=radius, peak_stress=1.0)],
+                       FractureOptions(min_fragment_particles=1))
+    inside = np.linalg.norm(ring.particle_position - centre, axis=1) < radius
+    assert 0 < inside.sum() < ring.tet_count // 10
+    # Every piece lies wholly inside or wholly outside, and the inside ones make the ball
+    # (a tet whose face neighbours all lie across the sphere is a piece of its own).
+    sides = [set(inside[t].tolist()) for t in split.fragment_tets]
+    assert all(len(side) == 1 for side in sides)
+    chips = [t for t, side in zip(split.fragment_tets, sides) if side == {True}]
+    np.testing.assert_array_equal(np.sort(np.concatenate(chips)), np.nonzero(inside)[0])
+    assert max(len(t) for t in split.fragment_tets) > 0.9 * ring.tet_count  # the rest of the ring
+
+
+def test_ring_cracks_cut_the_wedges_into_rings():
+    """ring_crack_count = m adds m spheres about each cracking contact's analysis point,
+    radii crack_length x j / (m + 1), after its n planes; they cut the planar cracks'
+    pieces further, and 0 (the default) changes nothing."""
+    model = ring_model()
+    counts = {}
+    for rings in (0, 2):
+        opts = FractureOptions(crack_count=3, crack_length=0.3, seed=0, ring_crack_count=rings)
+        a = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, RING_MATERIAL, opts)
+        planes = [c for c in a.cracks if isinstance(c, CrackPlane)]
+        spheres = [c for c in a.cracks if isinstance(c, RingCrack)]
+        assert len(planes) == 3 and len(spheres) == rings
+        assert [s.radius for s in spheres] == pytest.approx([0.1, 0.2][:rings], rel=1e-12)
+        for s in spheres:
+            np.testing.assert_array_equal(s.point, a.analysis_point[0])
+        split = split_body(model, a, opts)
+        assert sum(len(t) for t in split.fragment_tets) == model.tet_count
+        counts[rings] = split.fragment_count
+    assert counts[0] == 5  # the documented crack_count 3 (docs/readme/fracture.md)
+    assert counts[2] > counts[0], counts
 
 
 def test_rankine_and_one_group_is_the_physical_answer():

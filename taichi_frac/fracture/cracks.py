@@ -82,6 +82,21 @@ class CrackPlane:
     group_index: int = 0
 
 
+@dataclass(frozen=True)
+class RingCrack:
+    """One concentric crack, body frame: the sphere of ``radius`` [m] about ``point`` (3,)
+    [m], the analysis point (``FractureOptions.ring_crack_count``). It cuts every bond whose
+    two tet centroids lie on either side of the sphere. ``peak_stress`` [Pa]: the analysis
+    point's largest principal stress; ``impact_index``: which contact; ``ring_index``:
+    1 (innermost) .. ring_crack_count."""
+
+    point: np.ndarray
+    radius: float
+    peak_stress: float
+    impact_index: int = 0
+    ring_index: int = 1
+
+
 @dataclass(frozen=True, eq=False)
 class ImpactAnalysis:
     """The stress analysis of one body's contacts in one step, body frame. K analysed
@@ -106,7 +121,8 @@ class ImpactAnalysis:
             analysis: NaN, and counts 0, for contacts that do not pass the Rankine test).
         group_principal_values: (K,n,3) [Pa] descending.
         group_principal_directions: (K,n,3,3) unit columns matching the values.
-        cracks: the crack planes (union over contacts), in (contact, group) order.
+        cracks: the crack planes (union over contacts), in (contact, group) order, each
+            contact's ``RingCrack``s (if ``ring_crack_count``) after its planes.
         tensile_strength: [Pa] the Rankine threshold used.
     """
 
@@ -392,6 +408,13 @@ def analyze_impact(
                 extent = max(h, float(reach.max()) if reach.size else 0.0)
             cracks.append(CrackPlane(point=origin.copy(), normal=crack_normal, extent=extent,
                                      peak_stress=peak, impact_index=k, group_index=g))
+        planes = [c for c in cracks if c.impact_index == k]
+        rings = options.ring_crack_count
+        if planes and rings:
+            longest = max(c.extent for c in planes)
+            cracks.extend(RingCrack(point=origin.copy(), radius=longest * j / (rings + 1),
+                                    peak_stress=float(particle_peak[analysis[k]]), impact_index=k, ring_index=j)
+                          for j in range(1, rings + 1))
 
     return ImpactAnalysis(
         contact_point=contact, normal_in=normal, force=force, analysis_particle=analysis,
@@ -406,9 +429,11 @@ def analyze_impact(
 def cut_bonds(model: BodyModel, cracks) -> np.ndarray:
     """Which bonds the cracks cut: (B,) bool.
 
-    A crack cuts bond (i, j) when the segment between the two tets' centroids crosses the
-    crack plane (the centroids lie strictly on opposite sides, or one on it) and the
-    crossing point lies within ``extent`` of the crack's point. Vectorised over cracks x bonds.
+    A crack plane cuts bond (i, j) when the segment between the two tets' centroids
+    crosses the plane (the centroids lie strictly on opposite sides, or one on it) and the
+    crossing point lies within ``extent`` of the crack's point. A ``RingCrack`` cuts it
+    when one centroid lies inside its sphere and the other on or outside. Vectorised over
+    cracks x bonds.
     """
     bonds = model.bonds
     cut = np.zeros(len(bonds), dtype=bool)
@@ -416,14 +441,22 @@ def cut_bonds(model: BodyModel, cracks) -> np.ndarray:
         return cut
     xi = model.particle_position[bonds[:, 0]]
     xj = model.particle_position[bonds[:, 1]]
-    p = np.stack([c.point for c in cracks])  # (C,3)
-    nrm = np.stack([c.normal for c in cracks])  # (C,3)
-    ext = np.array([c.extent for c in cracks])  # (C,)
-    di = xi @ nrm.T - (p * nrm).sum(axis=1)  # (B,C) signed distances
-    dj = xj @ nrm.T - (p * nrm).sum(axis=1)
-    bond, crack = np.nonzero((di >= 0.0) != (dj >= 0.0))  # the crossings only (a few %)
-    t = di[bond, crack] / (di[bond, crack] - dj[bond, crack])
-    hit = xi[bond] + t[:, None] * (xj[bond] - xi[bond])
-    within = ((hit - p[crack]) ** 2).sum(axis=1) <= ext[crack] ** 2
-    cut[bond[within]] = True
+    planes = [c for c in cracks if isinstance(c, CrackPlane)]
+    rings = [c for c in cracks if isinstance(c, RingCrack)]
+    if planes:
+        p = np.stack([c.point for c in planes])  # (C,3)
+        nrm = np.stack([c.normal for c in planes])  # (C,3)
+        ext = np.array([c.extent for c in planes])  # (C,)
+        di = xi @ nrm.T - (p * nrm).sum(axis=1)  # (B,C) signed distances
+        dj = xj @ nrm.T - (p * nrm).sum(axis=1)
+        bond, crack = np.nonzero((di >= 0.0) != (dj >= 0.0))  # the crossings only (a few %)
+        t = di[bond, crack] / (di[bond, crack] - dj[bond, crack])
+        hit = xi[bond] + t[:, None] * (xj[bond] - xi[bond])
+        within = ((hit - p[crack]) ** 2).sum(axis=1) <= ext[crack] ** 2
+        cut[bond[within]] = True
+    for ring in rings:
+        r2 = ring.radius ** 2
+        inside_i = ((xi - ring.point) ** 2).sum(axis=1) < r2
+        inside_j = ((xj - ring.point) ** 2).sum(axis=1) < r2
+        cut |= inside_i != inside_j
     return cut
