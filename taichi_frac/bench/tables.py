@@ -48,6 +48,8 @@ class SceneCase:
 
 #: The glass walls at more cracks per impact: nearer the paper's 217 fragments, at more cost.
 GLASS_MORE_CRACKS = ["wall0.fracture.crack_count=8", "wall1.fracture.crack_count=6", "wall2.fracture.crack_count=5"]
+#: The glass walls with the radial cracks alone (the paper's crack model: planes only).
+GLASS_RADIAL_ONLY = [f"wall{k}.fracture.ring_crack_count=0" for k in range(3)]
 #: The 13 rings with the five rings of one crack, or of short cracks, cut too short to split
 #: them (the scene's controls before it gave them cracks across the ring).
 RINGS_SHORT_CRACKS = ["ring00.fracture.crack_length=none", "ring05.fracture.crack_length=0.07",
@@ -76,7 +78,8 @@ def default_cases() -> list[SceneCase]:
         SceneCase("single ring, control 3", load_scene(ring, ["ring.fracture.crack_count=5"]), note="crack_count 5"),
         SceneCase("3 glass walls", glass_scene, timed=True, variants=(
             *[(f"{SCENE_ROW}, seeds + {k}", load_scene(glass, other_seeds(glass_scene, k))) for k in (3, 6)],
-            ("crack_count 8, 6, 5 (the scene: 4, 3, 2)", load_scene(glass, GLASS_MORE_CRACKS)))),
+            ("crack_count 8, 6, 5 (the scene: 4, 3, 2; two rings)", load_scene(glass, GLASS_MORE_CRACKS)),
+            ("radial cracks only (ring_crack_count 0; the scene: 2)", load_scene(glass, GLASS_RADIAL_ONLY)))),
         SceneCase("13 rings", rings_scene, timed=True, variants=(
             *[(f"{SCENE_ROW}, seeds + {k}", load_scene(rings, other_seeds(rings_scene, k))) for k in (13, 26)],
             ("five rings cut short (one cut, or none, across the tube)", load_scene(rings, RINGS_SHORT_CRACKS)))),
