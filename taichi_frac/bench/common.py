@@ -151,8 +151,8 @@ def ms_pair(avg: float, peak: float) -> str:
 
 
 def warm_up(ctx: BenchContext) -> None:
-    """Compile the dynamics kernels of the report's World and the fracture kernels (one
-    short ring drop that breaks) so no timed run pays for compilation."""
+    """Compile the dynamics kernels of the report's World and the fracture kernels (a short
+    ring drop that breaks, run twice) so no timed run pays for compilation."""
     from ..scenes import load_scene
     from ..simulation import Simulation
 
@@ -166,6 +166,7 @@ def warm_up(ctx: BenchContext) -> None:
                            ["simulation.duration=0.8", f"simulation.resimulate_fractures={resimulate}"])
         events += Simulation(scene, output=False, world=world).run().fractures
     ctx.progress(f"warm-up (kernel compilation): {time.perf_counter() - t0:.1f} s, {events} fracture events")
+
 
 @functools.lru_cache(maxsize=1)
 def machine_info() -> dict:

@@ -3,8 +3,8 @@
 passes (``ti.func`` loops over one index set each, defined in collision/ and dynamics/) as
 successive tasks of ONE kernel: on the CPU backend a kernel launch costs ~17 us (and
 ~2.3 us per scalar argument: ``respond`` reads the solver options from ``StepParams``
-fields) and a parallel-for task 25-60 us, which is the whole budget of a pass over a few thousand
-particles, so a substep is two launches and one parallel task (the narrowphase, whose
+fields) and a parallel-for task 25-60 us, which is the whole budget of a pass over a few
+thousand particles, so a substep is two launches and one parallel task (the narrowphase, whose
 contacts ``order_contacts`` then sorts so that runs are reproducible); the other passes
 run serially on the CPU (``runtime.SERIAL_SMALL_LOOPS``). Scalars are arguments; vectors
 live in fields (a vector argument costs ~50 us per launch); each data-oriented container

@@ -505,11 +505,12 @@ class World:
         self._plane_count = self._box_count = 0
         self.statics.plane_count[None] = 0
         self.statics.box_count[None] = 0
+        self._checkpoint_token += 1  # a checkpoint of the bodies removed restores nothing
         self._update_grid_size()
 
     def set_options(self, options: DynamicsOptions) -> None:
-        """Replace the solver options between advances (they are kernel arguments, so this
-        compiles nothing)."""
+        """Replace the solver options between advances (kernel arguments and StepParams
+        fields written before the next substep, so this compiles nothing)."""
         self.options = options
         self.statics.gravity[None] = tuple(map(float, options.gravity))
         self._update_grid_size()

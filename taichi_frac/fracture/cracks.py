@@ -41,6 +41,10 @@ Decisions (the paper leaves them open; docs/readme/fracture.md explains them for
   over-threshold particle (full field) lying within one smoothing length of the plane, and
   at least one smoothing length (the crack must at least cross the analysis point's own
   bonds).
+- **Concentric cracks** (``ring_crack_count`` = m, beyond the paper, whose cracks are
+  planes): each cracking contact also gets m spheres about its analysis point, radii
+  j / (m + 1) of its longest crack, which cut the planes' wedges into rings, as a pane
+  struck by a ball breaks. m = 0 (the default) is the paper's model.
 """
 
 from __future__ import annotations
@@ -408,7 +412,7 @@ def analyze_impact(
                 extent = max(h, float(reach.max()) if reach.size else 0.0)
             cracks.append(CrackPlane(point=origin.copy(), normal=crack_normal, extent=extent,
                                      peak_stress=peak, impact_index=k, group_index=g))
-        planes = [c for c in cracks if c.impact_index == k]
+        planes = [c for c in cracks if isinstance(c, CrackPlane) and c.impact_index == k]
         rings = options.ring_crack_count
         if planes and rings:
             longest = max(c.extent for c in planes)
