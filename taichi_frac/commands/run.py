@@ -65,7 +65,10 @@ def _progress_printer(quiet: bool):
     return cb, None
 
 
-def print_summary(summary, file=sys.stdout) -> None:
+def print_summary(summary, file=None) -> None:
+    """The run's summary as a two-column table on ``file`` (default: sys.stdout at call
+    time, so a redirected stdout receives it)."""
+    file = sys.stdout if file is None else file
     s = summary
     rows = [
         ("scene", s.scene), ("frames", f"{s.frames} ({s.simulated_time:.2f} s simulated)"),
@@ -73,6 +76,14 @@ def print_summary(summary, file=sys.stdout) -> None:
         ("boundary particles", s.boundary_particles), ("fragments", s.fragments), ("fracture events", s.fractures),
         ("substeps simulated again", f"{s.resimulated_substeps} (simulation.resimulate_fractures)"),
         ("ms per frame (mean / max)", f"{s.ms_per_frame['mean']:.2f} / {s.ms_per_frame['max']:.2f}"),
+    ]
+    if s.ms_per_frame.get("mean_after_first") is not None:
+        rows += [
+            ("  first frame", f"{s.ms_per_frame['first']:.2f} (in a new process, each kernel's first launch)"),
+            ("  the later frames (mean / max)",
+             f"{s.ms_per_frame['mean_after_first']:.2f} / {s.ms_per_frame['max_after_first']:.2f}"),
+        ]
+    rows += [
         ("wall time", f"{s.wall_time:.2f} s"),
         ("mass initial / final + dropped", f"{s.mass_initial:.6g} / {s.mass_final:.6g} + {s.mass_dropped:.3g} kg"),
     ]

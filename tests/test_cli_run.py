@@ -1,0 +1,65 @@
+"""`taichi-frac run`: the summary (Table 1's columns and the time per stage), --stats-json,
+the cache, and Ctrl-C (a KeyboardInterrupt mid-run) leaving a valid cache of exactly the
+frames done."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from pxr import Usd
+
+from taichi_frac.cli import main
+from taichi_frac.io import schema
+from taichi_frac.io.cache import check_cache
+from taichi_frac.scenes import load_scene
+from taichi_frac.simulation import Simulation
+
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
+
+
+def test_run_prints_the_summary_and_writes_stats_json_and_a_cache(tmp_path, capsys):
+    out, stats = tmp_path / "ring.usdc", tmp_path / "stats.json"
+    code = main(["run", str(SCENES / "single_ring.toml"), "--frames", "12", "-o", str(out),
+                 "--stats-json", str(stats), "-q"])
+    assert code == 0
+    printed = capsys.readouterr().out
+    for label in ("physics particles", "boundary particles", "fragments", "fracture events", "ms per frame",
+                  "first frame", "the later frames", "collision", "contact response", "fracture analysis",
+                  "fragment split", "output", "cache"):
+        assert label in printed, label
+    s = json.loads(stats.read_text())
+    assert s["frames"] == 12 and s["interrupted"] is False and s["output"] == str(out)
+    assert abs(s["mass_final"] + s["mass_dropped"] - s["mass_initial"]) <= 1e-9 * s["mass_initial"]
+    ms = s["ms_per_frame"]  # the mean is the first frame and the later ones together
+    assert abs(12 * ms["mean"] - (ms["first"] + 11 * ms["mean_after_first"])) <= 1e-9 * 12 * ms["mean"]
+    assert ms["max"] == max(ms["first"], ms["max_after_first"])
+    assert check_cache(out) == []
+    stage = Usd.Stage.Open(str(out))
+    data = stage.GetRootLayer().customLayerData[schema.LAYER_DATA_KEY]
+    assert data[schema.KEY_COMPLETE] is True and data[schema.KEY_LAST_FRAME] == 12
+
+
+def test_bad_override_exits_2_and_names_the_key(capsys):
+    assert main(["run", str(SCENES / "single_ring.toml"), "--set", "ring.fracture.crack_count=0", "-q"]) == 2
+    assert "crack_count" in capsys.readouterr().err
+
+
+def test_ctrl_c_keeps_a_valid_cache_of_the_frames_done(tmp_path):
+    """Ctrl-C raises KeyboardInterrupt wherever the main thread is; here it comes from the
+    progress callback, right after frame 5 was written."""
+    out = tmp_path / "cut.usdc"
+    sim = Simulation(load_scene(SCENES / "single_ring.toml"), output=out, frames=30)
+
+    def stop(frame, total, t, fragments, fps):
+        if frame == 5:
+            raise KeyboardInterrupt
+
+    sim.progress = stop
+    summary = sim.run()
+    assert summary.interrupted and summary.frames == 5
+    assert check_cache(out) == []
+    stage = Usd.Stage.Open(str(out))
+    data = stage.GetRootLayer().customLayerData[schema.LAYER_DATA_KEY]
+    assert data[schema.KEY_COMPLETE] is False and data[schema.KEY_LAST_FRAME] == 5
+    assert stage.GetEndTimeCode() == 5
