@@ -214,3 +214,33 @@ def test_writer_rejects_bad_input(tmp_path):
     with pytest.raises(ValueError, match="unit quaternions"):
         w.write_frame(0, [fid], [[0, 0, 0]], [[2, 0, 0, 0]])
     w.close()
+
+
+def test_repeated_poses_are_held_not_sampled(tmp_path):
+    """A body that rests (the same pose frame after frame, as a sleeping body) gets no
+    samples while it rests: the held pose is written at the last frame that repeats it
+    once the body moves again. Read back at every frame, by USD and by the add-on's keys
+    (linear between samples, held after the last), the poses are the ones written."""
+    path = tmp_path / "held.usda"
+    vertices, faces = synthetic.box_mesh((0.1, 0.1, 0.1))
+    frames = range(0, 16)
+    # Moves on frames 0-3, rests 3-8, moves 9-11, rests from 11 to the end.
+    x = np.array([0.0, 0.1, 0.2, 0.3, 0.3, 0.3, 0.3, 0.3, 0.3, 0.5, 0.7, 0.9] + [0.9] * 4)
+    angle = np.where(np.arange(16) < 9, 0.0, 0.2 * (np.arange(16) - 8).clip(max=3))
+    quats = np.stack([np.cos(angle / 2), np.zeros(16), np.zeros(16), np.sin(angle / 2)], axis=1)
+    with CacheWriter(path, fps=24, checkpoint_every=1000) as writer:
+        fid = writer.add_fragment("box", vertices, faces, np.zeros(len(faces), bool), 0)
+        for f in frames:
+            writer.write_frame(f, [fid], [[x[f], 0.0, 1.0]], [quats[f]])
+    stage = Usd.Stage.Open(str(path))
+    prim = fragment_prim(stage, "box")
+    translate = prim.GetAttribute("xformOp:translate")
+    assert translate.GetTimeSamples() == [0, 1, 2, 3, 8, 9, 10, 11]
+    for f in frames:
+        np.testing.assert_allclose(translate.Get(f), [x[f], 0.0, 1.0], atol=0)
+        q = prim.GetAttribute("xformOp:orient").Get(f)
+        np.testing.assert_allclose([q.GetReal(), *q.GetImaginary()], quats[f], atol=1e-15)
+    fragment = addon_module("reader").read_cache(path).fragments[0]
+    keyed = np.interp(np.asarray(frames, dtype=float), fragment.sample_frames, fragment.positions[:, 0])
+    np.testing.assert_allclose(keyed, x, atol=1e-12)
+    assert check_cache(path) == []

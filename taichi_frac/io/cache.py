@@ -75,15 +75,17 @@ def _impact_fields(impact):
 
 
 class _Fragment:
-    __slots__ = ("prim_path", "translate", "orient", "visibility", "death", "birth")
+    __slots__ = ("prim_path", "translate", "orient", "visibility", "death", "birth", "pose", "held")
 
     def __init__(self, prim_path, translate, orient, visibility, birth):
         self.prim_path = prim_path
-        self.translate = translate
-        self.orient = orient
+        self.translate = translate  # Sdf.Path of the translate op's attribute
+        self.orient = orient  # Sdf.Path of the orient op's attribute
         self.visibility = visibility
         self.birth = birth
         self.death = None
+        self.pose = None  # (position, quaternion) of the last pose written, stage frame
+        self.held = None  # the last frame that repeated it without a sample
 
 
 class CacheWriter:
@@ -303,7 +305,8 @@ class CacheWriter:
         if birth_frame > self.start_frame:
             visibility.Set(UsdGeom.Tokens.invisible, Usd.TimeCode(self.start_frame))
         visibility.Set(UsdGeom.Tokens.inherited, Usd.TimeCode(birth_frame))
-        self._fragments.append(_Fragment(prim_path, translate.GetAttr(), orient.GetAttr(), visibility, birth_frame))
+        self._fragments.append(_Fragment(prim_path, translate.GetAttr().GetPath(), orient.GetAttr().GetPath(),
+                                         visibility, birth_frame))
         return len(self._fragments) - 1
 
     def _to_stage_vectors(self, points: np.ndarray, vectors: np.ndarray | None = None):
@@ -316,7 +319,13 @@ class CacheWriter:
     # ------------------------------------------------------------------ frames
     def write_frame(self, frame: int, fragment_ids, positions, orientations_wxyz) -> None:
         """World pose of each live body at ``frame``: positions (K,3) [m] of the body-frame
-        origin (centre of mass), orientations (K,4) unit quaternions (w,x,y,z) body -> world."""
+        origin (centre of mass), orientations (K,4) unit quaternions (w,x,y,z) body -> world.
+
+        A pose equal to the body's last one (a sleeping body) gets no sample: USD, and the
+        add-on's linear keys, hold a value after its last sample and between two equal
+        ones, so when the body moves again the held pose is written at the last frame that
+        repeated it, and the cache reads the same at every frame with fewer samples
+        (the 13 rings: most bodies sleep for the last quarter of the run)."""
         self._check_open()
         ids = np.asarray(fragment_ids, dtype=np.int64).reshape(-1)
         positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
@@ -333,16 +342,28 @@ class CacheWriter:
         if self.up_axis == "Y":
             quats = _quat_multiply(_Z_TO_Y_UP, quats)
         frame = int(frame)
-        time = Usd.TimeCode(frame)
-        with Sdf.ChangeBlock():
+        layer = self._stage.GetRootLayer()
+        with Sdf.ChangeBlock():  # (the layer's own time samples: ~2x faster than UsdAttribute.Set)
             for fid, p, q in zip(ids.tolist(), positions.tolist(), quats.tolist()):
                 fragment = self._fragments[fid]
-                fragment.translate.Set(Gf.Vec3d(*p), time)
-                fragment.orient.Set(Gf.Quatd(q[0], q[1], q[2], q[3]), time)
+                pose = (p, q)
+                if pose == fragment.pose:
+                    fragment.held = frame
+                    continue
+                if fragment.held is not None:
+                    self._set_pose(layer, fragment, fragment.held, *fragment.pose)
+                    fragment.held = None
+                self._set_pose(layer, fragment, frame, p, q)
+                fragment.pose = pose
         self._last_frame = frame if self._last_frame is None else max(self._last_frame, frame)
         self._frames_since_checkpoint += 1
         if self._frames_since_checkpoint >= self.checkpoint_every:
             self.checkpoint()
+
+    @staticmethod
+    def _set_pose(layer, fragment, frame: int, p, q) -> None:
+        layer.SetTimeSample(fragment.translate, frame, Gf.Vec3d(*p))
+        layer.SetTimeSample(fragment.orient, frame, Gf.Quatd(q[0], q[1], q[2], q[3]))
 
     def end_fragment(self, fragment_id: int, frame: int) -> None:
         """The fragment is gone (broke into children) from ``frame`` on: invisible from then."""
