@@ -256,8 +256,9 @@ def _solve_contact(bodies: ti.template(), contacts: ti.template(), c, dt, positi
     new = ti.max(old + mass_n * (target - v_rel.dot(n)), 0.0)
     contacts.normal_impulse[c] = new
     dj = new - old
-    _push(bodies, a, dj * n, dj * contacts.response_a[c, 0])
-    _push(bodies, b, -dj * n, -dj * contacts.response_b[c, 0])
+    if dj != 0.0:  # (most contacts are speculative ones that stay at zero: 70-85 % in the 13 rings' pile)
+        _push(bodies, a, dj * n, dj * contacts.response_a[c, 0])
+        _push(bodies, b, -dj * n, -dj * contacts.response_b[c, 0])
     # Friction: Coulomb cone |jt| <= mu jn, along t1 and t2, clamped jointly.
     # Skipped while the contact carries no impulse at all (most speculative
     # contacts: their cone is a point and they hold no friction to undo).
@@ -300,8 +301,9 @@ def _solve_contact(bodies: ti.template(), contacts: ti.template(), c, dt, positi
         new_p = ti.max(old_p + mass_n * (target_p - vp), 0.0)
         contacts.pseudo_impulse[c] = new_p
         dp = new_p - old_p
-        _push_pseudo(bodies, a, dp * n, dp * contacts.response_a[c, 0])
-        _push_pseudo(bodies, b, -dp * n, -dp * contacts.response_b[c, 0])
+        if dp != 0.0:
+            _push_pseudo(bodies, a, dp * n, dp * contacts.response_a[c, 0])
+            _push_pseudo(bodies, b, -dp * n, -dp * contacts.response_b[c, 0])
 
 
 @ti.func
