@@ -51,6 +51,8 @@ class Contacts:
     rolling resistance's angular impulse on body_a, from zero each substep).
     Written by order_contacts: order (i32), the contact slots in the order the solver,
     the impulse cache and the impact records visit them (sorted by querying particle).
+    Written by solver.solve_contacts: sweep_order (i32), ``order`` with the contacts
+    between bodies first, then those with static colliders.
     Scalars: count (may exceed capacity: the excess is ``overflow``), overflow (summed over
     an advance, reset by the World), peak (largest count since the World reset it),
     order_epoch (sorts so far).
@@ -84,6 +86,7 @@ class Contacts:
         self.query = ti.field(ti.i32, shape=capacity)
         self.key = ti.field(ti.i32, shape=capacity)
         self.order = ti.field(ti.i32, shape=capacity)
+        self.sweep_order = ti.field(ti.i32, shape=capacity)
         self.order_epoch = ti.field(ti.i32, shape=())
         self.count = ti.field(ti.i32, shape=())
         self.overflow = ti.field(ti.i32, shape=())
