@@ -281,8 +281,10 @@ class Simulation:
         from .io.cache import CacheWriter
 
         out = self.scene.output
+        # (checkpoint_every 0: only the final write, and Ctrl-C's)
         self.writer = CacheWriter(self.output_path, fps=self.scene.simulation.fps, start_frame=0,
-                                  checkpoint_every=max(1, out.checkpoint_every or 25))
+                                  checkpoint_every=out.checkpoint_every or 2**31 - 1,
+                                  checkpoint_seconds=out.checkpoint_seconds)
         for rec in self.records.values():
             self._add_to_cache(rec, birth_frame=0)
         self._write_frame(0)

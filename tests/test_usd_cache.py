@@ -244,3 +244,30 @@ def test_repeated_poses_are_held_not_sampled(tmp_path):
     keyed = np.interp(np.asarray(frames, dtype=float), fragment.sample_frames, fragment.positions[:, 0])
     np.testing.assert_allclose(keyed, x, atol=1e-12)
     assert check_cache(path) == []
+
+
+def test_checkpoints_wait_for_checkpoint_seconds(tmp_path, monkeypatch):
+    """A checkpoint is due every checkpoint_every frames, but not sooner than
+    checkpoint_seconds of wall time after the last write; close() writes every frame."""
+    import taichi_frac.io.cache as cache_module
+
+    now = [100.0]
+    monkeypatch.setattr(cache_module._time, "monotonic", lambda: now[0])
+    path = tmp_path / "throttled.usda"
+    vertices, faces = synthetic.box_mesh((0.1, 0.1, 0.1))
+    writer = CacheWriter(path, fps=24, checkpoint_every=2, checkpoint_seconds=5.0)
+    fid = writer.add_fragment("box", vertices, faces, np.zeros(len(faces), bool), 0)
+    written = []
+    for frame in range(10):
+        now[0] += 1.0  # one second a frame
+        writer.write_frame(frame, [fid], [[0.0, 0.0, float(frame)]], [[1, 0, 0, 0]])
+        if path.exists():  # (each checkpoint read from its own copy: USD caches layers by path)
+            copy = path.rename(tmp_path / f"checkpoint{frame}.usda")
+            stage = Usd.Stage.Open(str(copy))
+            written.append((frame, stage.GetRootLayer().customLayerData[schema.LAYER_DATA_KEY][schema.KEY_LAST_FRAME]))
+    # Due every 2 frames, allowed 5 s after the last write (the writer was made at t = 100).
+    assert written == [(4, 4), (9, 9)]
+    writer.close()
+    stage = Usd.Stage.Open(str(path))
+    assert stage.GetRootLayer().customLayerData[schema.LAYER_DATA_KEY][schema.KEY_COMPLETE] is True
+    assert stage.GetEndTimeCode() == 9
