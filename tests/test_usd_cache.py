@@ -271,3 +271,70 @@ def test_checkpoints_wait_for_checkpoint_seconds(tmp_path, monkeypatch):
     stage = Usd.Stage.Open(str(path))
     assert stage.GetRootLayer().customLayerData[schema.LAYER_DATA_KEY][schema.KEY_COMPLETE] is True
     assert stage.GetEndTimeCode() == 9
+
+
+def test_fragment_specs_match_the_schema_api(tmp_path):
+    """The writer authors a fragment's specs on the layer directly; the same values
+    authored through UsdGeom.Mesh, PrimvarsAPI and MaterialBindingAPI (what it used to do)
+    give the same layer text: types, variability, interpolation, list ops, relationships."""
+    from pxr import Gf, Sdf, Vt
+
+    vertices, faces = synthetic.box_mesh((0.1, 0.2, 0.3))
+    inner = np.zeros(len(faces), bool)
+    inner[[0, 5, 7]] = True
+    writer = CacheWriter(tmp_path / "direct.usda", fps=24)
+    first = writer.add_fragment("first", vertices, faces, inner, 0)
+    writer.add_fragment("second", vertices, faces, inner, 4, parent=first, peak_principal_stress=3e6,
+                        impact=dict(point=[0.1, 0.2, 0.3], force=[1.0, -2.0, 3.0]),
+                        face_peak_stress=np.arange(len(faces), dtype=float))
+    direct = writer.stage
+
+    reference = Usd.Stage.CreateInMemory("reference.usda")
+    for path in (schema.ROOT_PRIM, schema.MATERIALS_SCOPE, schema.FRAGMENTS_SCOPE):
+        reference.DefinePrim(path, direct.GetPrimAtPath(path).GetTypeName())
+    materials = {name: UsdShade.Material.Define(reference, f"{schema.MATERIALS_SCOPE}/{name}")
+                 for name in (schema.OUTER_SUBSET, schema.INNER_SUBSET)}
+    for name in ("first", "second"):
+        source = direct.GetPrimAtPath(f"{schema.FRAGMENTS_SCOPE}/{name}")
+        value = lambda attr: source.GetAttribute(attr).Get()  # noqa: E731
+        mesh = UsdGeom.Mesh.Define(reference, source.GetPath())
+        mesh.CreatePointsAttr(value("points"))
+        mesh.CreateFaceVertexCountsAttr(value("faceVertexCounts"))
+        mesh.CreateFaceVertexIndicesAttr(value("faceVertexIndices"))
+        mesh.CreateExtentAttr(value("extent"))
+        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        mesh.CreateNormalsAttr(value("normals"))
+        mesh.SetNormalsInterpolation(UsdGeom.Tokens.faceVarying)
+        primvars = UsdGeom.PrimvarsAPI(mesh)
+        primvars.CreatePrimvar(schema.PRIMVAR_UV, Sdf.ValueTypeNames.TexCoord2fArray,
+                               UsdGeom.Tokens.faceVarying).Set(value(f"primvars:{schema.PRIMVAR_UV}"))
+        primvars.CreatePrimvar(schema.PRIMVAR_FACE_STRESS, Sdf.ValueTypeNames.FloatArray,
+                               UsdGeom.Tokens.uniform).Set(value(f"primvars:{schema.PRIMVAR_FACE_STRESS}"))
+        binding = UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim())
+        for subset_name in (schema.OUTER_SUBSET, schema.INNER_SUBSET):
+            indices = direct.GetPrimAtPath(f"{source.GetPath()}/{subset_name}").GetAttribute("indices").Get()
+            subset = binding.CreateMaterialBindSubset(subset_name, Vt.IntArray(indices), UsdGeom.Tokens.face)
+            UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(materials[subset_name])
+        binding.SetMaterialBindSubsetsFamilyType(UsdGeom.Tokens.partition)
+        prim = mesh.GetPrim()
+        for attr in (schema.ATTR_BIRTH_FRAME, schema.ATTR_DEATH_FRAME, schema.ATTR_PEAK_STRESS,
+                     schema.ATTR_IMPACT_POINT, schema.ATTR_IMPACT_FORCE):
+            if source.GetAttribute(attr):
+                prim.CreateAttribute(attr, source.GetAttribute(attr).GetTypeName(), custom=True).Set(value(attr))
+        if source.GetRelationship(schema.ATTR_PARENT):
+            prim.CreateRelationship(schema.ATTR_PARENT, custom=True).SetTargets(
+                source.GetRelationship(schema.ATTR_PARENT).GetTargets())
+        mesh.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble)
+        mesh.AddOrientOp(UsdGeom.XformOp.PrecisionDouble)
+        visibility = mesh.CreateVisibilityAttr()
+        for t in source.GetAttribute("visibility").GetTimeSamples():
+            visibility.Set(source.GetAttribute("visibility").Get(t), Usd.TimeCode(t))
+
+    def fragments_text(stage):
+        text = stage.GetRootLayer().ExportToString()
+        return text[text.index('def Scope "Fragments"'):]
+
+    assert fragments_text(direct) == fragments_text(reference)
+    assert isinstance(direct.GetPrimAtPath(f"{schema.FRAGMENTS_SCOPE}/second").GetAttribute(
+        schema.ATTR_IMPACT_POINT).Get(), Gf.Vec3d)
+    writer.close()
