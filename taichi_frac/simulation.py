@@ -291,12 +291,13 @@ class Simulation:
 
     def _add_to_cache(self, rec: BodyRecord, birth_frame: int, parent_cache=None, impact=None, peak=0.0,
                       face_peak=None):
-        from .io.fragment_mesh import fragment_surface, surface_corner_attributes
+        from .io.fragment_mesh import fragment_surface, root_faces_of, surface_corner_attributes
 
-        vertices, faces, inner = fragment_surface(rec.model, rec.root)
+        root_faces = root_faces_of(rec.model, rec.root)  # (both calls below need it)
+        vertices, faces, inner = fragment_surface(rec.model, rec.root, root_faces)
         normals = uvs = None
         if rec.root_normals is not None:
-            normals, uvs = surface_corner_attributes(rec.model, rec.root, rec.root_normals, rec.root_uvs)
+            normals, uvs = surface_corner_attributes(rec.model, rec.root, rec.root_normals, rec.root_uvs, root_faces)
         rec.cache_id = self.writer.add_fragment(
             rec.name, vertices, faces, inner, birth_frame, parent=parent_cache, impact=impact,
             peak_principal_stress=float(peak), face_peak_stress=face_peak, normals=normals, uvs=uvs,

@@ -8,7 +8,7 @@ import numpy as np
 from ..model import BodyModel
 
 
-def fragment_surface(model: BodyModel, root: BodyModel):
+def fragment_surface(model: BodyModel, root: BodyModel, root_faces=None):
     """Surface of a fragment ``model`` cut from the solid ``root``.
 
     Returns (vertices (V,3) [m] = model.vertices, body frame; faces (F,3) = model.surface_faces,
@@ -21,14 +21,15 @@ def fragment_surface(model: BodyModel, root: BodyModel):
     assumed equal: a fragment's tets are a translated copy of its root tets (body axes stay
     parallel to the source's), so the vertex opposite the face is found by comparing vertex
     offsets from the tet centroid. That keeps it right if a tet's vertices were reordered
-    (e.g. re-oriented) when the fragment was built.
+    (e.g. re-oriented) when the fragment was built. ``root_faces``: ``root_faces_of(model,
+    root)`` when the caller has it already.
     """
-    root_tet, root_local = _root_faces(model, root)
+    root_tet, root_local = root_faces_of(model, root) if root_faces is None else root_faces
     inner = root.tet_neighbor[root_tet, root_local] != -1
     return model.vertices, np.asarray(model.surface_faces), inner
 
 
-def _root_faces(model: BodyModel, root: BodyModel):
+def root_faces_of(model: BodyModel, root: BodyModel):
     """For each boundary face of ``model``: (root tet (F,), local face index in that root
     tet (F,)), matched through the geometry (see fragment_surface)."""
     face_tet = np.asarray(model.surface_face_tet, dtype=np.int64)
@@ -51,12 +52,13 @@ def _root_faces(model: BodyModel, root: BodyModel):
     return root_tet, root_local
 
 
-def surface_corner_attributes(model: BodyModel, root: BodyModel, root_normals, root_uvs=None):
+def surface_corner_attributes(model: BodyModel, root: BodyModel, root_normals, root_uvs=None, root_faces=None):
     """Per-corner normals (F,3,3) and UVs (F,3,2) or None for ``model``'s boundary faces,
     taken from the root's boundary faces (``root_normals`` (Fr,3,3), ``root_uvs``
     (Fr,3,2) aligned with ``root.surface_faces``). Crack faces have no root counterpart
-    and get NaN (the cache writer then uses their flat face normal)."""
-    root_tet, root_local = _root_faces(model, root)
+    and get NaN (the cache writer then uses their flat face normal). ``root_faces``: as in
+    ``fragment_surface``."""
+    root_tet, root_local = root_faces_of(model, root) if root_faces is None else root_faces
     lookup = np.full(root.tet_count * 4, -1, dtype=np.int64)
     lookup[np.asarray(root.surface_face_tet, np.int64) * 4 + np.asarray(root.surface_face_local, np.int64)] = \
         np.arange(len(root.surface_faces))
