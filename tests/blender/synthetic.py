@@ -7,7 +7,8 @@ Frames 0..48 at 24 fps. Fragments (name, birth, death, parent):
     shard_b  20   35   slab   tumbles about x fast (turns past 180 degrees)
     sliver_1 35   -    shard_b
     sliver_2 35   -    shard_b
-Each is a box of 12 triangles; faces listed in INNER_FACES are crack faces.
+Each is a box of 12 triangles; faces listed in INNER_FACES are crack faces. shard_a rests
+over frames 30-38 and sliver_2 from frame 42 to the end (``RESTS``).
 """
 
 from __future__ import annotations
@@ -48,8 +49,25 @@ def axis_angle_quat(axis, angle):
     return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis])
 
 
+# Rests: the pose held over frames first..last (a sleeping body). The cache writer samples
+# none of the frames strictly between (and none after a rest to the end); the held pose is
+# written at ``last`` when the body moves again, so every frame still reads its pose.
+RESTS = {"shard_a": (30, 38), "sliver_2": (42, END_FRAME)}
+
+
+def sampled(name, frame) -> bool:
+    """Whether the cache holds a pose sample of ``name`` at ``frame`` (a live frame)."""
+    if name not in RESTS:
+        return True
+    first, last = RESTS[name]
+    return not (first < frame < last or (last == END_FRAME and frame == last and first < frame))
+
+
 def pose(name, frame):
     """World position (3,) [m] and orientation (w,x,y,z) of fragment ``name`` at ``frame``."""
+    if name in RESTS:
+        first, last = RESTS[name]
+        frame = first if first < frame <= last else frame - (last - first) if frame > last else frame
     t = frame / FPS
     if name == "slab":
         return np.array([0.0, 0.0, 2.0 - 0.5 * 9.81 * t * t]), axis_angle_quat((0, 0, 1), 1.5 * t)
