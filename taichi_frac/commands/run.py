@@ -79,9 +79,10 @@ def print_summary(summary, file=None) -> None:
     ]
     if s.ms_per_frame.get("mean_after_first") is not None:
         rows += [
-            ("  first frame", f"{s.ms_per_frame['first']:.2f} (in a new process, each kernel's first launch)"),
+            ("  first frame", f"{s.ms_per_frame['first']:.2f} (in a new process, the dynamics kernels' first launch)"),
             ("  the later frames (mean / max)",
-             f"{s.ms_per_frame['mean_after_first']:.2f} / {s.ms_per_frame['max_after_first']:.2f}"),
+             f"{s.ms_per_frame['mean_after_first']:.2f} / {s.ms_per_frame['max_after_first']:.2f}"
+             + (" (with the first impact's frame, which launches the fracture kernels)" if s.fractures else "")),
         ]
     rows += [
         ("wall time", f"{s.wall_time:.2f} s"),
