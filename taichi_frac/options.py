@@ -226,7 +226,7 @@ class SimulationOptions:
             analysed as they happen, and a substep in which a body breaks is simulated
             again with the pieces in the body's place, so the impact that broke it meets
             the pieces (a projectile goes on through what it breaks) instead of the whole
-            body, which the rigid solver has already bounced. Costs a snapshot per substep
+            body, which the rigid solver has already bounced. Costs a device checkpoint per substep
             and a second run of each such substep. Off: the frame's impacts are analysed
             after it.
         arch: Taichi backend: cpu, cuda, vulkan, metal or gpu.

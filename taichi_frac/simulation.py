@@ -317,7 +317,7 @@ class Simulation:
 
     def _fracture_stage(self, frame: int, start=None, first: int = 0, analysed: dict | None = None) -> list[int]:
         """Analyse the impacts recorded since row ``first`` of this advance, split the
-        bodies that crack; returns the new pieces' body ids. ``start``: a World snapshot
+        bodies that crack; returns the new pieces' body ids. ``start``: a World checkpoint
         from before those impacts; the pieces are then put where their parent was then
         (``resimulate_fractures``: see ``_FractureWatch``). ``analysed``: (body, other) ->
         the largest force [N] already analysed for that pair in this frame without a crack;
@@ -378,7 +378,7 @@ class Simulation:
                 self.times.fracture_analysis += time.perf_counter() - t
                 t = time.perf_counter()
             # The pieces start where the body is now, or was before the substep run again.
-            state = self.world.body_state([body]) if start is None else self.world.snapshot_state(start, [body])
+            state = self.world.body_state([body]) if start is None else self.world.checkpoint_state(start, [body])
             pieces = make_fragments(
                 rec.model, split, state["position"][0], state["orientation"][0], state["linear_velocity"][0],
                 state["angular_velocity"][0],
@@ -502,9 +502,9 @@ class Simulation:
             wall_time=wall,
             stage_seconds=self.times.as_dict() | {"prepare": round(self.prepare_seconds, 6)},
             dynamics_stage_seconds={k: round(v, 6) for k, v in dynamics_seconds.items()},
-            # first: the frame that launches each kernel for the first time in this process
-            # (Taichi's front end runs then, ~1-2 s even with the offline cache warm); the
-            # rest: what every later frame costs.
+            # first: in a new process, the frame that launches the dynamics kernels for the
+            # first time (Taichi's front end runs then, ~1-2 s even with the offline cache
+            # warm); the first impact's frame does the same for the fracture kernels.
             ms_per_frame=dict(mean=float(ms.mean()), max=float(ms.max()), median=float(np.median(ms)),
                               first=float(ms[0]), mean_after_first=float(ms[1:].mean()) if len(ms) > 1 else None,
                               max_after_first=float(ms[1:].max()) if len(ms) > 1 else None),

@@ -55,22 +55,21 @@ def test_torque_free_asymmetric_body_conserves_momentum_and_energy():
     assert max_angle > 0.5  # w really wanders (gyroscopic term active), L stays put
 
 
-@pytest.mark.parametrize("kind", ["snapshot", "checkpoint"])
-def test_snapshot_restore_puts_bodies_back_exactly(kind):
-    """World.restore returns the chosen bodies to their snapshot (host copy) or checkpoint
-    (device copy) bit for bit (pose, velocities, sleep state), and leaves the others where
-    the run took them; snapshot_state reads the kept state back."""
+def test_checkpoint_restore_puts_bodies_back_exactly():
+    """World.restore returns the chosen bodies to their checkpoint bit for bit (pose,
+    velocities, sleep state), and leaves the others where the run took them;
+    checkpoint_state reads the kept state back."""
     world = fresh_world()
     world.add_ground(0.0)
     model = sphere_model(0.05)
     a = world.add_body(model, (0, 0, 0.3), (1, 0, 0, 0), (0.5, 0, 0), (0, 2.0, 0))
     b = world.add_body(model, (0.5, 0, 0.3), (0.8, 0.6, 0, 0), (0, 0, -1.0), (1.0, 0, 0))
     before = world.body_state([a, b])
-    snap = getattr(world, kind)()
+    snap = world.checkpoint()
     for _ in range(5):
         world.advance(0.02, 4)
     moved = world.body_state([a, b])
-    kept = world.snapshot_state(snap, [b, a])
+    kept = world.checkpoint_state(snap, [b, a])
     for key in ("position", "orientation", "linear_velocity", "angular_velocity", "sleeping"):
         np.testing.assert_array_equal(kept[key], before[key][::-1], err_msg=key)
     world.restore(snap, [a])
@@ -81,10 +80,9 @@ def test_snapshot_restore_puts_bodies_back_exactly(kind):
     assert not np.allclose(moved["position"][0], before["position"][0])
     with pytest.raises(KeyError):
         world.restore(snap, [a, 999])
-    if kind == "checkpoint":  # only the latest checkpoint is kept
-        world.checkpoint()
-        with pytest.raises(ValueError, match="stale"):
-            world.restore(snap, [a])
+    world.checkpoint()  # only the latest checkpoint is kept
+    with pytest.raises(ValueError, match="stale"):
+        world.restore(snap, [a])
 
 
 def test_advance_runs_a_substep_again_when_the_watch_asks():

@@ -200,7 +200,7 @@ class KeptMotion:
             orientation wxyz, linear [m/s] and angular [rad/s] velocity, active, sleeping,
             sleep timer [s], wake request); exact copies of the f32 state.
         cache: (2,) i32 the contact cache's parity and epoch.
-    Writer: World.checkpoint; read by World.restore and World.snapshot_state.
+    Writer: World.checkpoint; read by World.restore and World.checkpoint_state.
     """
 
     def __init__(self, capacity: int):

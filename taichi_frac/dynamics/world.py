@@ -27,16 +27,6 @@ STAGES = ("collision", "response")
 
 
 @dataclass(frozen=True)
-class BodySnapshot:
-    """Motion state of the bodies ``ids`` (K,) at one moment (``World.snapshot``): rows
-    (K, 17) in ``_pack_bodies``' layout; cache (2,) the contact cache's parity and epoch."""
-
-    ids: np.ndarray
-    rows: np.ndarray
-    cache: np.ndarray
-
-
-@dataclass(frozen=True)
 class Checkpoint:
     """The motion state of the bodies ``ids`` (K,) at one moment, kept on the device
     (``World.checkpoint``): valid until the World's next checkpoint. ``token`` names it."""
@@ -210,21 +200,10 @@ def _pack_bodies(bodies: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim
                  rows: ti.types.ndarray(dtype=ti.f64, ndim=2)):
     """Bodies ``ids`` (K,) into ``rows`` (K, 17): position, orientation (wxyz), linear and
     angular velocity, active, sleeping, sleep timer, wake request (the layout
-    World.body_state and World.snapshot unpack)."""
+    World.body_state unpacks)."""
     ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for k in range(ids.shape[0]):
         _pack_body(bodies, ids[k], rows, k)
-
-
-@ti.kernel
-def _snapshot_bodies(bodies: ti.template(), particles: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                     rows: ti.types.ndarray(dtype=ti.f64, ndim=2), cache: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-    """_pack_bodies, and the contact cache's parity and epoch into ``cache`` (2,)."""
-    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for k in range(ids.shape[0]):
-        _pack_body(bodies, ids[k], rows, k)
-    cache[0] = particles.parity[None]
-    cache[1] = particles.cache_epoch[None]
 
 
 @ti.func
@@ -242,25 +221,11 @@ def _unpack_body(bodies: ti.template(), b, rows: ti.template(), k):
 
 
 @ti.kernel
-def _restore_bodies(bodies: ti.template(), particles: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                    rows: ti.types.ndarray(dtype=ti.f64, ndim=2), cache: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-    """The inverse of _snapshot_bodies for the motion state (not ``active``) of bodies
-    ``ids``, and the contact cache's parity and epoch: the impulses stored since are no
-    longer the valid half, so a substep run again warm-starts as it did."""
-    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for k in range(ids.shape[0]):
-        _unpack_body(bodies, ids[k], rows, k)
-    particles.parity[None] = cache[0]
-    particles.cache_epoch[None] = cache[1]
-
-
-@ti.kernel
 def _keep_bodies(f: ti.template(), kept: ti.template()):
     """Every body slot's motion state and the contact cache's parity and epoch into
     ``kept`` (a KeptMotion). One serial task: a parallel one over ~100 bodies cost more to
-    dispatch than the copy, and copying to the host (``_snapshot_bodies``) took ~0.2-0.5 ms
-    with its array arguments, paid before every substep of a scene that re-runs broken
-    substeps."""
+    dispatch than the copy, and copying to the host took ~0.2-0.5 ms with its array
+    arguments, paid before every substep of a scene that re-runs broken substeps."""
     ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for b in range(f.bodies.slot_end[None]):
         _pack_body(f.bodies, b, kept.rows, b)
@@ -270,7 +235,8 @@ def _keep_bodies(f: ti.template(), kept: ti.template()):
 
 @ti.kernel
 def _restore_kept(f: ti.template(), kept: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-    """_restore_bodies from ``kept`` (slot b in row b)."""
+    """Bodies ``ids`` back to their motion state in ``kept`` (slot b in row b), and the
+    contact cache's parity and epoch."""
     ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for k in range(ids.shape[0]):
         _unpack_body(f.bodies, ids[k], kept.rows, ids[k])
@@ -309,15 +275,6 @@ def _body_rows(ids: np.ndarray, rows: np.ndarray) -> dict:
     """The dict World.body_state returns from rows (K, 17) in ``_pack_body``'s layout."""
     return dict(id=ids, position=rows[:, 0:3], orientation=rows[:, 3:7], linear_velocity=rows[:, 7:10],
                 angular_velocity=rows[:, 10:13], active=rows[:, 13] != 0, sleeping=rows[:, 14] != 0)
-
-
-def _snapshot_rows(snapshot: BodySnapshot, ids: np.ndarray) -> np.ndarray:
-    """Rows (K, 17) of bodies ``ids`` in ``snapshot``; KeyError names those it lacks."""
-    where = {int(b): k for k, b in enumerate(snapshot.ids)}
-    missing = [int(b) for b in ids if int(b) not in where]
-    if missing:
-        raise KeyError(f"bodies {missing} are not in the snapshot")
-    return snapshot.rows[[where[int(b)] for b in ids]].reshape(len(ids), 17)
 
 
 def cluster_spheres(offsets: np.ndarray, radii: np.ndarray, count: int) -> np.ndarray:
@@ -629,52 +586,38 @@ class World:
         """Impact rows recorded so far in this advance (see :meth:`impacts`)."""
         return min(int(self.impact_buffer.count[None]), self.capacity.max_impacts)
 
-    def snapshot(self) -> "BodySnapshot":
-        """The motion state of every body now (pose, velocities, sleep state), for
-        :meth:`restore`; one launch. Static data (models, colliders) is not copied."""
-        ids = np.asarray(self.body_ids, dtype=np.int32)
-        rows = np.zeros((len(ids), 17), dtype=np.float64)
-        cache = np.zeros(2, dtype=np.int32)
-        _snapshot_bodies(self.bodies, self.particles, ids, rows, cache)
-        return BodySnapshot(ids=ids, rows=rows, cache=cache)
-
     def checkpoint(self) -> Checkpoint:
-        """The motion state of every body now, kept on the device for :meth:`restore` and
-        :meth:`snapshot_state` (one small launch; nothing is copied to the host). Valid
-        until the next checkpoint; :meth:`snapshot` keeps any number, at a host copy each."""
+        """The motion state of every body now (pose, velocities, sleep state) and the contact
+        cache's, kept on the device for :meth:`restore` and :meth:`checkpoint_state` (one
+        small launch; nothing is copied to the host; static data is not copied). Valid
+        until the next checkpoint: the World keeps only the latest."""
         _keep_bodies(self.fields, self.kept)
         self._checkpoint_token += 1
         return Checkpoint(ids=np.asarray(self.body_ids, dtype=np.int32), token=self._checkpoint_token)
 
-    def restore(self, snapshot: "BodySnapshot | Checkpoint", ids) -> None:
-        """Put bodies ``ids`` (each in the world now and in ``snapshot``) back in their
-        motion state of ``snapshot``, and the contact cache (warm starting) back to that
-        moment; the other bodies are left as they are."""
+    def restore(self, checkpoint: Checkpoint, ids) -> None:
+        """Put bodies ``ids`` (each in the world now and in ``checkpoint``) back in their
+        motion state of ``checkpoint``, and the contact cache (warm starting) back to that
+        moment: the impulses stored since are no longer the valid half, so a substep run
+        again warm-starts as it did. The other bodies are left as they are."""
         ids = np.asarray(ids, dtype=np.int64)
         missing = [int(b) for b in ids if int(b) not in self._body_range]
         if missing:
             raise KeyError(f"bodies {missing} are not in the world")
-        if isinstance(snapshot, Checkpoint):
-            _restore_kept(self.fields, self.kept, self._checkpoint_ids(snapshot, ids))
-            return
-        rows = np.ascontiguousarray(_snapshot_rows(snapshot, ids))
-        _restore_bodies(self.bodies, self.particles, np.ascontiguousarray(ids, dtype=np.int32), rows, snapshot.cache)
+        _restore_kept(self.fields, self.kept, self._checkpoint_ids(checkpoint, ids))
 
-    def snapshot_state(self, snapshot: "BodySnapshot | Checkpoint", ids) -> dict:
-        """:meth:`body_state` of bodies ``ids`` as ``snapshot`` holds them."""
+    def checkpoint_state(self, checkpoint: Checkpoint, ids) -> dict:
+        """:meth:`body_state` of bodies ``ids`` as ``checkpoint`` holds them."""
         ids = np.asarray(ids, dtype=np.int64)
-        if isinstance(snapshot, Checkpoint):
-            rows = np.zeros((len(ids), 17), dtype=np.float64)
-            _pack_kept(self.kept, self._checkpoint_ids(snapshot, ids), rows)
-            return _body_rows(ids, rows)
-        return _body_rows(ids, _snapshot_rows(snapshot, ids))
+        rows = np.zeros((len(ids), 17), dtype=np.float64)
+        _pack_kept(self.kept, self._checkpoint_ids(checkpoint, ids), rows)
+        return _body_rows(ids, rows)
 
     def _checkpoint_ids(self, checkpoint: Checkpoint, ids: np.ndarray) -> np.ndarray:
         """``ids`` as i32 for a kernel; raises if ``checkpoint`` is stale or lacks one."""
         if checkpoint.token != self._checkpoint_token:
             raise ValueError(f"checkpoint {checkpoint.token} is stale: the World has taken checkpoint "
-                             f"{self._checkpoint_token} since, and keeps only the latest (use World.snapshot() "
-                             f"to keep several)")
+                             f"{self._checkpoint_token} since (or been cleared), and keeps only the latest")
         missing = np.setdiff1d(ids, checkpoint.ids)
         if len(missing):
             raise KeyError(f"bodies {missing.tolist()} are not in the checkpoint")
