@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from .geometry import rows
 from .geometry.mass import tet_mass_properties
 from .geometry.topology import (
     bonds_from_neighbors,
@@ -294,7 +295,7 @@ def _assemble(vertices, tets, vol, neighbor, density, boundary_group_size, keep_
     com = props.center_of_mass
     vertices = vertices - com
     faces, face_tet, face_local = boundary_faces(tets, neighbor)
-    centroids = vertices[tets].mean(axis=1)
+    centroids = rows.corner_mean(vertices[tets])
     mass = density * vol
     radius = np.cbrt(3.0 * vol / (4.0 * np.pi))
     is_surface = np.zeros(len(tets), dtype=bool)
@@ -329,7 +330,7 @@ def _assemble(vertices, tets, vol, neighbor, density, boundary_group_size, keep_
     b_pos = np.stack(
         [np.bincount(owner, weights=centroids[members, k], minlength=len(groups)) for k in range(3)], axis=1
     ) / np.maximum(sizes, 1)[:, None]
-    reach = np.linalg.norm(centroids[members] - b_pos[owner], axis=1) + radius[members]
+    reach = rows.norm(centroids[members] - b_pos[owner]) + radius[members]
     b_radius = np.zeros(len(groups))
     np.maximum.at(b_radius, owner, reach)
     if inherited is None:
@@ -403,8 +404,9 @@ def _face_tree(vertices, faces):
     from scipy.spatial import cKDTree
 
     corners = vertices[faces]
-    centre = corners.mean(axis=1)
-    spread = float(np.linalg.norm(corners - centre[:, None, :], axis=2).max())
+    centre = rows.corner_mean(corners)
+    offset = corners - centre[:, None, :]
+    spread = float(np.sqrt(np.einsum("fki,fki->fk", offset, offset).max()))
     return corners, cKDTree(centre), spread
 
 
@@ -434,12 +436,12 @@ def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner,
     mine = np.nonzero(group >= 0)[0]  # the faces of these groups' members (all, or a few)
     group = group[mine]
     corners = vertices[faces[mine]]  # (Fm,3,3)
-    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    outward = np.sign(((corners.mean(axis=1) - centroids[face_tet[mine]]) * normal).sum(axis=1))
+    normal = rows.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    outward = np.sign(rows.dot(rows.corner_mean(corners) - centroids[face_tet[mine]], normal))
     normal *= outward[:, None]  # away from the owning tet, whatever the winding
     n_sum = np.zeros((n_groups, 3))
     np.add.at(n_sum, group, normal)
-    length = np.linalg.norm(n_sum, axis=1)
+    length = rows.norm(n_sum)
     has_normal = length > 1e-12 * max(float(length.max()), 1e-300)
     n_unit = np.where(has_normal[:, None], n_sum / np.maximum(length, 1e-300)[:, None], 0.0)
     rel = corners - b_pos[group][:, None, :]  # (Fm,3,3) face vertices from the centre
@@ -448,9 +450,9 @@ def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner,
     np.minimum.at(h, group, -heights.max(axis=1))
     h = -h  # largest height of the group's faces above its centre
     member_rel = centroids[members] - b_pos[owner]
-    along = (member_rel * n_unit[owner]).sum(axis=1)
+    along = rows.dot(member_rel, n_unit[owner])
     rho = np.zeros(n_groups)
-    np.maximum.at(rho, owner, np.sqrt(np.maximum((member_rel ** 2).sum(axis=1) - along ** 2, 0.0)))
+    np.maximum.at(rho, owner, np.sqrt(np.maximum(rows.dot(member_rel, member_rel) - along ** 2, 0.0)))
     cover = np.sqrt(np.maximum(b_radius ** 2 - rho ** 2, 0.0))
     shift = np.where(has_normal & np.isfinite(h), np.minimum(b_radius, cover) - h, 0.0)
     todo = np.nonzero(shift > 0)[0]
@@ -485,15 +487,15 @@ def ray_exit_distance(vertices, faces, origin, direction, reach):
     o, d = origin[ray], direction[ray]
     v0 = corners[face, 0]
     e1, e2 = corners[face, 1] - v0, corners[face, 2] - v0
-    p = np.cross(d, e2)
-    det = (e1 * p).sum(axis=1)
+    p = rows.cross(d, e2)
+    det = rows.dot(e1, p)
     ok = np.abs(det) > 1e-18
     inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
     s = o - v0
-    u = (s * p).sum(axis=1) * inv
-    q = np.cross(s, e1)
-    v = (d * q).sum(axis=1) * inv
-    t = (e2 * q).sum(axis=1) * inv
+    u = rows.dot(s, p) * inv
+    q = rows.cross(s, e1)
+    v = rows.dot(d, q) * inv
+    t = rows.dot(e2, q) * inv
     hit = ok & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > 0.0) & (t <= reach[ray])
     np.minimum.at(result, ray[hit], t[hit])
     return result

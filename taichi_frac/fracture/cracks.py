@@ -57,7 +57,7 @@ import numpy as np
 from ..model import BodyModel
 from ..options import FractureOptions, Material
 from .field import point_loads_displacement
-from .sph import displacement_gradient, neighbor_lists
+from .sph import gradient_rows, neighbor_lists
 from .stress import largest_principal_stress, principal_stresses, stress_from_gradient
 
 # Analysis points are sought within this many smoothing lengths (kernel support radii,
@@ -329,8 +329,9 @@ def analyze_impact(
         displacement = np.zeros((t_count, 3))
         displacement[where] = point_loads_displacement(points[where], contact, normal, force, material.shear_modulus,
                                                        material.poisson_ratio, radius)
-        grad = displacement_gradient(points, volumes, displacement, offsets, indices, h,
-                                     corrected=options.corrected_gradient, query=query)
+        q_ids = np.arange(t_count) if query is None else query
+        grad, _ = gradient_rows(points, volumes, displacement, offsets[q_ids], offsets[q_ids + 1], indices, h,
+                                options.corrected_gradient, q_ids)
         stress = stress_from_gradient(grad, material.young_modulus, material.poisson_ratio)
         return displacement, np.asarray(stress), largest_principal_stress(stress)
 
@@ -381,9 +382,8 @@ def analyze_impact(
         # give n noisy copies of one direction; the plain sum over a one-sided sector leans
         # toward the sector, which is what fans the n cracks out (module docstring).
         group_corrected = options.corrected_gradient if n_groups == 1 else False
-        group_grad = displacement_gradient(points, volumes, displacement, group_offsets, group_indices, h,
-                                           corrected=group_corrected,
-                                           query=np.asarray(query, dtype=np.int64))
+        group_grad, _ = gradient_rows(points, volumes, displacement, group_offsets[:-1], group_offsets[1:],
+                                      group_indices, h, group_corrected, np.asarray(query, dtype=np.int32))
         stress_g = np.asarray(stress_from_gradient(group_grad, material.young_modulus, material.poisson_ratio))
         values_g, dirs_g = principal_stresses(stress_g)
         group_stress[grouped] = stress_g.reshape(len(grouped), n_groups, 3, 3)

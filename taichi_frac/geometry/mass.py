@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .rows import corner_sum
 from .topology import signed_volumes
 
 
@@ -35,9 +36,9 @@ def tet_mass_properties(vertices: np.ndarray, tets: np.ndarray, density, volumes
     rho = np.broadcast_to(np.asarray(density, dtype=np.float64), vol.shape)
     m = rho * vol
     mass = float(m.sum())
-    com = (m @ p.sum(axis=1)) / (4.0 * mass)
+    com = (m @ corner_sum(p)) / (4.0 * mass)
     q = p - com  # about the centre of mass: no large parallel-axis cancellation
-    s = q.sum(axis=1)
+    s = corner_sum(q)
     w = m / 20.0
     # sum_t w_t (sum_i q_ti q_ti^T + s_t s_t^T) as two (3,N) @ (N,3) products (BLAS; the
     # per-tet einsum took a third of a fragment's model build).
