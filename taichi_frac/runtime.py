@@ -26,17 +26,29 @@ def cache_dir() -> Path:
     return path
 
 
-def init(arch: str = "cpu", *, debug: bool = False) -> str:
+class ArchError(RuntimeError):
+    """Another Taichi arch was asked for than the one this process already runs on."""
+
+
+def init(arch: str | None = None, *, debug: bool = False) -> str:
     """Initialise Taichi once per process and return the arch in use.
 
-    ``arch`` is one of cpu, cuda, vulkan, metal, gpu. Fields use float32 by default
+    ``arch`` is one of cpu, cuda, vulkan, metal, gpu; None takes the arch already in use,
+    or cpu. Taichi runs on one arch per process, so asking for another once a kernel has
+    run is an error (it used to return the first arch silently: a run asked for cuda
+    got the CPU when its models were prepared first). Fields use float32 by default
     (``default_fp``); accuracy-critical fracture kernels declare float64 explicitly.
     Compiled kernels are kept in Taichi's offline cache under :func:`cache_dir`, so a second
     process does not recompile them.
     """
     global _initialised_arch
     if _initialised_arch is not None:
+        if arch is not None and arch != _initialised_arch:
+            raise ArchError(f"Taichi is already running on arch {_initialised_arch!r} in this process, so "
+                               f"arch {arch!r} cannot be used: choose the arch before anything runs a kernel "
+                               f"(e.g. taichi-frac run --arch {arch} in a new process)")
         return _initialised_arch
+    arch = "cpu" if arch is None else arch
     if arch not in _ARCHES:
         raise ValueError(f"unknown Taichi arch {arch!r}: use one of {', '.join(sorted(_ARCHES))}")
     ti.init(

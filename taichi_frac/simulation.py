@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import runtime
 from .geometry.rotation import quaternion_matrix
 from .model import BodyModel
 from .options import FractureOptions, Material, ParticleOptions
@@ -196,6 +197,10 @@ class Simulation:
         if output is None:
             output = scene.output_path
         self.output_path = None if output is False else output
+        # The arch first: preparing a breakable body runs kernels (its SPH neighbour lists),
+        # and the first kernel fixes the process's arch. A World given brings its own.
+        if world is None or arch is not None:
+            runtime.init(arch or sim.arch)
 
         t0 = time.perf_counter()
         prepared = []

@@ -63,3 +63,21 @@ def test_ctrl_c_keeps_a_valid_cache_of_the_frames_done(tmp_path):
     data = stage.GetRootLayer().customLayerData[schema.LAYER_DATA_KEY]
     assert data[schema.KEY_COMPLETE] is False and data[schema.KEY_LAST_FRAME] == 5
     assert stage.GetEndTimeCode() == 5
+
+
+def test_another_arch_than_the_running_one_is_refused(capsys):
+    """Taichi runs on one arch per process. The scene's models used to be prepared (their
+    SPH neighbour lists are a kernel) before the World chose the arch, so a run asked for
+    cuda silently ran on the CPU; now the arch is chosen first, and asking for another
+    than the one already running is an error naming both (exit 2 from the command)."""
+    import pytest
+
+    from taichi_frac import runtime
+
+    assert runtime.init() == "cpu"  # the test session's
+    assert main(["run", str(SCENES / "single_ring.toml"), "--arch", "cuda", "--frames", "1", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "'cpu'" in err and "'cuda'" in err
+    with pytest.raises(runtime.ArchError, match="cuda"):
+        Simulation(load_scene(SCENES / "single_ring.toml"), output=False, arch="cuda")
+    assert runtime.init("cpu") == "cpu"

@@ -231,3 +231,26 @@ def test_one_tet_fragment_is_a_valid_body():
     assert one.model.mass == pytest.approx(model.particle_mass[tet], rel=1e-12)
     assert one.model.surface_particle_count == 1 and len(one.model.surface_faces) == 4
     assert_conserved(model, frags, POSE)
+
+
+@pytest.mark.parametrize("generations", [1, 3])
+def test_big_piece_mass_by_subtraction_matches_integration(generations):
+    """The big piece left when a chip breaks off gets its mass properties as the parent's
+    less the chip's (model._mass_by_subtraction); integrated afresh from its own tets
+    they agree to round-off, also after chips broken off three times in a row (each
+    generation's parent is itself a subtracted piece)."""
+    from taichi_frac.model import build_fragment_model
+
+    model = ring_model()
+    piece = model
+    for g in range(generations):
+        keep = np.arange(40, piece.tet_count)  # a chip of 40 tets off the front
+        piece = build_fragment_model(piece, keep, boundary_group_size=4)
+    root = model
+    direct = tet_mass_properties(root.vertices, root.tets[np.sort(piece.source_tet)], root.density)
+    assert piece.mass == pytest.approx(direct.mass, rel=1e-12)
+    # The piece's frame is at its own centre of mass, and its inertia is about it.
+    own = tet_mass_properties(piece.vertices, piece.tets, piece.density)
+    np.testing.assert_allclose(own.center_of_mass, 0.0, atol=1e-12 * np.ptp(root.vertices))
+    np.testing.assert_allclose(piece.inertia, own.inertia, rtol=0, atol=1e-11 * np.abs(own.inertia).max())
+    np.testing.assert_allclose(piece.inertia, direct.inertia, rtol=0, atol=1e-11 * np.abs(own.inertia).max())

@@ -107,6 +107,7 @@ def print_summary(summary, file=None) -> None:
 
 def main(args) -> int:
     from ..options import OptionError
+    from ..runtime import ArchError
     from ..scenes import load_scene
     from ..simulation import Simulation
 
@@ -117,8 +118,14 @@ def main(args) -> int:
         return 2
     output = False if args.no_output else (Path(args.output) if args.output else None)
     cb, bar = _progress_printer(args.quiet)
-    sim = Simulation(scene, output=output, arch=args.arch, progress=cb, frames=args.frames,
-                     single_scale=True if args.single_scale else None, fracture=not args.no_fracture)
+    try:
+        sim = Simulation(scene, output=output, arch=args.arch, progress=cb, frames=args.frames,
+                         single_scale=True if args.single_scale else None, fracture=not args.no_fracture)
+    except ArchError as exc:
+        if bar is not None:
+            bar.stop()
+        print(f"taichi-frac run: {exc}", file=sys.stderr)
+        return 2
     try:
         summary = sim.run()
     finally:

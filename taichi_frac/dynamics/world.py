@@ -319,7 +319,7 @@ class World:
     """
 
     def __init__(self, capacity: WorldCapacity | None = None, options: DynamicsOptions | None = None,
-                 arch: str = "cpu"):
+                 arch: str | None = None):
         runtime.init(arch)
         self.capacity = capacity or WorldCapacity()
         self.options = options or DynamicsOptions()
