@@ -152,3 +152,29 @@ def test_strongest_impact_per_body_pair_matches_a_plain_loop():
                 best[o] = r
         assert np.array_equal(result[int(b)], np.sort(list(best.values())))
     assert set(result) == {int(b) for b in breakable if np.any(impacts["body"] == b)}
+
+
+def test_the_whole_stress_field_is_computed_only_for_the_cache(world, tmp_path, monkeypatch):
+    """A scene pays only for what it uses: the pieces' peak stress (the cache's per-face
+    stress) needs the whole field of a cracking impact's analysis; without a cache that
+    analysis is skipped, and the run is otherwise the same (same fragments, same poses)."""
+    import taichi_frac.fracture.cracks as cracks
+
+    calls = []
+    real = cracks.analyze_impact
+
+    def counting(*args, **kwargs):
+        calls.append(kwargs.get("full_field", True))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(cracks, "analyze_impact", counting)
+    runs = {}
+    for label, output in (("cache", tmp_path / "ring.usdc"), ("none", False)):
+        calls.clear()
+        sim = Simulation(ring_scene(3), output=output, frames=30, world=world)
+        summary = sim.run()
+        ids = sim.world.body_ids
+        runs[label] = (summary.fragments, sim.world.body_state(ids)["position"], calls.count(True))
+    assert runs["cache"][0] == runs["none"][0] >= 3
+    np.testing.assert_array_equal(runs["cache"][1], runs["none"][1])
+    assert runs["cache"][2] >= 1 and runs["none"][2] == 0

@@ -50,8 +50,9 @@ class FractureResult:
             ordered by their smallest tet index (deterministic).
         fragment_is_debris: (F,) bool, small pieces kept unbreakable ("debris" policy).
         fragment_peak_stress: (F,) [Pa] largest principal stress over each fragment's tets
-            (full field of the analysis), or the largest crack peak bounding it when no
-            field was given.
+            (over the particles the analysis evaluated: all of them for a full-field one,
+            NaN for a piece a local one did not reach), or the largest crack peak bounding
+            it when no field was given.
         dropped_tets: (D,) parent tet indices removed by the "drop" policy.
         dropped_mass: [kg] their exact mass (density x tet volume).
         component_count: connected pieces right after cutting, before the small-fragment
@@ -98,7 +99,9 @@ class Fragment:
         linear_velocity: (3,) [m/s]; angular_velocity: (3,) [rad/s], world frame.
         source_tets: (T,) root-solid tet indices (= model.source_tet).
         parent_tets: (T,) the parent's tet indices.
-        peak_principal_stress: [Pa] largest principal stress over its tets at the impact.
+        peak_principal_stress: [Pa] largest principal stress over its tets at the impact (see
+            ``FractureResult.fragment_peak_stress``; the simulation computes the whole field
+            for it only when it writes a cache).
         birth_frame: output frame it appeared in (the caller's).
         parent: the parent body's id (the caller's), or None.
         impact: the impact that made it, or None.
@@ -156,8 +159,15 @@ def _merge_small(labels: np.ndarray, bonds: np.ndarray, cut: np.ndarray, min_siz
 
 
 def fragment_peak_stress(pieces, principal_stress) -> np.ndarray:
-    """(F,) [Pa] the largest of ``principal_stress`` (T,) over each piece's tets."""
-    return np.array([float(np.max(principal_stress[p])) for p in pieces])
+    """(F,) [Pa] the largest of ``principal_stress`` (T,) over each piece's tets. NaN
+    entries (the particles a local analysis did not evaluate) are skipped: a piece with
+    none evaluated gets NaN."""
+    peaks = []
+    for p in pieces:
+        values = principal_stress[p]
+        values = values[~np.isnan(values)]
+        peaks.append(float(values.max()) if len(values) else np.nan)
+    return np.array(peaks)
 
 
 def split_body(
