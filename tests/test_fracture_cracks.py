@@ -220,3 +220,30 @@ def test_local_first_analysis_matches_the_full_field(strength):
         # No contact passed the Rankine test: its sector stresses (crack directions) are
         # not needed, and not computed.
         assert np.isnan(fast.group_stress).all() and not fast.group_neighbor_count.any()
+
+
+def test_neighbor_rows_of_a_piece_are_its_restricted_lists_rows():
+    """cracks.neighbor_rows: the rows of a piece's SPH neighbour lists, read from its
+    root's lists without restricting them over the whole piece, equal those rows of the
+    whole restriction (same neighbours, same order); a local analysis of the piece then
+    finds the same cracks as a full-field one."""
+    from taichi_frac.fracture.cracks import (model_neighbor_lists, neighbor_rows, restrict_neighbor_lists,
+                                            smoothing_length)
+    from taichi_frac.model import build_fragment_model
+
+    root = ring_model()
+    options = FractureOptions(crack_count=3, seed=4, crack_length=0.04)
+    h = smoothing_length(root, options)
+    piece = build_fragment_model(root, np.arange(300, root.tet_count, dtype=np.int64), boundary_group_size=4)
+    off, idx = restrict_neighbor_lists(*model_neighbor_lists(root, h), piece.source_tet, root.tet_count)
+    query = np.sort(np.random.default_rng(2).choice(piece.tet_count, 150, replace=False))
+    r_off, r_idx = neighbor_rows(piece, h, query)
+    assert len(r_off) == len(query) + 1
+    for q, i in enumerate(query):
+        np.testing.assert_array_equal(r_idx[r_off[q]:r_off[q + 1]], idx[off[i]:off[i + 1]])
+    fast = analyze_impact(piece, RING_CONTACT - piece.com_in_source, RING_NORMAL, RING_FORCE, RING_MATERIAL, options,
+                          full_field=False)
+    full = analyze_impact(piece, RING_CONTACT - piece.com_in_source, RING_NORMAL, RING_FORCE, RING_MATERIAL, options)
+    assert len(fast.cracks) == len(full.cracks) == 3
+    for a, b in zip(fast.cracks, full.cracks):
+        np.testing.assert_allclose(a.normal, b.normal, rtol=0, atol=1e-12)

@@ -55,6 +55,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry import rows
 from ..model import BodyModel
 from ..options import FractureOptions, Material
 from .field import point_loads_displacement
@@ -244,6 +245,39 @@ def restrict_neighbor_lists(offsets, indices, subset, count):
     return out_offsets, mapped[keep].astype(np.int32)
 
 
+def neighbor_rows(model: BodyModel, h: float, query: np.ndarray):
+    """CSR lists (offsets (Q+1,) int64, indices int32) of the SPH neighbours of the
+    particles ``query`` (Q,) only: row q is :func:`model_neighbor_lists`' row
+    ``query[q]``, the same neighbours in the same order. A piece whose own lists are not
+    built yet reads its root's rows and maps them to its particles, so a local analysis
+    of a new piece (a few hundred rows) does not restrict its root's lists over the whole
+    piece first (2.5 ms on a ring's big piece)."""
+    query = np.asarray(query, dtype=np.int64)
+    mapping = None
+    if h in _NEIGHBORS.get(model, {}) or model.root is None:
+        offsets, indices = model_neighbor_lists(model, h)
+        source = query
+    else:
+        offsets, indices = model_neighbor_lists(model.root, h)
+        source = model.source_tet[query].astype(np.int64)
+        mapping = np.full(model.root.tet_count, -1, dtype=np.int32)
+        mapping[model.source_tet] = np.arange(model.tet_count, dtype=np.int32)
+    begin = offsets[source]
+    lengths = offsets[source + 1] - begin
+    starts = np.cumsum(lengths) - lengths
+    flat = np.arange(int(lengths.sum())) + np.repeat(begin - starts, lengths)
+    found = indices[flat]
+    out_offsets = np.zeros(len(query) + 1, dtype=np.int64)
+    if mapping is None:
+        np.cumsum(lengths, out=out_offsets[1:])
+        return out_offsets, found
+    found = mapping[found]
+    keep = found >= 0
+    np.cumsum(np.bincount(np.repeat(np.arange(len(query)), lengths)[keep], minlength=len(query)),
+              out=out_offsets[1:])
+    return out_offsets, found[keep]
+
+
 def smoothing_length(model: BodyModel, options: FractureOptions) -> float:
     """h [m] = ``options.smoothing_length_factor`` x the model's particle spacing (a
     fragment's is its root's, so its particles keep their neighbours)."""
@@ -294,7 +328,8 @@ def analyze_impact(
     h = smoothing_length(model, options)  # support radius
 
     # Load-patch radius: given, or the radius of the particle nearest the contact.
-    d2 = ((points[None, :, :] - contact[:, None, :]) ** 2).sum(axis=2)  # (K,T)
+    offset = points[None, :, :] - contact[:, None, :]
+    d2 = np.einsum("ktx,ktx->kt", offset, offset)  # (K,T)
     nearest = np.argmin(d2, axis=1) if k_count else np.zeros(0, dtype=np.int64)
     if options.contact_radius is not None:
         radius = np.full(k_count, options.contact_radius)
@@ -314,29 +349,43 @@ def analyze_impact(
     if k_count == 0:
         return empty
 
-    offsets, indices = model_neighbor_lists(model, h)
     # Analysis point of each contact: the particle of largest principal stress within
     # ANALYSIS_RADIUS_FACTOR h of it (right under a point load the stress is compressive;
     # the tension that cracks brittle solids peaks beside the load, BRIEF.md section 2).
     in_reach = d2 <= (ANALYSIS_RADIUS_FACTOR * h) ** 2
     in_reach[np.arange(k_count), nearest] = True
 
+    lists = {}  # the neighbour rows in hand: "local" (rows of ``local``) or "all"
+
     def field(query):
         """Steps 5-7 at particles ``query`` (None: all): the superposed half-space
         displacement of every contact where the SPH sums read it, then the gradient
         (every neighbour), stress and largest principal stress."""
         where = slice(None)
-        if query is not None:
-            rows = [indices[offsets[i]:offsets[i + 1]] for i in query]
-            where = np.unique(np.concatenate([query, *rows]))
+        if query is None:
+            lists["all"] = model_neighbor_lists(model, h)
+            q_off, q_idx = lists["all"]
+            q_ids = np.arange(t_count)
+        else:
+            lists["local"] = q_off, q_idx = neighbor_rows(model, h, query)
+            q_ids = query
+            where = np.unique(np.concatenate([query, q_idx]))
         displacement = np.zeros((t_count, 3))
         displacement[where] = point_loads_displacement(points[where], contact, normal, force, material.shear_modulus,
                                                        material.poisson_ratio, radius)
-        q_ids = np.arange(t_count) if query is None else query
-        grad, _ = gradient_rows(points, volumes, displacement, offsets[q_ids], offsets[q_ids + 1], indices, h,
+        grad, _ = gradient_rows(points, volumes, displacement, q_off[:-1], q_off[1:], q_idx, h,
                                 options.corrected_gradient, q_ids)
         stress = stress_from_gradient(grad, material.young_modulus, material.poisson_ratio)
         return displacement, np.asarray(stress), largest_principal_stress(stress)
+
+    def neighbours_of(i):
+        """Particle i's neighbours (i is a field particle: in ``local`` when local)."""
+        if "all" in lists:
+            offsets, indices = lists["all"]
+        else:
+            offsets, indices = lists["local"]
+            i = int(np.searchsorted(local, i))
+        return indices[offsets[i]:offsets[i + 1]]
 
     local = None if full_field else np.nonzero(in_reach.any(axis=0))[0]
     displacement, stress, peak = field(local)
@@ -370,7 +419,7 @@ def analyze_impact(
         group_rows, query = [], []
         for k in grouped:
             i = int(analysis[k])
-            nbrs = indices[offsets[i]:offsets[i + 1]]
+            nbrs = neighbours_of(i)
             sector = group_neighbors(points, nbrs, points[i], normal[k], n_groups,
                                      start_angle(options.seed, int(k)))
             order = np.argsort(sector, kind="stable")
@@ -446,24 +495,24 @@ def cut_bonds(model: BodyModel, cracks) -> np.ndarray:
     cut = np.zeros(len(bonds), dtype=bool)
     if not len(cracks) or not len(bonds):
         return cut
-    xi = model.particle_position[bonds[:, 0]]
-    xj = model.particle_position[bonds[:, 1]]
+    x = model.particle_position
+    first, second = bonds[:, 0], bonds[:, 1]
     planes = [c for c in cracks if isinstance(c, CrackPlane)]
     rings = [c for c in cracks if isinstance(c, RingCrack)]
     if planes:
         p = np.stack([c.point for c in planes])  # (C,3)
         nrm = np.stack([c.normal for c in planes])  # (C,3)
         ext = np.array([c.extent for c in planes])  # (C,)
-        di = xi @ nrm.T - (p * nrm).sum(axis=1)  # (B,C) signed distances
-        dj = xj @ nrm.T - (p * nrm).sum(axis=1)
+        side = x @ nrm.T - rows.dot(p, nrm)  # (T,C) signed distances, per particle (not per bond end)
+        di, dj = side[first], side[second]
         bond, crack = np.nonzero((di >= 0.0) != (dj >= 0.0))  # the crossings only (a few %)
         t = di[bond, crack] / (di[bond, crack] - dj[bond, crack])
-        hit = xi[bond] + t[:, None] * (xj[bond] - xi[bond])
-        within = ((hit - p[crack]) ** 2).sum(axis=1) <= ext[crack] ** 2
+        xi = x[first[bond]]
+        hit = xi + t[:, None] * (x[second[bond]] - xi) - p[crack]
+        within = rows.dot(hit, hit) <= ext[crack] ** 2
         cut[bond[within]] = True
     for ring in rings:
-        r2 = ring.radius ** 2
-        inside_i = ((xi - ring.point) ** 2).sum(axis=1) < r2
-        inside_j = ((xj - ring.point) ** 2).sum(axis=1) < r2
-        cut |= inside_i != inside_j
+        d = x - ring.point
+        inside = rows.dot(d, d) < ring.radius ** 2
+        cut |= inside[first] != inside[second]
     return cut
