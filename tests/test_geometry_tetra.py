@@ -163,12 +163,16 @@ def test_row_operations_match_numpy():
     np.testing.assert_allclose(rows.norm(a), np.linalg.norm(a, axis=1), rtol=1e-15, atol=0)
 
 
-def test_first_hits_against_a_box_and_brute_force():
+@pytest.mark.parametrize("path", ["kernel", "numpy"])
+def test_first_hits_against_a_box_and_brute_force(path, monkeypatch):
     """geometry.rays.first_hits: rays from inside a closed box mesh outward along the
     axes hit the walls at the hand-computed distances; random short rays agree with a
-    brute-force Moller-Trumbore loop in numpy over every face (inf where none is within
-    reach)."""
+    brute-force Moller-Trumbore loop over every face (inf where none is within reach).
+    Both the kernel and the all-pairs numpy path (small inputs) are checked."""
+    from taichi_frac.geometry import rays
     from taichi_frac.geometry.rays import first_hits
+
+    monkeypatch.setattr(rays, "SMALL_PAIRS", 0 if path == "kernel" else 10**9)
 
     box = trimesh.creation.box(extents=(2.0, 1.0, 0.5))
     verts, faces = np.asarray(box.vertices, dtype=np.float64), np.asarray(box.faces)

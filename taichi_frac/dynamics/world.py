@@ -278,6 +278,14 @@ def _body_rows(ids: np.ndarray, rows: np.ndarray) -> dict:
                 angular_velocity=rows[:, 10:13], active=rows[:, 13] != 0, sleeping=rows[:, 14] != 0)
 
 
+def _median(values: np.ndarray) -> float:
+    """The median (the mean of the two middle values for an even count): np.percentile's
+    argument handling took ~0.15 ms a body added."""
+    ordered = np.sort(values)
+    n = len(ordered)
+    return float(0.5 * (ordered[(n - 1) // 2] + ordered[n // 2]))
+
+
 def cluster_spheres(offsets: np.ndarray, radii: np.ndarray, count: int) -> np.ndarray:
     """(K, 4) spheres (centre [m], radius [m]) that together enclose every sphere
     (``offsets`` (N,3) [m], ``radii`` (N,) [m]), K = min(count, N): seeds by farthest-point
@@ -390,7 +398,7 @@ class World:
         _write_body(self.bodies, self.particles, slot, pose, inertia.astype(np.float32),
                     inverse_inertia.astype(np.float32), float(inverse_mass), float(friction),
                     float(restitution), int(fixed), float(compliance), float(contact_radius), start, np.ascontiguousarray(offsets, dtype=np.float32),
-                    np.ascontiguousarray(radii, dtype=np.float32), float(np.percentile(radii, 50)),
+                    np.ascontiguousarray(radii, dtype=np.float32), _median(radii),
                     cluster_spheres(offsets, radii, min(MAX_CLUSTERS, max(1, count // 16))).astype(np.float32))
         self._body_range[slot] = (start, count)
         self.breakable = getattr(self, "breakable", {})
