@@ -99,3 +99,41 @@ def test_moving_ring_contacts_match_brute_force_with_the_speculative_reach():
     old_rule = (dist - r[:, None] - r[None] < margin * 0.5 * (r[:, None] + r[None]) + m[:, None] + m[None]) & other
     assert len(expected) < 0.8 * np.triu(old_rule, 1).sum()
     assert world.contacts.overflow[None] == 0
+
+
+def test_a_large_sphere_whose_cells_share_buckets_makes_each_pair_once():
+    """A sphere much larger than its body's typical one occupies a box of cells, one
+    bucket entry each; with few particles in use the hash table is small, so cells of
+    that box share buckets. Each contact must still be made once, in one cell: the
+    brute-force pairs, no more (the pair used to be made again for every other cell of
+    the box hashed to the scanned bucket)."""
+    world = fresh_world(gravity=(0.0, 0.0, 0.0))
+    rng = np.random.default_rng(5)
+    big = np.vstack([[0.0, 0.0, 0.0], rng.uniform(-0.01, 0.01, (8, 3))])
+    big_r = np.r_[0.04, np.full(8, 0.005)]  # typical (median) radius 5 mm, one 40 mm sphere
+    centres, radii = [], []
+    for k in range(12):  # small bodies on the big sphere's surface, a touch inside it
+        direction = rng.normal(size=3)
+        direction /= np.linalg.norm(direction)
+        offsets = rng.uniform(-0.004, 0.004, (3, 3))
+        position = direction * (0.04 + 0.005 - 0.0005)
+        world.add_body(with_spheres(single_tet_model(), offsets, 0.005), position, (1, 0, 0, 0))
+        centres.append(offsets + position)
+        radii.append(np.full(3, 0.005))
+    # Added last: the small spheres (lower slots) make the pairs, the large one is the
+    # partner found in its bucket entries.
+    world.add_body(with_spheres(single_tet_model(), big, big_r), (0.0, 0.0, 0.0), (1, 0, 0, 0))
+    centres.append(big)
+    radii.append(big_r)
+    assert world.grid.table_size[None] <= 128  # few particles: a small table
+    owners = np.concatenate([np.full(len(r), b) for b, r in enumerate(radii)])
+    centres, radii = np.concatenate(centres), np.concatenate(radii)
+    margin = world.options.contact_margin
+    stages.collide(world.fields, margin, 1e-3, world.options.sleep_time)
+    count = int(world.contacts.count[None])
+    gap = np.linalg.norm(centres[:, None] - centres[None], axis=-1) - radii[:, None] - radii[None]
+    close = (gap < margin * 0.5 * (radii[:, None] + radii[None])) & (owners[:, None] != owners[None])
+    expected = np.sort(gap[np.triu(close, 1)])
+    assert len(expected) >= 12 and count == len(expected)
+    np.testing.assert_allclose(np.sort(world.contacts.separation.to_numpy()[:count]), expected, atol=2e-6)
+    assert world.contacts.overflow[None] == 0 and world.grid.overflow[None] == 0

@@ -14,8 +14,8 @@ plus the farthest any neighbouring pair of bodies can close in the substep
 sum of their own motion bounds doubled the cells' edge at every first impact). A particle
 larger than the typical one occupies the box of cells its extra reach covers
 (``cell`` .. ``cell_hi``); a query scans its own box grown by one cell, and a pair seen in
-several cells is kept only in the first of them in scan order (the per-axis max of the
-two boxes' lower corners), so every pair is made exactly once.
+several cells is kept only in the cell of the partner's box nearest the query's centre
+(the cell the centre lies in, clamped to the box), so every pair is made exactly once.
 Only *active* particles enter the grid: those of a body with a neighbour (``body_cull``)
 that lie inside that neighbour's grown body-frame box and one of its grown cluster spheres
 (``particle_cells``; up to ``MAX_CLUSTERS`` spheres that each enclose a group of the body's
@@ -48,7 +48,10 @@ class HashGrid:
             order where the scatter is serial (the CPU: ``runtime.SERIAL_SMALL_LOOPS``),
             which the narrowphase uses to skip a body's own particles without reading
             them; sorted_body: its body, beside it
-            (the narrowphase skips same-body candidates without a random read); entries beyond the capacity are
+            (the narrowphase skips same-body candidates without a random read);
+            sorted_offset: which cell of the particle's box the entry is for (its index in
+            the box, x-major), since two cells of one large particle's box can hash to one
+            bucket and the pair must be made in one cell only; entries beyond the capacity are
             counted in ``overflow`` (reported by the World), never silently dropped.
         table_size: scalar, the power of two in use this substep (<= capacity).
         cell_size: scalar [m], edge of a grid cell. typical_radius: scalar [m], largest
@@ -68,6 +71,7 @@ class HashGrid:
         self.entry_capacity = 2 * particle_capacity
         self.sorted_particle = ti.field(ti.i32, shape=self.entry_capacity)
         self.sorted_body = ti.field(ti.i32, shape=self.entry_capacity)
+        self.sorted_offset = ti.field(ti.i32, shape=self.entry_capacity)
         self.table_size = ti.field(ti.i32, shape=())
         self.cell_size = ti.field(ti.f32, shape=())
         self.typical_radius = ti.field(ti.f32, shape=())
@@ -257,12 +261,14 @@ def _scatter_one(particles: ti.template(), grid: ti.template(), p):
     if particles.active[p] == 1:
         lower = particles.cell[p]
         upper = particles.cell_hi[p]
+        span = upper - lower + 1
         for i, j, k in ti.ndrange((lower[0], upper[0] + 1), (lower[1], upper[1] + 1), (lower[2], upper[2] + 1)):
             h = cell_hash(ti.math.ivec3(i, j, k), grid.table_size[None])
             slot = ti.atomic_add(grid.bucket_cursor[h], 1)
             if slot < grid.entry_capacity:
                 grid.sorted_particle[slot] = p
                 grid.sorted_body[slot] = particles.body[p]
+                grid.sorted_offset[slot] = ((i - lower[0]) * span[1] + (j - lower[1])) * span[2] + (k - lower[2])
             else:
                 ti.atomic_add(grid.overflow[None], 1)
 

@@ -170,7 +170,7 @@ def _sphere_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.t
     """Sphere-sphere contacts of active particle ``i`` (awake body ``a``) with the active
     particles of other bodies in its cell box grown by one cell. A pair is made once: from
     the lower slot when both bodies are awake, from the awake side otherwise, and only in
-    the first cell (scan order) both boxes share. An awake body that has not been still
+    the cell of the partner's box nearest this particle's centre. An awake body that has not been still
     for ``sleep_time`` [s] wakes a sleeping body it touches; one just woken itself (its
     timer kept at ``sleep_time`` or more) does not, so a touch does not wake a whole pile."""
     xi = particles.world_position[i]
@@ -187,17 +187,18 @@ def _sphere_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.t
             for dy in range(-1, 2):
                 for dz in range(-1, 2):
                     _scan_cell(bodies, particles, grid, statics, contacts, margin, sleep_time, dt, i, a, xi, ri,
-                               lower_i, lower_i + ti.math.ivec3(dx, dy, dz), reach)
+                               lower_i, lower_i + ti.math.ivec3(dx, dy, dz), reach)  # (home = lower_i)
     else:  # a large particle scans its whole box grown by one cell
+        home = ti.floor(xi / grid.cell_size[None], ti.i32)  # the cell its centre is in
         for cx, cy, cz in ti.ndrange((lower_i[0] - 1, upper_i[0] + 2), (lower_i[1] - 1, upper_i[1] + 2),
                                      (lower_i[2] - 1, upper_i[2] + 2)):
-            _scan_cell(bodies, particles, grid, statics, contacts, margin, sleep_time, dt, i, a, xi, ri, lower_i,
+            _scan_cell(bodies, particles, grid, statics, contacts, margin, sleep_time, dt, i, a, xi, ri, home,
                        ti.math.ivec3(cx, cy, cz), 1e30)
 
 
 @ti.func
 def _scan_cell(bodies: ti.template(), particles: ti.template(), grid: ti.template(), statics: ti.template(),
-               contacts: ti.template(), margin, sleep_time, dt, i, a, xi, ri, lower_i, cell, reach):
+               contacts: ti.template(), margin, sleep_time, dt, i, a, xi, ri, home, cell, reach):
     """Candidates of particle ``i`` in one cell (skipped when the cell lies beyond ``reach``).
 
     A partner j of another body is wanted when j > i (both awake: the lower slot makes the
@@ -232,7 +233,7 @@ def _scan_cell(bodies: ti.template(), particles: ti.template(), grid: ti.templat
                 b = grid.sorted_body[k]
                 if step == -1 or is_idle(bodies, b):
                     _test_pair(bodies, particles, statics, contacts, margin, sleep_time, dt, grid.max_motion[None],
-                               i, a, xi, ri, lower_i, cell, grid.sorted_particle[k], b)
+                               i, a, xi, ri, home, cell, grid.sorted_particle[k], b, grid.sorted_offset[k])
                 k += step
         else:
             for k in range(first, last):
@@ -240,15 +241,16 @@ def _scan_cell(bodies: ti.template(), particles: ti.template(), grid: ti.templat
                 j = grid.sorted_particle[k]
                 if b != a and (j > i or is_idle(bodies, b)):
                     _test_pair(bodies, particles, statics, contacts, margin, sleep_time, dt, grid.max_motion[None],
-                               i, a, xi, ri, lower_i, cell, j, b)
+                               i, a, xi, ri, home, cell, j, b, grid.sorted_offset[k])
 
 
 @ti.func
 def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.template(), contacts: ti.template(),
                margin, sleep_time, dt, max_motion,
-               i, a, xi, ri, lower_i, cell, j, b):
+               i, a, xi, ri, home, cell, j, b, offset):
     """Contact of particle ``i`` (body ``a``) with candidate ``j`` (body ``b``) found in
-    ``cell``, when their gap is within the speculative reach."""
+    ``cell`` by its entry for the cell ``offset`` of its box, when their gap is within the
+    speculative reach."""
     rj = particles.radius[j]
     d = xi - particles.world_position[j]
     dist = d.norm()
@@ -259,11 +261,19 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
         n = vec3(0.0, 0.0, 1.0)
         if dist > 1e-9:
             n = d / dist
-        # j really occupies this cell (not a hash collision), this is the first cell
-        # both boxes share in scan order, and the gap may close within the margin this
-        # substep (the body bounds above are the cheap, coarser test).
-        if ((lower_j <= cell).all() and (cell <= particles.cell_hi[j]).all()
-                and (ti.max(lower_i - 1, lower_j) == cell).all()
+        # The entry is j's for this very cell (not another cell of j's box hashed to the
+        # same bucket: the pair was made again for each), this is the cell of j's box
+        # nearest i's centre (``home``: the cell it lies in, clamped to j's box; unique,
+        # within the cells i scans, and the last of them the reach test would skip: the
+        # first cell both boxes share, the rule before, could be skipped while a nearer
+        # one was scanned, and the pair was lost), and the gap may close within the margin
+        # this substep (the body bounds above are the cheap, coarser test).
+        upper_j = particles.cell_hi[j]
+        span = upper_j - lower_j + 1
+        registered = lower_j + ti.math.ivec3(offset // (span[1] * span[2]), (offset // span[2]) % span[1],
+                                             offset % span[2])
+        if ((registered == cell).all()
+                and (ti.math.clamp(home, lower_j, upper_j) == cell).all()
                 and gap < margin * mean_r
                 + _speculative(bodies, statics, a, xi, b, particles.world_position[j], n, dt)):
             point = particles.world_position[j] + n * (rj + 0.5 * gap)
