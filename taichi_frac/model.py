@@ -314,7 +314,7 @@ def _mass_by_subtraction(parent: BodyModel, tets: np.ndarray) -> MassProperties 
 
     (parallel-axis rule, both about the origin, then to c). Exact in arithmetic; in f64
     it agrees with integrating the piece to ~1e-15 of the inertia, because the piece's
-    terms are the large ones. A ring's big piece: 1.0 -> ~0.15 ms."""
+    terms are the large ones. A ring's big piece: 1.2 -> 0.2 ms."""
     if 2 * len(tets) <= parent.tet_count:
         return None
     rest = np.ones(parent.tet_count, dtype=bool)
