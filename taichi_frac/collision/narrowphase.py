@@ -170,9 +170,10 @@ def _sphere_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.t
     """Sphere-sphere contacts of active particle ``i`` (awake body ``a``) with the active
     particles of other bodies in its cell box grown by one cell. A pair is made once: from
     the lower slot when both bodies are awake, from the awake side otherwise, and only in
-    the cell of the partner's box nearest this particle's centre. An awake body that has not been still
-    for ``sleep_time`` [s] wakes a sleeping body it touches; one just woken itself (its
-    timer kept at ``sleep_time`` or more) does not, so a touch does not wake a whole pile."""
+    the cell of the partner's box nearest this particle's centre. An awake body that has
+    not been still for ``sleep_time`` [s] wakes a sleeping body it touches; one just woken
+    itself (its timer kept at ``sleep_time`` or more) does not, so a touch does not wake a
+    whole pile."""
     xi = particles.world_position[i]
     ri = particles.radius[i]
     lower_i = particles.cell[i]

@@ -309,7 +309,8 @@ def analyze_impact(
     instead of every one. The cracks are the same either way (the stress at a particle
     depends on its neighbours only). A local analysis has ``field_particles`` set and NaN
     stress elsewhere; where its cracks do split the body, the fragments' peak stress needs
-    the whole field: analyse again with ``full_field=True`` (the simulation does).
+    the whole field: analyse again with ``full_field=True`` (the simulation does when it
+    writes a cache, whose per-face stress reads it).
     """
     points = model.particle_position
     volumes = model.tet_volume
