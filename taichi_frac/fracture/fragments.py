@@ -126,16 +126,9 @@ class Fragment:
 
 
 def _labels(t_count: int, bonds: np.ndarray, keep: np.ndarray) -> tuple[int, np.ndarray]:
-    """Connected components of the tets joined by the bonds ``keep`` selects. The graph is
-    handed to scipy as CSR built here from the bonds (sorted by their first tet), not as
-    COO for scipy to convert (0.8 -> ~0.3 ms on a ring's 11k bonds)."""
+    """Connected components of the tets joined by the bonds ``keep`` selects."""
     b = bonds[keep]
-    rows = b[:, 0]
-    indptr = np.zeros(t_count + 1, dtype=np.int32)
-    np.cumsum(np.bincount(rows, minlength=t_count), out=indptr[1:])
-    order = np.argsort(rows, kind="stable")  # (already sorted for BodyModel.bonds: cheap)
-    graph = sp.csr_matrix((np.ones(len(b), dtype=np.int8), b[order, 1].astype(np.int32), indptr),
-                          shape=(t_count, t_count))
+    graph = sp.coo_matrix((np.ones(len(b)), (b[:, 0], b[:, 1])), shape=(t_count, t_count))
     return connected_components(graph, directed=False)
 
 
