@@ -1,9 +1,11 @@
 """Real simulations' caches imported through the add-on in a real Blender: every object's
 world matrix and visibility at chosen frames equal what pxr computes from the same file (an
-independent reader), and every fragment the run made is an object. Two scenes: the single
+independent reader), and every fragment the run made is an object. Three scenes: the single
 ring breaking, then its pieces coming to rest and sleeping (poses held between samples);
 the glass walls' first 12 frames (three roots and an unbreakable ball, pieces of pieces
-down to the third generation, substeps simulated again, ~150 pieces)."""
+down to the third generation, substeps simulated again, ~150 pieces); the 13 rings' first
+26 frames (13 roots landing and breaking into ~100 pieces). Together: every scene of the
+paper."""
 
 from __future__ import annotations
 
@@ -30,6 +32,7 @@ CASES = {
     # scene file, overrides, frames to compare (the run lasts until the last)
     "single_ring": ("single_ring.toml", ["ring.fracture.crack_count=3"], (0, 20, 30, 45, 60)),
     "glass_walls": ("glass_walls.toml", [], (0, 3, 6, 9, 12)),
+    "thirteen_rings": ("thirteen_rings.toml", [], (0, 12, 22, 26)),
 }
 
 
