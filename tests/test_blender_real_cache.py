@@ -37,12 +37,12 @@ CASES = {
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_real_cache_imports_as_pxr_reads_it(case, tmp_path):
+def test_real_cache_imports_as_pxr_reads_it(case, tmp_path, scene_world):
     blender_python()  # skip/fail as the import test does when .venv-blender is missing
     name, overrides, frames = CASES[case]
     cache = tmp_path / f"{case}.usdc"
     scene = load_scene(ROOT / "scenes" / name, overrides)
-    sim = Simulation(scene, output=cache, frames=max(frames))
+    sim = Simulation(scene, output=cache, frames=max(frames), world=scene_world)
     summary = sim.run()
     assert summary.fractures >= 1 and summary.fragments >= 4  # pieces born mid-run
     if case == "glass_walls":  # pieces of pieces, and the unbreakable ball among them

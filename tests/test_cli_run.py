@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from pxr import Usd
 
 from taichi_frac.cli import main
@@ -18,7 +19,19 @@ from taichi_frac.simulation import Simulation
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
 
 
-def test_run_prints_the_summary_and_writes_stats_json_and_a_cache(tmp_path, capsys):
+@pytest.fixture
+def shared_world(scene_world, monkeypatch):
+    """The command builds its Simulation itself; here on the session's World (conftest.py),
+    whose kernels are compiled already, instead of a new one."""
+    import functools
+
+    import taichi_frac.simulation as simulation
+
+    monkeypatch.setattr(simulation, "Simulation", functools.partial(Simulation, world=scene_world))
+    return scene_world
+
+
+def test_run_prints_the_summary_and_writes_stats_json_and_a_cache(tmp_path, capsys, shared_world):
     out, stats = tmp_path / "ring.usdc", tmp_path / "stats.json"
     code = main(["run", str(SCENES / "single_ring.toml"), "--frames", "12", "-o", str(out),
                  "--stats-json", str(stats), "-q"])
@@ -45,11 +58,11 @@ def test_bad_override_exits_2_and_names_the_key(capsys):
     assert "crack_count" in capsys.readouterr().err
 
 
-def test_ctrl_c_keeps_a_valid_cache_of_the_frames_done(tmp_path):
+def test_ctrl_c_keeps_a_valid_cache_of_the_frames_done(tmp_path, scene_world):
     """Ctrl-C raises KeyboardInterrupt wherever the main thread is; here it comes from the
     progress callback, right after frame 5 was written."""
     out = tmp_path / "cut.usdc"
-    sim = Simulation(load_scene(SCENES / "single_ring.toml"), output=out, frames=30)
+    sim = Simulation(load_scene(SCENES / "single_ring.toml"), output=out, frames=30, world=scene_world)
 
     def stop(frame, total, t, fragments, fps):
         if frame == 5:
@@ -70,8 +83,6 @@ def test_another_arch_than_the_running_one_is_refused(capsys):
     SPH neighbour lists are a kernel) before the World chose the arch, so a run asked for
     cuda silently ran on the CPU; now the arch is chosen first, and asking for another
     than the one already running is an error naming both (exit 2 from the command)."""
-    import pytest
-
     from taichi_frac import runtime
 
     assert runtime.init() == "cpu"  # the test session's

@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from taichi_frac.dynamics import World, WorldCapacity
 from taichi_frac.geometry.mass import tet_mass_properties
 from taichi_frac.io.cache import check_cache
 from taichi_frac.scenes import load_scene
@@ -26,10 +25,9 @@ SCENES = Path(__file__).resolve().parents[1] / "scenes"
 
 
 @pytest.fixture(scope="module")
-def world():
-    """One World for every scene here: its kernels compile once."""
-    return World(WorldCapacity(max_bodies=4096, max_boundary_particles=200_000, max_contacts=400_000,
-                               max_static_boxes=8))
+def world(scene_world):
+    """One World for every scene here (the session's, conftest.py): its kernels compile once."""
+    return scene_world
 
 
 def run_checked(scene, world, frames, output=False):
