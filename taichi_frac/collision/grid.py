@@ -197,11 +197,14 @@ def _particle_cell(bodies: ti.template(), particles: ti.template(), grid: ti.tem
                 act = 1
             r = particles.radius[p]
             for k in range(ti.max(count, 0)):
-                if act == 0:
-                    o = bodies.neighbors[b, k]
-                    local = bodies.rotation[o].transpose() @ (x - bodies.position[o])
+                o = bodies.neighbors[b, k]
+                grow = (r + bodies.max_particle_radius[o]) * (1.0 + 0.5 * margin) + bodies.neighbor_motion[b, k]
+                gap = x - bodies.position[o]
+                bound = bodies.bounding_radius[o] + grow
+                # (o's bounding sphere first: no rotation for the particles far from it)
+                if act == 0 and gap.norm_sqr() < bound * bound:
+                    local = bodies.rotation[o].transpose() @ gap
                     q = ti.math.clamp(local, bodies.local_lower[o], bodies.local_upper[o])
-                    grow = (r + bodies.max_particle_radius[o]) * (1.0 + 0.5 * margin) + bodies.neighbor_motion[b, k]
                     if (local - q).norm_sqr() < grow * grow:
                         # Inside the box: now o's cluster spheres (each encloses its member
                         # spheres), which leave out the holes and hollows a box holds.
