@@ -254,10 +254,13 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
     speculative reach."""
     rj = particles.radius[j]
     d = xi - particles.world_position[j]
-    dist = d.norm()
     mean_r = 0.5 * (ri + rj)
-    gap = dist - ri - rj
-    if gap < margin * mean_r + max_motion:
+    # gap = |d| - ri - rj < margin mean_r + max_motion, squared: no square root for the
+    # candidates it rejects (~99 % of them in the 13-ring pile)
+    limit = ri + rj + margin * mean_r + max_motion
+    if d.norm_sqr() < limit * limit:
+        dist = d.norm()
+        gap = dist - ri - rj
         lower_j = particles.cell[j]
         n = vec3(0.0, 0.0, 1.0)
         if dist > 1e-9:
