@@ -21,7 +21,7 @@ import scipy.sparse as sp
 
 from .geometry import rows
 from .geometry.mass import MassProperties, tet_mass_properties
-from .geometry.rays import first_hits
+from .geometry.rays import face_bounds, first_hits
 from .geometry.topology import (
     bonds_from_neighbors,
     boundary_faces,
@@ -162,7 +162,7 @@ def group_surface_particles(
     s_count = len(surface)
     local = np.full(int(surface.max()) + 1 if s_count else 1, -1, dtype=np.int64)
     local[surface] = np.arange(s_count)
-    rows = _surface_adjacency(local[face_tet], faces, s_count)
+    adjacent = _surface_adjacency(local[face_tet], faces, s_count)
     # The greedy walk below is sequential; on a fragment's few hundred particles plain
     # Python lists beat numpy's per-call overhead (~4x on a ring's 2,562).
     pos = positions[surface].tolist()
@@ -178,7 +178,7 @@ def group_surface_particles(
         while head < len(queue):
             seed = queue[head]
             head += 1
-            nbrs = rows[seed]
+            nbrs = adjacent[seed]
             for m in nbrs:
                 if not visited[m]:
                     visited[m] = True
@@ -199,7 +199,7 @@ def group_surface_particles(
                     members.extend(take)
                 if len(members) >= group_size:
                     break
-                frontier = [m for member in members for m in rows[member]]
+                frontier = [m for member in members for m in adjacent[member]]
             if len(members) == 1 and not keep_leftovers:
                 dropped.append(seed)
             else:
@@ -440,25 +440,15 @@ CENTRE_REACH = 3.0
 
 def _near_faces(vertices, faces, points, reach) -> np.ndarray:
     """(P,) bool: does any of ``faces`` (F,3) come within ``reach`` (P,) [m] of ``points``
-    (P,3) [m] (face centre distance less the face's own spread; a conservative test)."""
-    if len(faces) == 0 or len(points) == 0:
-        return np.zeros(len(points), dtype=bool)
-    _, tree, spread = _face_tree(vertices, faces)
-    distance, _ = tree.query(points)
-    return distance < reach + spread
-
-
-def _face_tree(vertices, faces):
-    """Corners (F,3,3) [m] of ``faces``, a KD-tree of their centres, and the farthest any
-    corner lies from its face's centre [m] (so a face comes within r of a point only if
-    its centre is within r + spread)."""
+    (P,3) [m] (the nearest face centre's distance less the largest face's own radius; a
+    conservative test)."""
     from scipy.spatial import cKDTree
 
-    corners = vertices[faces]
-    centre = rows.corner_mean(corners)
-    offset = corners - centre[:, None, :]
-    spread = float(np.sqrt(np.einsum("fki,fki->fk", offset, offset).max()))
-    return corners, cKDTree(centre), spread
+    if len(faces) == 0 or len(points) == 0:
+        return np.zeros(len(points), dtype=bool)
+    centre, radius = face_bounds(vertices[faces])
+    distance, _ = cKDTree(centre).query(points)
+    return distance < reach + float(radius.max())
 
 
 def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius):

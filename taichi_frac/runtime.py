@@ -45,9 +45,9 @@ def init(arch: str | None = None, *, debug: bool = False) -> str:
     if _initialised_arch is not None:
         if arch is not None and arch != _initialised_arch:
             raise ArchError(f"Taichi is already running on arch {_initialised_arch!r} in this process, so "
-                               f"arch {arch!r} cannot be used: ask for {_initialised_arch!r} (a scene's "
-                               f"[simulation] arch, Simulation(..., arch=...)), or choose the arch before "
-                               f"anything runs a kernel (e.g. taichi-frac run --arch {arch} in a new process)")
+                            f"arch {arch!r} cannot be used: ask for {_initialised_arch!r} (a scene's "
+                            f"[simulation] arch, Simulation(..., arch=...)), or choose the arch before "
+                            f"anything runs a kernel (e.g. taichi-frac run --arch {arch} in a new process)")
         return _initialised_arch
     arch = "cpu" if arch is None else arch
     if arch not in _ARCHES:

@@ -232,17 +232,9 @@ def restrict_neighbor_lists(offsets, indices, subset, count):
     points) from lists over all of them: row s keeps the neighbours of point subset[s] that
     are in the subset, renumbered to positions in it (still ascending)."""
     subset = np.asarray(subset, dtype=np.int64)
-    local = np.full(count, -1, dtype=np.int64)
-    local[subset] = np.arange(len(subset))
-    begin, end = offsets[subset], offsets[subset + 1]
-    lengths = end - begin
-    row = np.repeat(np.arange(len(subset)), lengths)
-    flat = np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths) + np.repeat(begin, lengths)
-    mapped = local[indices[flat]]
-    keep = mapped >= 0
-    out_offsets = np.zeros(len(subset) + 1, dtype=np.int64)
-    np.cumsum(np.bincount(row[keep], minlength=len(subset)), out=out_offsets[1:])
-    return out_offsets, mapped[keep].astype(np.int32)
+    local = np.full(count, -1, dtype=np.int32)
+    local[subset] = np.arange(len(subset), dtype=np.int32)
+    return _gather_rows(offsets, indices, subset, local)
 
 
 def neighbor_rows(model: BodyModel, h: float, query: np.ndarray):
@@ -253,28 +245,28 @@ def neighbor_rows(model: BodyModel, h: float, query: np.ndarray):
     of a new piece (a few hundred rows) does not restrict its root's lists over the whole
     piece first (2.5 ms on a ring's big piece)."""
     query = np.asarray(query, dtype=np.int64)
-    mapping = None
     if h in _NEIGHBORS.get(model, {}) or model.root is None:
-        offsets, indices = model_neighbor_lists(model, h)
-        source = query
-    else:
-        offsets, indices = model_neighbor_lists(model.root, h)
-        source = model.source_tet[query].astype(np.int64)
-        mapping = np.full(model.root.tet_count, -1, dtype=np.int32)
-        mapping[model.source_tet] = np.arange(model.tet_count, dtype=np.int32)
-    begin = offsets[source]
-    lengths = offsets[source + 1] - begin
+        return _gather_rows(*model_neighbor_lists(model, h), query)
+    local = np.full(model.root.tet_count, -1, dtype=np.int32)
+    local[model.source_tet] = np.arange(model.tet_count, dtype=np.int32)
+    return _gather_rows(*model_neighbor_lists(model.root, h), model.source_tet[query].astype(np.int64), local)
+
+
+def _gather_rows(offsets, indices, rows, renumber=None):
+    """CSR lists (offsets int64, indices int32) of the rows ``rows`` (R,) of the CSR lists
+    ``offsets``, ``indices``, in that order; with ``renumber`` (int32, -1 = drop), each
+    neighbour j becomes renumber[j] and the dropped ones leave their row."""
+    begin = offsets[rows]
+    lengths = offsets[rows + 1] - begin
     starts = np.cumsum(lengths) - lengths
-    flat = np.arange(int(lengths.sum())) + np.repeat(begin - starts, lengths)
-    found = indices[flat]
-    out_offsets = np.zeros(len(query) + 1, dtype=np.int64)
-    if mapping is None:
+    found = indices[np.arange(int(lengths.sum())) + np.repeat(begin - starts, lengths)]
+    out_offsets = np.zeros(len(rows) + 1, dtype=np.int64)
+    if renumber is None:
         np.cumsum(lengths, out=out_offsets[1:])
-        return out_offsets, found
-    found = mapping[found]
+        return out_offsets, np.asarray(found, dtype=np.int32)
+    found = renumber[found]
     keep = found >= 0
-    np.cumsum(np.bincount(np.repeat(np.arange(len(query)), lengths)[keep], minlength=len(query)),
-              out=out_offsets[1:])
+    np.cumsum(np.bincount(np.repeat(np.arange(len(rows)), lengths)[keep], minlength=len(rows)), out=out_offsets[1:])
     return out_offsets, found[keep]
 
 

@@ -62,6 +62,15 @@ def _first_hits(
         hit_out[r] = best
 
 
+def face_bounds(corners: np.ndarray):
+    """Each triangle's centre (F,3) [m] and the farthest its corners lie from it (F,) [m],
+    for ``corners`` (F,3,3): a triangle comes within r of a point only if its centre does
+    within r + that radius."""
+    centre = rows.corner_mean(corners)
+    offset = corners - centre[:, None, :]
+    return centre, np.sqrt(np.einsum("fki,fki->fk", offset, offset).max(axis=1))
+
+
 def first_hits(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, direction: np.ndarray,
                reach: np.ndarray) -> np.ndarray:
     """(P,) [m] distance along each ray (``origin`` (P,3) [m], unit ``direction`` (P,3)) to
@@ -75,9 +84,7 @@ def first_hits(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, dire
     direction = np.ascontiguousarray(direction, dtype=np.float64).reshape(-1, 3)
     reach = np.ascontiguousarray(reach, dtype=np.float64).reshape(-1)
     corners = np.asarray(vertices, dtype=np.float64)[faces]  # (F,3,3)
-    centre = rows.corner_mean(corners)
-    offset = corners - centre[:, None, :]
-    radius = np.sqrt(np.einsum("fki,fki->fk", offset, offset).max(axis=1))
+    centre, radius = face_bounds(corners)
     if len(origin) * len(corners) <= SMALL_PAIRS:
         return _first_hits_numpy(corners, centre, radius, origin, direction, reach)
     runtime.init()
