@@ -197,25 +197,27 @@ def _particle_cell(bodies: ti.template(), particles: ti.template(), grid: ti.tem
                 act = 1
             r = particles.radius[p]
             for k in range(ti.max(count, 0)):
-                o = bodies.neighbors[b, k]
-                grow = (r + bodies.max_particle_radius[o]) * (1.0 + 0.5 * margin) + bodies.neighbor_motion[b, k]
-                gap = x - bodies.position[o]
-                bound = bodies.bounding_radius[o] + grow
-                # (o's bounding sphere first: no rotation for the particles far from it)
-                if act == 0 and gap.norm_sqr() < bound * bound:
-                    local = bodies.rotation[o].transpose() @ gap
-                    q = ti.math.clamp(local, bodies.local_lower[o], bodies.local_upper[o])
-                    if (local - q).norm_sqr() < grow * grow:
-                        # Inside the box: now o's cluster spheres (each encloses its member
-                        # spheres), which leave out the holes and hollows a box holds.
-                        reach = r * (1.0 + 0.5 * margin) + 0.5 * margin * bodies.max_particle_radius[o] \
-                            + bodies.neighbor_motion[b, k]
-                        for m in range(bodies.cluster_count[o]):
-                            if act == 0:
-                                sphere = bodies.cluster[o, m]
-                                limit = sphere[3] + reach
-                                if (local - ti.math.vec3(sphere[0], sphere[1], sphere[2])).norm_sqr() < limit * limit:
-                                    act = 1
+                if act == 0:
+                    o = bodies.neighbors[b, k]
+                    grow = (r + bodies.max_particle_radius[o]) * (1.0 + 0.5 * margin) + bodies.neighbor_motion[b, k]
+                    gap = x - bodies.position[o]
+                    bound = bodies.bounding_radius[o] + grow
+                    # (o's bounding sphere first: no rotation for the particles far from it)
+                    if gap.norm_sqr() < bound * bound:
+                        local = bodies.rotation[o].transpose() @ gap
+                        q = ti.math.clamp(local, bodies.local_lower[o], bodies.local_upper[o])
+                        if (local - q).norm_sqr() < grow * grow:
+                            # Inside the box: now o's cluster spheres (each encloses its member
+                            # spheres), which leave out the holes and hollows a box holds.
+                            reach = r * (1.0 + 0.5 * margin) + 0.5 * margin * bodies.max_particle_radius[o] \
+                                + bodies.neighbor_motion[b, k]
+                            for m in range(bodies.cluster_count[o]):
+                                if act == 0:
+                                    sphere = bodies.cluster[o, m]
+                                    limit = sphere[3] + reach
+                                    centre = ti.math.vec3(sphere[0], sphere[1], sphere[2])
+                                    if (local - centre).norm_sqr() < limit * limit:
+                                        act = 1
             if act == 1:
                 lower, upper = cell_box(grid, x, r, margin)
                 particles.cell[p] = lower
