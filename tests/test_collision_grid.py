@@ -1,7 +1,9 @@
-"""Hashed-grid broadphase + sphere narrowphase against a brute-force numpy pair search."""
+"""Body-pair broadphase, body-frame sphere grids and the sphere narrowphase, against
+brute-force numpy pair searches."""
 
 import numpy as np
 
+from taichi_frac.collision.grid import CELLS_PER_SPHERE, body_grid
 from taichi_frac.dynamics import stages
 from test_dynamics_support import fresh_world, single_tet_model, with_spheres
 
@@ -125,7 +127,6 @@ def test_a_large_sphere_whose_cells_share_buckets_makes_each_pair_once():
     world.add_body(with_spheres(single_tet_model(), big, big_r), (0.0, 0.0, 0.0), (1, 0, 0, 0))
     centres.append(big)
     radii.append(big_r)
-    assert world.grid.table_size[None] <= 128  # few particles: a small table
     owners = np.concatenate([np.full(len(r), b) for b, r in enumerate(radii)])
     centres, radii = np.concatenate(centres), np.concatenate(radii)
     margin = world.options.contact_margin
@@ -136,4 +137,60 @@ def test_a_large_sphere_whose_cells_share_buckets_makes_each_pair_once():
     expected = np.sort(gap[np.triu(close, 1)])
     assert len(expected) >= 12 and count == len(expected)
     np.testing.assert_allclose(np.sort(world.contacts.separation.to_numpy()[:count]), expected, atol=2e-6)
-    assert world.contacts.overflow[None] == 0 and world.grid.overflow[None] == 0
+    assert world.contacts.overflow[None] == 0
+
+
+def test_body_grid_puts_every_sphere_in_its_cell_and_fits_its_share():
+    """``body_grid``: the entries of each cell are exactly the spheres whose centre falls in
+    it (checked against the cell computed here for every sphere), each sphere once, and the
+    cell starts fit the body's share (cells + 1 <= CELLS_PER_SPHERE x spheres) for a compact
+    body, a long thin one (its cells grow longer instead) and a single sphere."""
+    rng = np.random.default_rng(11)
+    cases = [rng.uniform(-0.05, 0.05, (300, 3)), np.c_[np.linspace(0.0, 3.0, 40), np.zeros((40, 2))],
+             np.zeros((1, 3))]
+    for offsets in cases:
+        radii = rng.uniform(0.004, 0.006, len(offsets))
+        origin, edge, dims, first, order = body_grid(offsets, radii, 0.25)
+        assert len(first) == np.prod(dims) + 1 <= CELLS_PER_SPHERE * len(offsets)
+        assert first[0] == 0 and first[-1] == len(offsets) and np.all(np.diff(first) >= 0)
+        np.testing.assert_array_equal(np.sort(order), np.arange(len(offsets)))
+        index = np.minimum(np.floor((offsets - origin) / edge).astype(int), dims - 1)
+        assert np.all(index >= 0)
+        cell = (index[:, 0] * dims[1] + index[:, 1]) * dims[2] + index[:, 2]
+        for c in range(int(np.prod(dims))):
+            np.testing.assert_array_equal(np.sort(order[first[c]:first[c + 1]]), np.nonzero(cell == c)[0])
+    # the compact body: cells of about 3 median radii (1 + margin / 2), not grown
+    origin, edge, dims, first, order = body_grid(cases[0], np.full(300, 0.005), 0.25)
+    assert edge == 3.0 * 0.005 * 1.125
+
+
+def test_a_body_with_more_neighbours_than_its_list_holds_still_makes_every_contact():
+    """A plate with more neighbouring bodies than ``Bodies.max_neighbors`` (its list
+    overflows, count -1): its spheres then try every body. Added first (lowest slot), it is
+    the side that makes every plate-piece pair, so a lost pair would show: the contacts
+    equal a brute-force search."""
+    world = fresh_world(gravity=(0.0, 0.0, 0.0))
+    rng = np.random.default_rng(2)
+    side = np.arange(-0.3, 0.3001, 0.012)
+    plate = np.stack(np.meshgrid(side, side, [0.0], indexing="ij"), -1).reshape(-1, 3)
+    plate_r = np.full(len(plate), 0.006)
+    centres, radii = [plate], [plate_r]
+    world.add_body(with_spheres(single_tet_model(), plate, plate_r), (0.0, 0.0, 0.0), (1, 0, 0, 0))
+    pieces = world.bodies.max_neighbors + 20
+    for k in range(pieces):
+        offsets = rng.uniform(-0.004, 0.004, (2, 3))
+        position = np.r_[rng.uniform(-0.28, 0.28, 2), rng.uniform(0.008, 0.012)]
+        world.add_body(with_spheres(single_tet_model(), offsets, 0.003), position, (1, 0, 0, 0))
+        centres.append(offsets + position)
+        radii.append(np.full(2, 0.003))
+    owners = np.concatenate([np.full(len(r), b) for b, r in enumerate(radii)])
+    centres, radii = np.concatenate(centres), np.concatenate(radii)
+    margin = world.options.contact_margin
+    stages.collide(world.fields, margin, 1e-3, world.options.sleep_time)
+    assert world.bodies.neighbor_count[0] == -1
+    count = int(world.contacts.count[None])
+    gap = np.linalg.norm(centres[:, None] - centres[None], axis=-1) - radii[:, None] - radii[None]
+    close = (gap < margin * 0.5 * (radii[:, None] + radii[None])) & (owners[:, None] != owners[None])
+    expected = np.sort(gap[np.triu(close, 1)])
+    assert count == len(expected) and close[owners == 0].sum() > 50
+    np.testing.assert_allclose(np.sort(world.contacts.separation.to_numpy()[:count]), expected, atol=2e-6)

@@ -1,9 +1,11 @@
-"""Collision detection on particles: hashed-grid broadphase and sphere narrowphase."""
+"""Collision detection on particles: a body-pair broadphase, static body-frame grids over
+each body's collision spheres, and the sphere narrowphase."""
 
-from .grid import HashGrid, body_cull, bucket_scan, bucket_scatter, particle_cells
+from .broadphase import body_cull
+from .grid import body_grid
 from .narrowphase import GROUND, STATIC_BOX, Contacts, clear_contacts, particle_contacts
 
 __all__ = [
-    "HashGrid", "body_cull", "bucket_scan", "bucket_scatter", "particle_cells",
+    "body_cull", "body_grid",
     "GROUND", "STATIC_BOX", "Contacts", "clear_contacts", "particle_contacts",
 ]

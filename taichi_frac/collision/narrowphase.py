@@ -1,5 +1,6 @@
-"""Narrowphase: sphere-sphere (particles of different bodies), sphere-plane (ground) and
-sphere-box (static walls). One pass over particles per kernel; each contact is appended
+"""Narrowphase: sphere-sphere (particles of different bodies, each sphere looking in the
+body-frame grid of each neighbouring body the broadphase listed, ``grid.py``), sphere-plane
+(ground) and sphere-box (static walls). One pass over particles; each contact is appended
 with an atomic counter into fixed-capacity ``Contacts``; contacts beyond the capacity are
 counted in ``overflow`` (reported by the World), never silently lost.
 
@@ -18,9 +19,8 @@ per substep at 6.7 ms substeps, where the body bounds made 10-15 thousand contac
 
 import taichi as ti
 
-from .. import runtime
-from ..dynamics.bounds import is_idle
-from .grid import cell_hash
+from ..dynamics.bounds import is_idle, pair_motion
+from .grid import CELLS_PER_SPHERE
 
 vec3 = ti.math.vec3
 mat3 = ti.math.mat3
@@ -165,135 +165,92 @@ def clear_contacts(contacts: ti.template()):
 
 
 @ti.func
-def _sphere_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.template(),
-                     statics: ti.template(), contacts: ti.template(), margin, sleep_time, dt, i, a):
-    """Sphere-sphere contacts of active particle ``i`` (awake body ``a``) with the active
-    particles of other bodies in its cell box grown by one cell. A pair is made once: from
-    the lower slot when both bodies are awake, from the awake side otherwise, and only in
-    the cell of the partner's box nearest this particle's centre. An awake body that has
-    not been still for ``sleep_time`` [s] wakes a sleeping body it touches; one just woken
-    itself (its timer kept at ``sleep_time`` or more) does not, so a touch does not wake a
-    whole pile."""
-    xi = particles.world_position[i]
-    ri = particles.radius[i]
-    lower_i = particles.cell[i]
-    upper_i = particles.cell_hi[i]
-    if (lower_i == upper_i).all():  # the common case: 27 cells
-        # No partner centre lies further than this: its radius is at most the typical one
-        # beyond its own cell box, and the pair closes at most max_motion.
-        reach = (ri + grid.typical_radius[None]) * (1.0 + 0.5 * margin) + grid.max_motion[None]
-        # Plain nested loops, not unrolled: 27 inlined copies of the cell scan made this
-        # kernel take ~90 s to compile on the CPU backend.
-        for dx in range(-1, 2):
-            for dy in range(-1, 2):
-                for dz in range(-1, 2):
-                    _scan_cell(bodies, particles, grid, statics, contacts, margin, sleep_time, dt, i, a, xi, ri,
-                               lower_i, lower_i + ti.math.ivec3(dx, dy, dz), reach)  # (home = lower_i)
-    else:  # a large particle scans its whole box grown by one cell
-        home = ti.floor(xi / grid.cell_size[None], ti.i32)  # the cell its centre is in
-        for cx, cy, cz in ti.ndrange((lower_i[0] - 1, upper_i[0] + 2), (lower_i[1] - 1, upper_i[1] + 2),
-                                     (lower_i[2] - 1, upper_i[2] + 2)):
-            _scan_cell(bodies, particles, grid, statics, contacts, margin, sleep_time, dt, i, a, xi, ri, home,
-                       ti.math.ivec3(cx, cy, cz), 1e30)
+def _pair_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
+                   contacts: ti.template(), margin, sleep_time, dt, i, a, xi, ri, o, closing):
+    """Sphere-sphere contacts of particle ``i`` (awake body ``a``, world centre ``xi`` [m],
+    radius ``ri`` [m]) with the spheres of body ``o``, whose gap may close by ``closing``
+    [m] this substep (``bounds.pair_motion``, or the broadphase's value for the pair).
 
-
-@ti.func
-def _scan_cell(bodies: ti.template(), particles: ti.template(), grid: ti.template(), statics: ti.template(),
-               contacts: ti.template(), margin, sleep_time, dt, i, a, xi, ri, home, cell, reach):
-    """Candidates of particle ``i`` in one cell (skipped when the cell lies beyond ``reach``).
-
-    A partner j of another body is wanted when j > i (both awake: the lower slot makes the
-    pair) or its body is idle. Body ``a`` holds the slots [start, end) and i lies in them,
-    so the first kind are exactly the entries with j >= end and the second the idle ones
-    with j < start or j >= end. Where the bucket is in ascending slot order (serial
-    scatter, the CPU) the scan reads only those: backwards from the bucket's end down to
-    the first j < end, then, when ``a`` has an idle neighbour, forwards from its start up
-    to the first j >= start. Most of a bucket is ``a``'s own particles (63 % of the
-    candidates of the 13-ring pile), which so are never read. Elsewhere every entry is
-    read and filtered."""
-    size = grid.cell_size[None]
-    nearest = ti.math.clamp(xi, ti.cast(cell, ti.f32) * size, ti.cast(cell + 1, ti.f32) * size)
-    if (nearest - xi).norm_sqr() < reach * reach:
-        h = cell_hash(cell, grid.table_size[None])
-        first = grid.bucket_start[h]
-        last = ti.min(grid.bucket_start[h + 1], grid.entry_capacity)
-        if ti.static(runtime.SERIAL_SMALL_LOOPS):
-            start = bodies.particle_start[a]
-            end = start + bodies.particle_count[a]
-            lower_too = bodies.idle_neighbor[a]
-            k = last - 1
-            step = -1
-            while True:
-                if step == -1 and (k < first or grid.sorted_particle[k] < end):
-                    if lower_too == 0:
-                        break
-                    k = first
-                    step = 1
-                if step == 1 and (k >= last or grid.sorted_particle[k] >= start):
-                    break
-                b = grid.sorted_body[k]
-                if step == -1 or is_idle(bodies, b):
-                    _test_pair(bodies, particles, statics, contacts, margin, sleep_time, dt, grid.max_motion[None],
-                               i, a, xi, ri, home, cell, grid.sorted_particle[k], b, grid.sorted_offset[k])
-                k += step
-        else:
-            for k in range(first, last):
-                b = grid.sorted_body[k]
-                j = grid.sorted_particle[k]
-                if b != a and (j > i or is_idle(bodies, b)):
-                    _test_pair(bodies, particles, statics, contacts, margin, sleep_time, dt, grid.max_motion[None],
-                               i, a, xi, ri, home, cell, j, b, grid.sorted_offset[k])
+    No contact can be made unless ``xi`` lies within ``grow`` = (ri + o's largest radius)
+    (1 + margin / 2) + closing of one of o's spheres, so three cheap tests come first:
+    o's bounding sphere, then (in o's frame) its box, then its cluster spheres (each
+    enclosing a group of its spheres: they leave out a ring's hole, which the box holds).
+    Then the cells of o's grid within ``grow`` of the point, and in them each sphere j
+    whose gap is below the margin plus the pair's closing; the speculative test of that
+    pair of points (``_speculative``) decides. An awake body that has not been still for
+    ``sleep_time`` [s] wakes a sleeping body it touches; one just woken itself (its timer
+    kept at ``sleep_time`` or more) does not, so a touch does not wake a whole pile."""
+    grow = (ri + bodies.max_particle_radius[o]) * (1.0 + 0.5 * margin) + closing
+    gap = xi - bodies.position[o]
+    bound = bodies.bounding_radius[o] + grow
+    if gap.norm_sqr() < bound * bound:
+        rot = bodies.rotation[o]
+        local = rot.transpose() @ gap
+        q = ti.math.clamp(local, bodies.local_lower[o], bodies.local_upper[o])
+        if (local - q).norm_sqr() < grow * grow:
+            near = 0
+            reach = ri * (1.0 + 0.5 * margin) + 0.5 * margin * bodies.max_particle_radius[o] + closing
+            for m in range(bodies.cluster_count[o]):
+                if near == 0:
+                    sphere = bodies.cluster[o, m]
+                    limit = sphere[3] + reach
+                    if (local - vec3(sphere[0], sphere[1], sphere[2])).norm_sqr() < limit * limit:
+                        near = 1
+            if near == 1:
+                edge = bodies.grid_edge[o]
+                dims = bodies.grid_dims[o]
+                rel = local - bodies.grid_origin[o]
+                # (a hair wider than grow: a centre on a cell face is never lost to the f32
+                # rounding of the cell bounds)
+                wide = grow * 1.0001
+                lo = ti.max(ti.floor((rel - wide) / edge, ti.i32), 0)
+                hi = ti.min(ti.floor((rel + wide) / edge, ti.i32), dims - 1)
+                base = ti.static(CELLS_PER_SPHERE) * bodies.particle_start[o]
+                for cx in range(lo[0], hi[0] + 1):
+                    for cy in range(lo[1], hi[1] + 1):
+                        for cz in range(lo[2], hi[2] + 1):
+                            corner = ti.math.vec3(cx, cy, cz) * edge
+                            nearest = ti.math.clamp(rel, corner, corner + edge)
+                            if (nearest - rel).norm_sqr() < wide * wide:
+                                cell = (cx * dims[1] + cy) * dims[2] + cz
+                                for k in range(particles.cell_first[base + cell], particles.cell_first[base + cell + 1]):
+                                    _test_pair(bodies, particles, statics, contacts, margin, sleep_time, dt, i, a, xi,
+                                               ri, o, rot, local, closing, k)
 
 
 @ti.func
 def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.template(), contacts: ti.template(),
-               margin, sleep_time, dt, max_motion,
-               i, a, xi, ri, home, cell, j, b, offset):
-    """Contact of particle ``i`` (body ``a``) with candidate ``j`` (body ``b``) found in
-    ``cell`` by its entry for the cell ``offset`` of its box, when their gap is within the
-    speculative reach."""
-    rj = particles.radius[j]
-    d = xi - particles.world_position[j]
+               margin, sleep_time, dt, i, a, xi, ri, o, rot, local, closing, k):
+    """Contact of particle ``i`` (body ``a``) with grid entry ``k`` of body ``o`` (its
+    centre ``local`` [m] in o's frame, rotation ``rot`` o -> world), when their gap is
+    within the margin plus the pair's closing (squared: no square root for the ~90 % of
+    candidates it rejects) and then the speculative reach of the two points."""
+    sphere = particles.grid_sphere[k]
+    rj = sphere[3]
+    d = local - vec3(sphere[0], sphere[1], sphere[2])
     mean_r = 0.5 * (ri + rj)
-    # gap = |d| - ri - rj < margin mean_r + max_motion, squared: no square root for the
-    # candidates it rejects (~99 % of them in the 13-ring pile)
-    limit = ri + rj + margin * mean_r + max_motion
+    limit = ri + rj + margin * mean_r + closing
     if d.norm_sqr() < limit * limit:
         dist = d.norm()
         gap = dist - ri - rj
-        lower_j = particles.cell[j]
         n = vec3(0.0, 0.0, 1.0)
         if dist > 1e-9:
-            n = d / dist
-        # The entry is j's for this very cell (not another cell of j's box hashed to the
-        # same bucket: the pair was made again for each), this is the cell of j's box
-        # nearest i's centre (``home``: the cell it lies in, clamped to j's box; unique,
-        # within the cells i scans, and the last of them the reach test would skip: the
-        # first cell both boxes share, the rule before, could be skipped while a nearer
-        # one was scanned, and the pair was lost), and the gap may close within the margin
-        # this substep (the body bounds above are the cheap, coarser test).
-        upper_j = particles.cell_hi[j]
-        span = upper_j - lower_j + 1
-        registered = lower_j + ti.math.ivec3(offset // (span[1] * span[2]), (offset // span[2]) % span[1],
-                                             offset % span[2])
-        if ((registered == cell).all()
-                and (ti.math.clamp(home, lower_j, upper_j) == cell).all()
-                and gap < margin * mean_r
-                + _speculative(bodies, statics, a, xi, b, particles.world_position[j], n, dt)):
-            point = particles.world_position[j] + n * (rj + 0.5 * gap)
-            mu = ti.sqrt(bodies.friction[a] * bodies.friction[b])
-            e = ti.max(bodies.restitution[a], bodies.restitution[b])
-            _append(contacts, particles, i, j, a, b, -1, n, point, gap, ti.min(ri, rj), mu, e)
-            if bodies.sleeping[b] == 1 and bodies.sleep_timer[a] < sleep_time:
-                bodies.wake_request[b] = 1
+            n = rot @ (d / dist)
+        xj = xi - n * dist
+        if gap < margin * mean_r + _speculative(bodies, statics, a, xi, o, xj, n, dt):
+            point = xj + n * (rj + 0.5 * gap)
+            mu = ti.sqrt(bodies.friction[a] * bodies.friction[o])
+            e = ti.max(bodies.restitution[a], bodies.restitution[o])
+            _append(contacts, particles, i, particles.grid_slot[k], a, o, -1, n, point, gap, ti.min(ri, rj), mu, e)
+            if bodies.sleeping[o] == 1 and bodies.sleep_timer[a] < sleep_time:
+                bodies.wake_request[o] = 1
 
 
 @ti.func
 def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
-                     contacts: ti.template(), margin, dt, i, a):
+                     contacts: ti.template(), margin, dt, i, a, x):
     """Sphere-plane and sphere-box contacts of particle ``i`` of awake body ``a`` (normal
-    out of the collider, i.e. into the body)."""
-    x = particles.world_position[i]
+    out of the collider, i.e. into the body); ``x`` [m] its world centre."""
     r = particles.radius[i]
     for k in range(statics.plane_count[None]):
         gap = x[2] - r - statics.plane_height[k]
@@ -338,23 +295,36 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
 
 
 @ti.func
-def particle_contacts(bodies: ti.template(), particles: ti.template(), grid: ti.template(),
-                      statics: ti.template(), contacts: ti.template(), margin, sleep_time, dt):
-    """One pass over the particles of awake bodies: sphere-sphere contacts of active
-    particles, sphere-plane and sphere-box contacts of bodies near a static collider.
-    A parallel task on every arch, unlike the small passes. Serial, on this 2-core CPU
-    (Taichi 1.7.4, `taichi-frac bench dynamics`, three alternating runs each, ms/frame avg
-    / max): 13 rings two-scale 2.0-2.3 / 10.9-12.9 against 2.2-2.3 / 10.4-10.6 parallel,
-    the 216-fragment pile 10.9-12.5 against 9.9-11.3; only single-scale gained (6.7-7.5
-    against 9.5-10.5)."""
+def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
+                      contacts: ti.template(), margin, sleep_time, dt):
+    """One pass over the particles of awake bodies near something: each particle's world
+    centre, its sphere-sphere contacts with each neighbour o of its body a that it makes
+    (o > a when both are awake, so a pair is made once; every idle neighbour, which makes
+    none of its own) in o's grid, and its sphere-plane and sphere-box contacts when a is
+    near a static collider. When a's neighbour list overflowed, every body is tried with
+    the pair's closing computed here. A parallel task on every arch, unlike the small
+    passes: a particle's contacts are appended by one thread in program order
+    (neighbours, cells, entries), and ``order_contacts`` sorts them by particle."""
     for i in range(particles.slot_end[None]):
         a = particles.body[i]
         if a >= 0:
-            if not is_idle(bodies, a):
-                if particles.active[i] == 1:
-                    _sphere_contacts(bodies, particles, grid, statics, contacts, margin, sleep_time, dt, i, a)
+            if not is_idle(bodies, a) and (bodies.near_body[a] == 1 or bodies.near_static[a] == 1):
+                xi = bodies.position[a] + bodies.rotation[a] @ particles.offset[i]
+                ri = particles.radius[i]
+                count = bodies.neighbor_count[a]
+                if count >= 0:
+                    for k in range(count):
+                        o = bodies.neighbors[a, k]
+                        if o > a or is_idle(bodies, o):
+                            _pair_contacts(bodies, particles, statics, contacts, margin, sleep_time, dt, i, a, xi, ri,
+                                           o, bodies.neighbor_motion[a, k])
+                else:
+                    for o in range(bodies.slot_end[None]):
+                        if o != a and bodies.active[o] == 1 and (o > a or is_idle(bodies, o)):
+                            _pair_contacts(bodies, particles, statics, contacts, margin, sleep_time, dt, i, a, xi, ri,
+                                           o, pair_motion(bodies, statics, a, o, dt))
                 if bodies.near_static[a] == 1:
-                    _static_contacts(bodies, particles, statics, contacts, margin, dt, i, a)
+                    _static_contacts(bodies, particles, statics, contacts, margin, dt, i, a, xi)
 
 
 @ti.func

@@ -13,7 +13,7 @@ argument costs ~8 us of Python per launch, so the kernels take ``WorldFields``.
 
 import taichi as ti
 
-from ..collision import grid, narrowphase
+from ..collision import broadphase, narrowphase
 from . import impacts, integrate, solver
 
 
@@ -24,24 +24,20 @@ class WorldFields:
     isinstance, which goes through the class's attribute hook), and a substep launches two
     kernels."""
 
-    def __init__(self, bodies, statics, particles, grid, contacts, impacts, params):
+    def __init__(self, bodies, statics, particles, contacts, impacts, params):
         self.params = params  # StepParams: the solver options respond reads
         self.bodies = bodies
         self.statics = statics
         self.particles = particles
-        self.grid = grid
         self.contacts = contacts
         self.impacts = impacts
 
 
 @ti.kernel
 def collide(f: ti.template(), margin: ti.f32, dt: ti.f32, sleep_time: ti.f32):
-    grid.body_cull(f.bodies, f.statics, f.grid, margin, dt)
-    grid.particle_cells(f.bodies, f.particles, f.grid, margin)
-    grid.bucket_scan(f.grid)
-    grid.bucket_scatter(f.particles, f.grid)
+    broadphase.body_cull(f.bodies, f.statics, margin, dt)
     narrowphase.clear_contacts(f.contacts)
-    narrowphase.particle_contacts(f.bodies, f.particles, f.grid, f.statics, f.contacts, margin, sleep_time, dt)
+    narrowphase.particle_contacts(f.bodies, f.particles, f.statics, f.contacts, margin, sleep_time, dt)
     narrowphase.order_contacts(f.particles, f.contacts)
 
 

@@ -9,13 +9,16 @@ that writes each array.
 
 import taichi as ti
 
+from ..collision.grid import CELLS_PER_SPHERE
+
 vec3 = ti.math.vec3
 vec4 = ti.math.vec4
 mat3 = ti.math.mat3
 CACHE_SLOTS = 4  # contacts remembered per particle for warm starting
-# Cluster spheres per body for the broadphase's activity test (collision/grid.py): one per
-# 16 collision spheres, at most this many. On the 13 rings' first impacts: 8 -> 1,403,
-# 16 -> 1,010, 32 -> 928 active particles (box: 1,990). A small fragment gets one (its
+# Cluster spheres per body for the narrowphase's pre-test (a sphere near one of them reads
+# the body's grid; narrowphase._pair_contacts): one per 16 collision spheres, at most this
+# many. On the 13 rings' first impacts (with the world grid before): 8 -> 1,403, 16 ->
+# 1,010, 32 -> 928 spheres passed (the box alone: 1,990). A small fragment gets one (its
 # bounding sphere): with a sphere each, the 216-fragment pile ran 9.5 -> 11.9 ms/frame.
 MAX_CLUSTERS = 16
 
@@ -51,13 +54,14 @@ class Bodies:
         touched: i32 1 = the body has a contact this substep (free-flying bodies are moved
             by the exact ballistic step). Writer: prepare_contacts.
         bounding_radius: [m] max |offset| + radius over the body's particles.
-        mean_particle_radius, max_particle_radius, typical_particle_radius (the
-            median): [m] of its collision particles (substep refinement, contact
-            margins, grid cell size).
+        mean_particle_radius, max_particle_radius: [m] of its collision particles
+            (substep refinement, contact reach).
         local_lower, local_upper: vec3 [m] body-frame box holding every collision sphere.
         cluster (capacity, MAX_CLUSTERS) vec4: body-frame spheres (centre [m], radius [m])
             that each enclose a group of its collision spheres; cluster_count: how many.
         particle_start, particle_count: i32 its contiguous range of particle slots.
+        grid_origin: vec3 [m] body-frame corner of its sphere grid (``collision/grid.py``),
+            grid_edge: [m] cell edge, grid_dims: ivec3 cells per axis.
         Writer of all the above: add_body.
         rotation: mat3 body -> world this substep. motion: [m] bound on how far any of its
             points moves in this substep ((|v| + |w| bounding_radius) dt; 0 when idle).
@@ -68,12 +72,10 @@ class Bodies:
             neighbor_count = -1 (then every particle of the body is tested).
         neighbor_motion (capacity, max_neighbors): [m] how far the gap to each neighbour
             may close this substep (``bounds.pair_motion``).
-        idle_neighbor: i32 1 = a neighbour is asleep or fixed (or the list overflowed):
-            the narrowphase then also looks for partners in lower particle slots.
-            Writer of rotation ... idle_neighbor: body_cull (broadphase).
+            Writer of rotation ... neighbor_motion: body_cull (broadphase).
     """
 
-    def __init__(self, capacity: int, max_neighbors: int = 32):
+    def __init__(self, capacity: int, max_neighbors: int = 128):
         self.capacity = capacity
         self.max_neighbors = max_neighbors
         self.position = vec3.field(shape=capacity)
@@ -101,7 +103,6 @@ class Bodies:
         self.bounding_radius = ti.field(ti.f32, shape=capacity)
         self.mean_particle_radius = ti.field(ti.f32, shape=capacity)
         self.max_particle_radius = ti.field(ti.f32, shape=capacity)
-        self.typical_particle_radius = ti.field(ti.f32, shape=capacity)
         self.local_lower = vec3.field(shape=capacity)
         self.local_upper = vec3.field(shape=capacity)
         self.cluster = vec4.field(shape=(capacity, MAX_CLUSTERS))
@@ -113,8 +114,10 @@ class Bodies:
         self.neighbor_motion = ti.field(ti.f32, shape=(capacity, max_neighbors))
         self.particle_start = ti.field(ti.i32, shape=capacity)
         self.particle_count = ti.field(ti.i32, shape=capacity)
+        self.grid_origin = vec3.field(shape=capacity)
+        self.grid_edge = ti.field(ti.f32, shape=capacity)
+        self.grid_dims = ti.math.ivec3.field(shape=capacity)
         self.near_body = ti.field(ti.i32, shape=capacity)
-        self.idle_neighbor = ti.field(ti.i32, shape=capacity)
         self.near_static = ti.field(ti.i32, shape=capacity)
         # Scalar: one past the highest slot in use (loops run to it).
         self.slot_end = ti.field(ti.i32, shape=())
@@ -127,12 +130,12 @@ class Particles:
     Fields:
         body: i32 owning body slot. Writer: add_body / remove_body.
         offset: vec3 [m] centre in the body frame. radius: [m]. Writer: add_body.
-        world_position: vec3 [m]. Writer: broadphase (particle_cells), for bodies that are
-            near something this substep.
-        cell, cell_hi: ivec3 lower and upper corner of the grid cells it occupies (equal
-            unless it is larger than the typical radius). Writer: broadphase.
-        active: i32 1 = the particle lies inside a neighbour body's grown box this substep,
-            so it is put in the grid and queried. Writer: broadphase.
+        Its body's sphere grid (``collision/grid.py``), in the body's slot range [start,
+        start + count) but in cell order: grid_sphere vec4 (body-frame centre [m], radius
+        [m]) and grid_slot (i32, that sphere's particle slot) of entry k; cell_first,
+        shape (C x capacity,), C = ``grid.CELLS_PER_SPHERE``: the body's cell c holds the
+        entries cell_first[C start + c] .. cell_first[C start + c + 1] (a grid has at most
+        C count - 1 cells, so a body's cell starts fit in its share). Writer: add_body.
         order_stamp, order_start: i32, the contacts' counting sort by querying particle
             (narrowphase.order_contacts): the sort that counted the particle last, and
             where its contacts start in ``Contacts.order``.
@@ -152,10 +155,9 @@ class Particles:
         self.body = ti.field(ti.i32, shape=capacity)
         self.offset = vec3.field(shape=capacity)
         self.radius = ti.field(ti.f32, shape=capacity)
-        self.world_position = vec3.field(shape=capacity)
-        self.cell = ti.math.ivec3.field(shape=capacity)
-        self.cell_hi = ti.math.ivec3.field(shape=capacity)
-        self.active = ti.field(ti.i32, shape=capacity)
+        self.grid_sphere = vec4.field(shape=capacity)
+        self.grid_slot = ti.field(ti.i32, shape=capacity)
+        self.cell_first = ti.field(ti.i32, shape=CELLS_PER_SPHERE * capacity)
         self.cache_count = ti.field(ti.i32, shape=(2, capacity))
         self.cache_key = ti.field(ti.i32, shape=(2, capacity, CACHE_SLOTS))
         self.cache_normal = ti.field(ti.f32, shape=(2, capacity, CACHE_SLOTS))

@@ -14,7 +14,7 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
-from ..collision import grid as grid_kernels
+from ..collision.grid import CELLS_PER_SPHERE, body_grid
 from ..collision import narrowphase
 from ..geometry import rows
 from ..geometry.rotation import quaternion_matrix
@@ -75,10 +75,15 @@ def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32,
                 inverse_mass: ti.f32, friction: ti.f32, restitution: ti.f32, fixed: ti.i32,
                 compliance: ti.f32, contact_radius: ti.f32,
                 start: ti.i32, offsets: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                radii: ti.types.ndarray(dtype=ti.f32, ndim=1), typical_radius: ti.f32,
-                clusters: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+                radii: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                clusters: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                grid_frame: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                cell_first: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                grid_order: ti.types.ndarray(dtype=ti.i32, ndim=1)):
     """Fill one body slot and its particle range. ``pose``: (13,) position, orientation
-    wxyz, linear velocity, angular velocity."""
+    wxyz, linear velocity, angular velocity. The body's sphere grid (``grid.body_grid``):
+    ``grid_frame`` (7,) origin [m], edge [m], dims; ``cell_first`` (cells + 1,) and
+    ``grid_order`` (N,), body-relative."""
     ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for _ in range(1):
         bodies.position[slot] = ti.math.vec3(pose[0], pose[1], pose[2])
@@ -116,11 +121,14 @@ def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32,
             upper = ti.max(upper, offset + radii[k])
         bodies.bounding_radius[slot] = bounding
         bodies.max_particle_radius[slot] = largest
-        bodies.typical_particle_radius[slot] = typical_radius
         bodies.mean_particle_radius[slot] = total / radii.shape[0]
         bodies.local_lower[slot] = lower
         bodies.local_upper[slot] = upper
         bodies.motion[slot] = 0.0
+        bodies.grid_origin[slot] = ti.math.vec3(grid_frame[0], grid_frame[1], grid_frame[2])
+        bodies.grid_edge[slot] = grid_frame[3]
+        bodies.grid_dims[slot] = ti.math.ivec3(ti.cast(grid_frame[4], ti.i32), ti.cast(grid_frame[5], ti.i32),
+                                               ti.cast(grid_frame[6], ti.i32))
         bodies.cluster_count[slot] = clusters.shape[0]
         for m in range(clusters.shape[0]):
             bodies.cluster[slot, m] = ti.math.vec4(clusters[m, 0], clusters[m, 1], clusters[m, 2], clusters[m, 3])
@@ -132,6 +140,12 @@ def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32,
         particles.cache_stamp[1, p] = -1
         particles.offset[p] = ti.math.vec3(offsets[k, 0], offsets[k, 1], offsets[k, 2])
         particles.radius[p] = radii[k]
+        j = grid_order[k]
+        particles.grid_sphere[p] = ti.math.vec4(offsets[j, 0], offsets[j, 1], offsets[j, 2], radii[j])
+        particles.grid_slot[p] = start + j
+    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
+    for c in range(cell_first.shape[0]):
+        particles.cell_first[ti.static(CELLS_PER_SPHERE) * start + c] = start + cell_first[c]
 
 
 @ti.kernel
@@ -257,7 +271,6 @@ def _pack_kept(kept: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
 
 @ti.kernel
 def _reset_advance_counters(f: ti.template()):
-    f.grid.overflow[None] = 0
     f.contacts.overflow[None] = 0
     f.contacts.peak[None] = 0
     f.impacts.count[None] = 0
@@ -265,25 +278,17 @@ def _reset_advance_counters(f: ti.template()):
 
 
 @ti.kernel
-def _advance_counters(f: ti.template()) -> ti.types.vector(5, ti.i32):
-    """(contacts in the last substep, peak, lost to capacity, grid entries lost, impact
-    rows lost) in one launch instead of five field reads."""
+def _advance_counters(f: ti.template()) -> ti.types.vector(4, ti.i32):
+    """(contacts in the last substep, peak, lost to capacity, impact rows lost) in one
+    launch instead of four field reads."""
     return ti.Vector([f.contacts.count[None], f.contacts.peak[None], f.contacts.overflow[None],
-                      f.grid.overflow[None], f.impacts.overflow[None]], dt=ti.i32)
+                      f.impacts.overflow[None]], dt=ti.i32)
 
 
 def _body_rows(ids: np.ndarray, rows: np.ndarray) -> dict:
     """The dict World.body_state returns from rows (K, 17) in ``_pack_body``'s layout."""
     return dict(id=ids, position=rows[:, 0:3], orientation=rows[:, 3:7], linear_velocity=rows[:, 7:10],
                 angular_velocity=rows[:, 10:13], active=rows[:, 13] != 0, sleeping=rows[:, 14] != 0)
-
-
-def _median(values: np.ndarray) -> float:
-    """The median (the mean of the two middle values for an even count): np.percentile's
-    argument handling took ~0.15 ms a body added."""
-    ordered = np.sort(values)
-    n = len(ordered)
-    return float(0.5 * (ordered[(n - 1) // 2] + ordered[n // 2]))
 
 
 def cluster_spheres(offsets: np.ndarray, radii: np.ndarray, count: int) -> np.ndarray:
@@ -335,10 +340,9 @@ class World:
         self.bodies = Bodies(cap.max_bodies)
         self.particles = Particles(cap.max_boundary_particles)
         self.statics = Statics(cap.max_planes, cap.max_static_boxes)
-        self.grid = grid_kernels.HashGrid(cap.max_boundary_particles)
         self.contacts = narrowphase.Contacts(cap.max_contacts)
         self.impact_buffer = impact_kernels.Impacts(cap.max_impacts, cap.max_contacts)
-        self.fields = stages.WorldFields(self.bodies, self.statics, self.particles, self.grid, self.contacts,
+        self.fields = stages.WorldFields(self.bodies, self.statics, self.particles, self.contacts,
                                          self.impact_buffer, StepParams())
         self._params_of = None  # the options object the StepParams fields hold
         self.kept = KeptMotion(cap.max_bodies)
@@ -395,11 +399,14 @@ class World:
         pose = np.concatenate([position, orientation_wxyz, linear_velocity, angular_velocity]).astype(np.float32)
         if pose.shape != (13,):
             raise ValueError("position, velocities need 3 components and orientation_wxyz 4")
+        origin, edge, dims, cell_first, order = body_grid(offsets, radii, self.options.contact_margin)
         _write_body(self.bodies, self.particles, slot, pose, inertia.astype(np.float32),
                     inverse_inertia.astype(np.float32), float(inverse_mass), float(friction),
-                    float(restitution), int(fixed), float(compliance), float(contact_radius), start, np.ascontiguousarray(offsets, dtype=np.float32),
-                    np.ascontiguousarray(radii, dtype=np.float32), _median(radii),
-                    cluster_spheres(offsets, radii, min(MAX_CLUSTERS, max(1, count // 16))).astype(np.float32))
+                    float(restitution), int(fixed), float(compliance), float(contact_radius), start,
+                    np.ascontiguousarray(offsets, dtype=np.float32), np.ascontiguousarray(radii, dtype=np.float32),
+                    cluster_spheres(offsets, radii, min(MAX_CLUSTERS, max(1, count // 16))).astype(np.float32),
+                    np.concatenate([origin, [edge], dims]).astype(np.float32), cell_first.astype(np.int32),
+                    order.astype(np.int32))
         self._body_range[slot] = (start, count)
         self.breakable = getattr(self, "breakable", {})
         self.breakable[slot] = bool(breakable)
@@ -407,7 +414,6 @@ class World:
         self._particle_slot_end = max(self._particle_slot_end, start + count)
         self.particles.slot_end[None] = self._particle_slot_end
         self.bodies.slot_end[None] = self._body_slot_end
-        self._update_grid_size()
         return slot
 
     def remove_body(self, body: int) -> None:
@@ -419,7 +425,6 @@ class World:
         self._free_body_slots.append(body)
         self._release_particles(start, count)
         self._particles_in_use -= count
-        self._update_grid_size()
 
     def add_ground(self, height: float = 0.0, friction: float = 0.5, restitution: float = 0.2) -> int:
         """A horizontal ground plane z = height [m] (normal +Z); returns its index."""
@@ -477,14 +482,12 @@ class World:
         self.statics.plane_count[None] = 0
         self.statics.box_count[None] = 0
         self._checkpoint_token += 1  # a checkpoint of the bodies removed restores nothing
-        self._update_grid_size()
 
     def set_options(self, options: DynamicsOptions) -> None:
         """Replace the solver options between advances (kernel arguments and StepParams
         fields written before the next substep, so this compiles nothing)."""
         self.options = options
         self.statics.gravity[None] = tuple(map(float, options.gravity))
-        self._update_grid_size()
 
     @property
     def body_ids(self) -> list[int]:
@@ -525,12 +528,9 @@ class World:
         self.stats.substeps = count
         self.stats.total_substeps += count
         self.stats.frames += 1
-        contacts, peak, overflow, grid_overflow, impact_overflow = (int(v) for v in _advance_counters(self.fields))
+        contacts, peak, overflow, impact_overflow = (int(v) for v in _advance_counters(self.fields))
         self.stats.contacts = contacts if count else 0
         self.stats.peak_contacts = max(peak, self.stats.contacts)
-        if grid_overflow:
-            print(f"taichi-frac dynamics: {grid_overflow} grid entries lost in this frame (large particles "
-                  f"occupying many cells): contacts may be missed; raise WorldCapacity(max_boundary_particles=...)")
         self.stats.contact_overflows = overflow
         self.stats.total_contact_overflows += overflow
         self.stats.impact_overflows = impact_overflow
@@ -710,11 +710,3 @@ class World:
             else:
                 merged.append((s, n))
         self._free_ranges = merged
-
-    def _update_grid_size(self) -> None:
-        # The cell size is set every substep by the broadphase (body_cull); the hash table
-        # holds about two buckets per particle in use.
-        size = 1
-        while size < 2 * max(self._particles_in_use, 1) and size < self.grid.table_capacity:
-            size *= 2
-        self.grid.table_size[None] = size
