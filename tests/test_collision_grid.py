@@ -194,3 +194,62 @@ def test_a_body_with_more_neighbours_than_its_list_holds_still_makes_every_conta
     expected = np.sort(gap[np.triu(close, 1)])
     assert count == len(expected) and close[owners == 0].sum() > 50
     np.testing.assert_allclose(np.sort(world.contacts.separation.to_numpy()[:count]), expected, atol=2e-6)
+
+
+def test_broadphase_neighbour_lists_equal_testing_every_pair():
+    """The body grid's neighbour lists (bodies.neighbors) against testing every pair in
+    numpy with the same rule (grown bounding spheres overlap by margin x largest radius
+    and ``bounds.pair_motion``, at least one of the two awake), in ascending slot order:
+    bodies of many sizes, moving and spinning fast, some asleep, and one plate far larger
+    than the cells (kept out of the grid, tested against every body; it has more
+    neighbours than its list holds, so its count is -1)."""
+    world = fresh_world(gravity=(0.0, 0.0, -9.81))
+    rng = np.random.default_rng(4)
+    side = np.arange(-0.5, 0.5001, 0.02)
+    plate = np.stack(np.meshgrid(side, side, [0.0], indexing="ij"), -1).reshape(-1, 3)
+    bodies = [world.add_body(with_spheres(single_tet_model(), plate, np.full(len(plate), 0.01)), (0.0, 0.0, -0.05),
+                             (1, 0, 0, 0))]
+    for k in range(150):
+        size = rng.choice([0.005, 0.02, 0.06])
+        offsets = rng.uniform(-size, size, (5, 3))
+        q = rng.normal(size=4)
+        bodies.append(world.add_body(with_spheres(single_tet_model(), offsets, rng.uniform(0.2, 0.5) * size),
+                                     rng.uniform(-0.45, 0.45, 3) * [1, 1, 0.3], q / np.linalg.norm(q),
+                                     rng.normal(0.0, 2.0, 3), rng.normal(0.0, 20.0, 3)))
+    asleep = bodies[1:40:3]
+    for b in asleep:
+        world.bodies.sleeping[b] = 1
+    margin, dt, g = world.options.contact_margin, 4e-3, 9.81
+    stages.collide(world.fields, margin, dt, world.options.sleep_time)
+    assert world.grid.large_count[None] >= 1  # the plate
+
+    f = world.bodies
+    ids = np.array(bodies)
+    x = f.position.to_numpy()[ids].astype(np.float64)
+    v = f.linear_velocity.to_numpy()[ids].astype(np.float64)
+    w = f.angular_velocity.to_numpy()[ids].astype(np.float64)
+    radius = f.bounding_radius.to_numpy()[ids].astype(np.float64)
+    largest = f.max_particle_radius.to_numpy()[ids].astype(np.float64)
+    idle = np.isin(ids, asleep)
+    v[idle], w[idle] = 0.0, 0.0
+    spin = np.linalg.norm(w, axis=1) * radius
+    curve = 0.5 * np.linalg.norm(w, axis=1) ** 2 * radius
+    closing = (np.linalg.norm(v[:, None] - v[None], axis=-1) + spin[:, None] + spin[None]) * dt \
+        + (curve[:, None] + curve[None] + g) * dt * dt
+    grown = radius + margin * largest
+    reach = grown[:, None] + grown[None] + closing
+    excess = np.linalg.norm(x[:, None] - x[None], axis=-1) - reach
+    pair = (excess < 0) & ~(idle[:, None] & idle[None]) & ~np.eye(len(ids), dtype=bool)
+    borderline = np.abs(excess) < 1e-6
+    counts = f.neighbor_count.to_numpy()[ids]
+    lists = f.neighbors.to_numpy()[ids]
+    assert pair.sum() > 150
+    for k, b in enumerate(ids):
+        if counts[k] < 0:  # more neighbours than the list holds (the plate, under everyone)
+            assert pair[k].sum() > f.max_neighbors
+            continue
+        got = lists[k, :counts[k]]
+        assert np.all(np.diff(got) > 0)  # ascending, each once
+        expected = set(ids[pair[k]].tolist())
+        loose = set(ids[borderline[k]].tolist())
+        assert set(got.tolist()) - loose == expected - loose, b

@@ -24,9 +24,10 @@ class WorldFields:
     isinstance, which goes through the class's attribute hook), and a substep launches two
     kernels."""
 
-    def __init__(self, bodies, statics, particles, contacts, impacts, params):
+    def __init__(self, bodies, statics, particles, grid, contacts, impacts, params):
         self.params = params  # StepParams: the solver options respond reads
         self.bodies = bodies
+        self.grid = grid  # broadphase.BodyGrid
         self.statics = statics
         self.particles = particles
         self.contacts = contacts
@@ -35,7 +36,7 @@ class WorldFields:
 
 @ti.kernel
 def collide(f: ti.template(), margin: ti.f32, dt: ti.f32, sleep_time: ti.f32):
-    broadphase.body_cull(f.bodies, f.statics, margin, dt)
+    broadphase.body_cull(f.bodies, f.statics, f.grid, margin, dt)
     narrowphase.clear_contacts(f.contacts)
     narrowphase.particle_contacts(f.bodies, f.particles, f.statics, f.contacts, margin, sleep_time, dt)
     narrowphase.order_contacts(f.particles, f.contacts)

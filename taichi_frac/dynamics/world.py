@@ -15,7 +15,7 @@ import taichi as ti
 
 from .. import runtime
 from ..collision.grid import CELLS_PER_SPHERE, body_grid
-from ..collision import narrowphase
+from ..collision import broadphase, narrowphase
 from ..geometry import rows
 from ..geometry.rotation import quaternion_matrix
 from ..model import BodyModel
@@ -340,9 +340,10 @@ class World:
         self.bodies = Bodies(cap.max_bodies)
         self.particles = Particles(cap.max_boundary_particles)
         self.statics = Statics(cap.max_planes, cap.max_static_boxes)
+        self.grid = broadphase.BodyGrid(cap.max_bodies)
         self.contacts = narrowphase.Contacts(cap.max_contacts)
         self.impact_buffer = impact_kernels.Impacts(cap.max_impacts, cap.max_contacts)
-        self.fields = stages.WorldFields(self.bodies, self.statics, self.particles, self.contacts,
+        self.fields = stages.WorldFields(self.bodies, self.statics, self.particles, self.grid, self.contacts,
                                          self.impact_buffer, StepParams())
         self._params_of = None  # the options object the StepParams fields hold
         self.kept = KeptMotion(cap.max_bodies)
