@@ -67,85 +67,88 @@ class WorldStats:
     last_frame_seconds: float = 0.0
 
 
+#: Layout of ``_write_body``'s ``row`` (f32, 43): pose (13: position, orientation wxyz,
+#: linear and angular velocity), inertia and inverse inertia (row-major 3x3), the scalars
+#: (inverse mass, friction, restitution, compliance, contact radius), the sphere grid's
+#: origin, edge and dims (``grid.body_grid``).
+_ROW_INERTIA, _ROW_INVERSE_INERTIA, _ROW_SCALARS, _ROW_GRID = 13, 22, 31, 36  # (the pose at 0)
+
+
 @ti.kernel
-def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32,
-                pose: ti.types.ndarray(dtype=ti.f32, ndim=1),
-                inertia: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                inverse_inertia: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                inverse_mass: ti.f32, friction: ti.f32, restitution: ti.f32, fixed: ti.i32,
-                compliance: ti.f32, contact_radius: ti.f32,
-                start: ti.i32, offsets: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                radii: ti.types.ndarray(dtype=ti.f32, ndim=1),
+def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32, start: ti.i32, fixed: ti.i32,
+                row: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                spheres: ti.types.ndarray(dtype=ti.f32, ndim=2),
                 clusters: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                grid_frame: ti.types.ndarray(dtype=ti.f32, ndim=1),
-                cell_first: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                grid_order: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-    """Fill one body slot and its particle range. ``pose``: (13,) position, orientation
-    wxyz, linear velocity, angular velocity. The body's sphere grid (``grid.body_grid``):
-    ``grid_frame`` (7,) origin [m], edge [m], dims; ``cell_first`` (cells + 1,) and
-    ``grid_order`` (N,), body-relative."""
+                grid_ints: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+    """Fill one body slot and its particle range: ``row`` (see ``_ROW_*``), ``spheres``
+    (N,4) collision spheres (body-frame centre [m], radius [m]), ``clusters`` (K,4),
+    ``grid_ints`` the sphere grid's order (N,) then its cell starts (cells + 1,),
+    body-relative. Few array arguments: each costs ~11 us of Python a launch (17
+    arguments took ~0.25 ms a body added)."""
     ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for _ in range(1):
-        bodies.position[slot] = ti.math.vec3(pose[0], pose[1], pose[2])
-        bodies.orientation[slot] = ti.math.vec4(pose[3], pose[4], pose[5], pose[6]).normalized()
-        bodies.linear_velocity[slot] = ti.math.vec3(pose[7], pose[8], pose[9])
-        bodies.angular_velocity[slot] = ti.math.vec3(pose[10], pose[11], pose[12])
+        bodies.position[slot] = ti.math.vec3(row[0], row[1], row[2])
+        bodies.orientation[slot] = ti.math.vec4(row[3], row[4], row[5], row[6]).normalized()
+        bodies.linear_velocity[slot] = ti.math.vec3(row[7], row[8], row[9])
+        bodies.angular_velocity[slot] = ti.math.vec3(row[10], row[11], row[12])
         bodies.pseudo_linear_velocity[slot] = ti.math.vec3(0.0)
         bodies.pseudo_angular_velocity[slot] = ti.math.vec3(0.0)
         for r, c in ti.static(ti.ndrange(3, 3)):
-            bodies.inertia_body[slot][r, c] = inertia[r, c]
-            bodies.inverse_inertia_body[slot][r, c] = inverse_inertia[r, c]
-        bodies.inverse_mass[slot] = inverse_mass
-        bodies.friction[slot] = friction
-        bodies.restitution[slot] = restitution
-        bodies.contact_compliance[slot] = compliance
-        bodies.contact_radius[slot] = contact_radius
+            bodies.inertia_body[slot][r, c] = row[_ROW_INERTIA + 3 * r + c]
+            bodies.inverse_inertia_body[slot][r, c] = row[_ROW_INVERSE_INERTIA + 3 * r + c]
+        bodies.inverse_mass[slot] = row[_ROW_SCALARS]
+        bodies.friction[slot] = row[_ROW_SCALARS + 1]
+        bodies.restitution[slot] = row[_ROW_SCALARS + 2]
+        bodies.contact_compliance[slot] = row[_ROW_SCALARS + 3]
+        bodies.contact_radius[slot] = row[_ROW_SCALARS + 4]
         bodies.fixed[slot] = fixed
         bodies.sleeping[slot] = 0
         bodies.sleep_timer[slot] = 0.0
         bodies.wake_request[slot] = 0
         bodies.particle_start[slot] = start
-        bodies.particle_count[slot] = radii.shape[0]
+        bodies.particle_count[slot] = spheres.shape[0]
         bodies.active[slot] = 1
         bounding = 0.0
         largest = 0.0
         total = 0.0
         lower = ti.math.vec3(1e30)
         upper = ti.math.vec3(-1e30)
-        for k in range(radii.shape[0]):
-            offset = ti.math.vec3(offsets[k, 0], offsets[k, 1], offsets[k, 2])
-            bounding = ti.max(bounding, offset.norm() + radii[k])
-            largest = ti.max(largest, radii[k])
-            total += radii[k]
-            lower = ti.min(lower, offset - radii[k])
-            upper = ti.max(upper, offset + radii[k])
+        for k in range(spheres.shape[0]):
+            offset = ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2])
+            r = spheres[k, 3]
+            bounding = ti.max(bounding, offset.norm() + r)
+            largest = ti.max(largest, r)
+            total += r
+            lower = ti.min(lower, offset - r)
+            upper = ti.max(upper, offset + r)
         bodies.bounding_radius[slot] = bounding
         bodies.max_particle_radius[slot] = largest
-        bodies.mean_particle_radius[slot] = total / radii.shape[0]
+        bodies.mean_particle_radius[slot] = total / spheres.shape[0]
         bodies.local_lower[slot] = lower
         bodies.local_upper[slot] = upper
         bodies.motion[slot] = 0.0
-        bodies.grid_origin[slot] = ti.math.vec3(grid_frame[0], grid_frame[1], grid_frame[2])
-        bodies.grid_edge[slot] = grid_frame[3]
-        bodies.grid_dims[slot] = ti.math.ivec3(ti.cast(grid_frame[4], ti.i32), ti.cast(grid_frame[5], ti.i32),
-                                               ti.cast(grid_frame[6], ti.i32))
+        g = _ROW_GRID
+        bodies.grid_origin[slot] = ti.math.vec3(row[g], row[g + 1], row[g + 2])
+        bodies.grid_edge[slot] = row[g + 3]
+        bodies.grid_dims[slot] = ti.math.ivec3(ti.cast(row[g + 4], ti.i32), ti.cast(row[g + 5], ti.i32),
+                                               ti.cast(row[g + 6], ti.i32))
         bodies.cluster_count[slot] = clusters.shape[0]
         for m in range(clusters.shape[0]):
             bodies.cluster[slot, m] = ti.math.vec4(clusters[m, 0], clusters[m, 1], clusters[m, 2], clusters[m, 3])
     ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for k in range(radii.shape[0]):
+    for k in range(spheres.shape[0]):
         p = start + k
         particles.body[p] = slot
         particles.cache_stamp[0, p] = -1
         particles.cache_stamp[1, p] = -1
-        particles.offset[p] = ti.math.vec3(offsets[k, 0], offsets[k, 1], offsets[k, 2])
-        particles.radius[p] = radii[k]
-        j = grid_order[k]
-        particles.grid_sphere[p] = ti.math.vec4(offsets[j, 0], offsets[j, 1], offsets[j, 2], radii[j])
+        particles.offset[p] = ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2])
+        particles.radius[p] = spheres[k, 3]
+        j = grid_ints[k]
+        particles.grid_sphere[p] = ti.math.vec4(spheres[j, 0], spheres[j, 1], spheres[j, 2], spheres[j, 3])
         particles.grid_slot[p] = start + j
     ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for c in range(cell_first.shape[0]):
-        particles.cell_first[ti.static(CELLS_PER_SPHERE) * start + c] = start + cell_first[c]
+    for c in range(grid_ints.shape[0] - spheres.shape[0]):
+        particles.cell_first[ti.static(CELLS_PER_SPHERE) * start + c] = start + grid_ints[spheres.shape[0] + c]
 
 
 @ti.kernel
@@ -401,13 +404,15 @@ class World:
         if pose.shape != (13,):
             raise ValueError("position, velocities need 3 components and orientation_wxyz 4")
         origin, edge, dims, cell_first, order = body_grid(offsets, radii, self.options.contact_margin)
-        _write_body(self.bodies, self.particles, slot, pose, inertia.astype(np.float32),
-                    inverse_inertia.astype(np.float32), float(inverse_mass), float(friction),
-                    float(restitution), int(fixed), float(compliance), float(contact_radius), start,
-                    np.ascontiguousarray(offsets, dtype=np.float32), np.ascontiguousarray(radii, dtype=np.float32),
+        row = np.concatenate([pose, inertia.reshape(-1), inverse_inertia.reshape(-1),
+                              [inverse_mass, friction, restitution, compliance, contact_radius], origin, [edge],
+                              dims]).astype(np.float32)
+        spheres = np.empty((count, 4), dtype=np.float32)
+        spheres[:, :3] = offsets
+        spheres[:, 3] = radii
+        _write_body(self.bodies, self.particles, slot, start, int(fixed), row, spheres,
                     cluster_spheres(offsets, radii, min(MAX_CLUSTERS, max(1, count // 16))).astype(np.float32),
-                    np.concatenate([origin, [edge], dims]).astype(np.float32), cell_first.astype(np.int32),
-                    order.astype(np.int32))
+                    np.concatenate([order, cell_first]).astype(np.int32))
         self._body_range[slot] = (start, count)
         self.breakable = getattr(self, "breakable", {})
         self.breakable[slot] = bool(breakable)
