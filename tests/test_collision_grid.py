@@ -3,6 +3,9 @@ brute-force numpy pair searches."""
 
 import numpy as np
 
+import taichi as ti
+
+from taichi_frac.collision import broadphase
 from taichi_frac.collision.grid import CELLS_PER_SPHERE, body_grid
 from taichi_frac.dynamics import stages
 from test_dynamics_support import fresh_world, single_tet_model, with_spheres
@@ -196,13 +199,9 @@ def test_a_body_with_more_neighbours_than_its_list_holds_still_makes_every_conta
     np.testing.assert_allclose(np.sort(world.contacts.separation.to_numpy()[:count]), expected, atol=2e-6)
 
 
-def test_broadphase_neighbour_lists_equal_testing_every_pair():
-    """The body grid's neighbour lists (bodies.neighbors) against testing every pair in
-    numpy with the same rule (grown bounding spheres overlap by margin x largest radius
-    and ``bounds.pair_motion``, at least one of the two awake), in ascending slot order:
-    bodies of many sizes, moving and spinning fast, some asleep, and one plate far larger
-    than the cells (kept out of the grid, tested against every body; it has more
-    neighbours than its list holds, so its count is -1)."""
+def _scattered_bodies():
+    """A World holding a large plate (over MAX_BODY_CELLS cells) and 150 bodies of three
+    sizes, moving and spinning fast, every third of the first 40 asleep."""
     world = fresh_world(gravity=(0.0, 0.0, -9.81))
     rng = np.random.default_rng(4)
     side = np.arange(-0.5, 0.5001, 0.02)
@@ -219,6 +218,17 @@ def test_broadphase_neighbour_lists_equal_testing_every_pair():
     asleep = bodies[1:40:3]
     for b in asleep:
         world.bodies.sleeping[b] = 1
+    return world, bodies, asleep
+
+
+def test_broadphase_neighbour_lists_equal_testing_every_pair():
+    """The body grid's neighbour lists (bodies.neighbors) against testing every pair in
+    numpy with the same rule (grown bounding spheres overlap by margin x largest radius
+    and ``bounds.pair_motion``, at least one of the two awake), in ascending slot order:
+    bodies of many sizes, moving and spinning fast, some asleep, and one plate far larger
+    than the cells (kept out of the grid, tested against every body; it has more
+    neighbours than its list holds, so its count is -1)."""
+    world, bodies, asleep = _scattered_bodies()
     margin, dt, g = world.options.contact_margin, 4e-3, 9.81
     stages.collide(world.fields, margin, dt, world.options.sleep_time)
     assert world.grid.large_count[None] >= 1  # the plate
@@ -253,3 +263,35 @@ def test_broadphase_neighbour_lists_equal_testing_every_pair():
         expected = set(ids[pair[k]].tolist())
         loose = set(ids[borderline[k]].tolist())
         assert set(got.tolist()) - loose == expected - loose, b
+
+
+@ti.kernel
+def _cull_parallel(f: ti.template(), margin: ti.f32, dt: ti.f32):
+    broadphase.body_cull_parallel(f.bodies, f.statics, f.grid, margin, dt)
+
+
+@ti.kernel
+def _cull_serial(f: ti.template(), margin: ti.f32, dt: ti.f32):
+    broadphase.body_cull_serial(f.bodies, f.statics, f.grid, margin, dt)
+
+
+def test_parallel_broadphase_makes_the_serial_lists():
+    """``body_cull_parallel`` (the GPU's passes: atomics, entries in any order) run on the
+    CPU's threads gives the serial passes' lists, counts and static-collider flags."""
+    world, bodies, asleep = _scattered_bodies()
+    world.add_ground(-0.02)
+    margin, dt = world.options.contact_margin, 4e-3
+    _cull_serial(world.fields, margin, dt)  # (not collide: its touches would wake sleepers)
+    f = world.bodies
+    serial = (f.neighbor_count.to_numpy(), f.neighbors.to_numpy(), f.near_static.to_numpy())
+    f.neighbors.fill(-7)
+    f.neighbor_count.fill(-7)
+    _cull_parallel(world.fields, margin, dt)
+    parallel = (f.neighbor_count.to_numpy(), f.neighbors.to_numpy(), f.near_static.to_numpy())
+    ids = np.array(bodies)
+    np.testing.assert_array_equal(parallel[0][ids], serial[0][ids])
+    np.testing.assert_array_equal(parallel[2][ids], serial[2][ids])
+    assert serial[2][ids].sum() > 0 and (serial[0][ids] > 0).sum() > 100
+    for b in ids:
+        n = max(serial[0][b], 0)
+        np.testing.assert_array_equal(parallel[1][b, :n], serial[1][b, :n])

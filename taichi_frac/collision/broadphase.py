@@ -21,6 +21,7 @@ order, as testing every pair gives (tested), and the run is the same.
 
 import taichi as ti
 
+from .. import runtime
 from ..dynamics.bounds import is_idle, motion_speed, near_static, pair_motion
 from ..dynamics.quaternion import quat_to_matrix
 
@@ -46,7 +47,8 @@ class BodyGrid:
         large: (max bodies,) i32 the bodies kept out of the grid (box over
             MAX_BODY_CELLS cells); large_count: scalar.
         cell_size [m], table_size, overflow (1: more entries than entry_capacity this
-            substep, every pair is tested instead): scalars.
+            substep, every pair is tested instead), grown_total [m] and active_count (the
+            mean grown radius's sum and count): scalars.
     """
 
     def __init__(self, max_bodies: int):
@@ -68,6 +70,8 @@ class BodyGrid:
         self.cell_size = ti.field(ti.f32, shape=())
         self.table_size = ti.field(ti.i32, shape=())
         self.overflow = ti.field(ti.i32, shape=())
+        self.grown_total = ti.field(ti.f32, shape=())
+        self.active_count = ti.field(ti.i32, shape=())
 
 
 @ti.func
@@ -135,49 +139,54 @@ def _test_neighbor(bodies: ti.template(), statics: ti.template(), b, o, xb, rb, 
 
 
 @ti.func
-def _grid_cells(bodies: ti.template(), statics: ti.template(), grid: ti.template(), margin, dt):
-    """Grown radius and box of cells of each active body, the cell size (twice the mean
-    grown radius), the table size; bodies over MAX_BODY_CELLS cells go to the large list,
-    the others count themselves into their cells' buckets."""
-    total = 0.0
-    active = 0
-    for b in range(bodies.slot_end[None]):
-        if bodies.active[b] == 1:
-            g = _pair_grown_radius(bodies, statics, b, margin, dt)
-            grid.grown[b] = g
-            total += g
-            active += 1
+def _body_grown(bodies: ti.template(), statics: ti.template(), grid: ti.template(), b, margin, dt):
+    """Body b's grown radius, summed into the mean that sizes the cells."""
+    if bodies.active[b] == 1:
+        g = _pair_grown_radius(bodies, statics, b, margin, dt)
+        grid.grown[b] = g
+        ti.atomic_add(grid.grown_total[None], g)
+        ti.atomic_add(grid.active_count[None], 1)
+
+
+@ti.func
+def _grid_setup(bodies: ti.template(), grid: ti.template()):
+    """Cell size (twice the mean grown radius) and table size (the smallest power of two
+    >= 2 x the body slots in use) of this substep."""
     size = 1
     while size < 2 * bodies.slot_end[None] and size < grid.table_capacity:
         size *= 2
     grid.table_size[None] = size
-    cell = 2.0 * total / ti.max(active, 1)
-    grid.cell_size[None] = cell
+    grid.cell_size[None] = 2.0 * grid.grown_total[None] / ti.max(grid.active_count[None], 1)
     grid.large_count[None] = 0
     grid.overflow[None] = 0
-    for b in range(bodies.slot_end[None]):
-        if bodies.active[b] == 1:
-            x = bodies.position[b]
-            g = grid.grown[b]
-            lower = ti.floor((x - g) / cell, ti.i32)
-            upper = ti.floor((x + g) / cell, ti.i32)
-            grid.lower[b] = lower
-            grid.upper[b] = upper
-            span = upper - lower + 1
-            if span[0] * span[1] * span[2] > MAX_BODY_CELLS:
-                grid.large[grid.large_count[None]] = b
-                grid.large_count[None] += 1
-                grid.upper[b] = lower - 1  # (an empty box: in no bucket)
-            else:
-                for i, j, k in ti.ndrange((lower[0], upper[0] + 1), (lower[1], upper[1] + 1),
-                                          (lower[2], upper[2] + 1)):
-                    grid.bucket_count[_cell_hash(ti.math.ivec3(i, j, k), size)] += 1
 
 
 @ti.func
-def _grid_scatter(bodies: ti.template(), grid: ti.template()):
-    """Prefix sum of the bucket counts (zeroing them for the next substep), then each
-    body's entries into its buckets; more entries than the capacity set ``overflow``."""
+def _body_box(bodies: ti.template(), grid: ti.template(), b):
+    """Body b's box of cells; over MAX_BODY_CELLS cells it goes to the large list (an
+    empty box), else it counts itself into its cells' buckets."""
+    if bodies.active[b] == 1:
+        cell = grid.cell_size[None]
+        x = bodies.position[b]
+        g = grid.grown[b]
+        lower = ti.floor((x - g) / cell, ti.i32)
+        upper = ti.floor((x + g) / cell, ti.i32)
+        grid.lower[b] = lower
+        grid.upper[b] = upper
+        span = upper - lower + 1
+        if span[0] * span[1] * span[2] > MAX_BODY_CELLS:
+            grid.large[ti.atomic_add(grid.large_count[None], 1)] = b
+            grid.upper[b] = lower - 1  # (an empty box: in no bucket)
+        else:
+            size = grid.table_size[None]
+            for i, j, k in ti.ndrange((lower[0], upper[0] + 1), (lower[1], upper[1] + 1), (lower[2], upper[2] + 1)):
+                ti.atomic_add(grid.bucket_count[_cell_hash(ti.math.ivec3(i, j, k), size)], 1)
+
+
+@ti.func
+def _grid_scan(grid: ti.template()):
+    """Prefix sum of the bucket counts (zeroing them for the next substep); more entries
+    than the capacity set ``overflow`` (every pair is then tested)."""
     size = grid.table_size[None]
     running = 0
     for h in range(size):
@@ -189,18 +198,20 @@ def _grid_scatter(bodies: ti.template(), grid: ti.template()):
     grid.bucket_start[size] = running
     if running > grid.entry_capacity:
         grid.overflow[None] = 1
-    else:
-        for b in range(bodies.slot_end[None]):
-            if bodies.active[b] == 1:
-                lower = grid.lower[b]
-                upper = grid.upper[b]
-                for i, j, k in ti.ndrange((lower[0], upper[0] + 1), (lower[1], upper[1] + 1),
-                                          (lower[2], upper[2] + 1)):
-                    cell = ti.math.ivec3(i, j, k)
-                    slot = grid.bucket_cursor[_cell_hash(cell, size)]
-                    grid.bucket_cursor[_cell_hash(cell, size)] = slot + 1
-                    grid.entry_body[slot] = b
-                    grid.entry_cell[slot] = cell
+
+
+@ti.func
+def _body_scatter(bodies: ti.template(), grid: ti.template(), b):
+    """Body b's entries into the buckets of its cells (none after an overflow)."""
+    if bodies.active[b] == 1 and grid.overflow[None] == 0:
+        lower = grid.lower[b]
+        upper = grid.upper[b]
+        size = grid.table_size[None]
+        for i, j, k in ti.ndrange((lower[0], upper[0] + 1), (lower[1], upper[1] + 1), (lower[2], upper[2] + 1)):
+            cell = ti.math.ivec3(i, j, k)
+            slot = ti.atomic_add(grid.bucket_cursor[_cell_hash(cell, size)], 1)
+            grid.entry_body[slot] = b
+            grid.entry_cell[slot] = cell
 
 
 @ti.func
@@ -254,17 +265,52 @@ def _body_neighbors(bodies: ti.template(), statics: ti.template(), grid: ti.temp
 @ti.func
 def body_cull(bodies: ti.template(), statics: ti.template(), grid: ti.template(), margin, dt):
     """Passes over bodies: rotation matrix and motion bound of each body this substep;
-    the body grid (cells, prefix sum, scatter); each body's neighbour list (grown
-    bounding spheres overlap, at least one of the two awake, grown by how far the pair can
-    close this substep, ``bounds.pair_motion``; more than ``max_neighbors`` neighbours set
-    the count to -1 and the narrowphase then tries every body) and whether it reaches a
-    static collider. Serial: a few hundred bodies, and the grid's passes depend on each
-    other (on every arch; the bodies' cost is far below the particles')."""
+    the body grid (grown radii, cells, prefix sum, scatter); each body's neighbour list
+    (grown bounding spheres overlap, at least one of the two awake, grown by how far the
+    pair can close this substep, ``bounds.pair_motion``; more than ``max_neighbors``
+    neighbours set the count to -1 and the narrowphase then tries every body) and whether
+    it reaches a static collider. One serial task on the CPU (``runtime.SERIAL_SMALL_LOOPS``),
+    parallel passes elsewhere (the order the entries land in differs from run to run
+    there, but each list is sorted)."""
+    if ti.static(runtime.SERIAL_SMALL_LOOPS):
+        body_cull_serial(bodies, statics, grid, margin, dt)
+    else:
+        body_cull_parallel(bodies, statics, grid, margin, dt)
+
+
+@ti.func
+def body_cull_serial(bodies: ti.template(), statics: ti.template(), grid: ti.template(), margin, dt):
     ti.loop_config(serialize=True)
     for _ in range(1):
+        grid.grown_total[None] = 0.0
+        grid.active_count[None] = 0
         for b in range(bodies.slot_end[None]):
             _body_motion(bodies, statics, b, dt)
-        _grid_cells(bodies, statics, grid, margin, dt)
-        _grid_scatter(bodies, grid)
+            _body_grown(bodies, statics, grid, b, margin, dt)
+        _grid_setup(bodies, grid)
+        for b in range(bodies.slot_end[None]):
+            _body_box(bodies, grid, b)
+        _grid_scan(grid)
+        for b in range(bodies.slot_end[None]):
+            _body_scatter(bodies, grid, b)
         for b in range(bodies.slot_end[None]):
             _body_neighbors(bodies, statics, grid, b, margin, dt)
+
+
+@ti.func
+def body_cull_parallel(bodies: ti.template(), statics: ti.template(), grid: ti.template(), margin, dt):
+    grid.grown_total[None] = 0.0
+    grid.active_count[None] = 0
+    for b in range(bodies.slot_end[None]):
+        _body_motion(bodies, statics, b, dt)
+        _body_grown(bodies, statics, grid, b, margin, dt)
+    _grid_setup(bodies, grid)
+    for b in range(bodies.slot_end[None]):
+        _body_box(bodies, grid, b)
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        _grid_scan(grid)
+    for b in range(bodies.slot_end[None]):
+        _body_scatter(bodies, grid, b)
+    for b in range(bodies.slot_end[None]):
+        _body_neighbors(bodies, statics, grid, b, margin, dt)
