@@ -58,9 +58,10 @@ import numpy as np
 from ..geometry import rows
 from ..model import BodyModel
 from ..options import FractureOptions, Material
-from .field import point_loads_displacement
-from .sph import gradient_rows, neighbor_lists
-from .stress import largest_principal_stress, principal_stresses, stress_from_gradient
+from .field import load_rows
+from .fused import stress_at as _stress_at
+from .sph import neighbor_lists
+from .stress import largest_principal_stress, principal_stresses
 
 # Analysis points are sought within this many smoothing lengths (kernel support radii,
 # fracture/sph.py) of the contact point.
@@ -304,8 +305,8 @@ def analyze_impact(
     the whole field: analyse again with ``full_field=True`` (the simulation does when it
     writes a cache, whose per-face stress reads it).
     """
-    points = model.particle_position
-    volumes = model.tet_volume
+    points = np.ascontiguousarray(model.particle_position, dtype=np.float64)
+    volumes = np.ascontiguousarray(model.tet_volume, dtype=np.float64)
     t_count = model.tet_count
     n_groups = options.crack_count
     contact = _as_rows(contact_point_body, "contact_point_body")
@@ -349,6 +350,7 @@ def analyze_impact(
     in_reach[np.arange(k_count), nearest] = True
 
     lists = {}  # the neighbour rows in hand: "local" (rows of ``local``) or "all"
+    loads = load_rows(contact, normal, force, radius)
 
     def field(query):
         """Steps 5-7 at particles ``query`` (None: all): the superposed half-space
@@ -364,12 +366,11 @@ def analyze_impact(
             q_ids = query
             where = np.unique(np.concatenate([query, q_idx]))
         displacement = np.zeros((t_count, 3))
-        displacement[where] = point_loads_displacement(points[where], contact, normal, force, material.shear_modulus,
-                                                       material.poisson_ratio, radius)
-        grad, _ = gradient_rows(points, volumes, displacement, q_off[:-1], q_off[1:], q_idx, h,
-                                options.corrected_gradient, q_ids)
-        stress = stress_from_gradient(grad, material.young_modulus, material.poisson_ratio)
-        return displacement, np.asarray(stress), largest_principal_stress(stress)
+        if isinstance(where, slice):
+            where = np.arange(t_count)
+        stress = _stress_at(points, volumes, displacement, loads, where, q_ids, q_off, q_idx, h,
+                            options.corrected_gradient, material)
+        return displacement, stress, largest_principal_stress(stress)
 
     def neighbours_of(i):
         """Particle i's neighbours (i is a field particle: in ``local`` when local)."""
@@ -427,9 +428,8 @@ def analyze_impact(
         # give n noisy copies of one direction; the plain sum over a one-sided sector leans
         # toward the sector, which is what fans the n cracks out (module docstring).
         group_corrected = options.corrected_gradient if n_groups == 1 else False
-        group_grad, _ = gradient_rows(points, volumes, displacement, group_offsets[:-1], group_offsets[1:],
-                                      group_indices, h, group_corrected, np.asarray(query, dtype=np.int32))
-        stress_g = np.asarray(stress_from_gradient(group_grad, material.young_modulus, material.poisson_ratio))
+        stress_g = _stress_at(points, volumes, displacement, loads, None, np.asarray(query, dtype=np.int32),
+                              group_offsets, group_indices, h, group_corrected, material)
         values_g, dirs_g = principal_stresses(stress_g)
         group_stress[grouped] = stress_g.reshape(len(grouped), n_groups, 3, 3)
         g_values[grouped] = np.asarray(values_g).reshape(len(grouped), n_groups, 3)

@@ -104,22 +104,29 @@ def _point_loads_kernel(
     displacement_out: ti.types.ndarray(dtype=ti.f64, ndim=2),  # (N,3) [m] body frame, summed
 ):
     for i in range(points.shape[0]):
-        total = _vec3(0.0)
-        for k in range(loads.shape[0]):
-            origin = _vec3(loads[k, 0], loads[k, 1], loads[k, 2])
-            e1 = _vec3(loads[k, 3], loads[k, 4], loads[k, 5])
-            e2 = _vec3(loads[k, 6], loads[k, 7], loads[k, 8])
-            e3 = _vec3(loads[k, 9], loads[k, 10], loads[k, 11])
-            d = _vec3(points[i, 0], points[i, 1], points[i, 2]) - origin
-            x = d.dot(e1)
-            y = d.dot(e2)
-            # Load moved to depth -a (module docstring); points above the tangent plane clamped.
-            z = ti.max(d.dot(e3), 0.0) + loads[k, 15]
-            u = _local_displacement(x, y, z, loads[k, 12], loads[k, 13], loads[k, 14], shear_modulus,
-                                    poisson_ratio)
-            total += u[0] * e1 + u[1] * e2 + u[2] * e3
+        total = displacement_at(points, i, loads, shear_modulus, poisson_ratio)
         for c in ti.static(range(3)):
             displacement_out[i, c] = total[c]
+
+
+@ti.func
+def displacement_at(points: ti.template(), i, loads: ti.template(), shear_modulus, poisson_ratio):
+    """The displacement [m] (body frame) of particle ``i`` under every load row of
+    ``loads`` (``_point_loads_kernel``'s layout), summed."""
+    total = _vec3(0.0)
+    for k in range(loads.shape[0]):
+        origin = _vec3(loads[k, 0], loads[k, 1], loads[k, 2])
+        e1 = _vec3(loads[k, 3], loads[k, 4], loads[k, 5])
+        e2 = _vec3(loads[k, 6], loads[k, 7], loads[k, 8])
+        e3 = _vec3(loads[k, 9], loads[k, 10], loads[k, 11])
+        d = _vec3(points[i, 0], points[i, 1], points[i, 2]) - origin
+        x = d.dot(e1)
+        y = d.dot(e2)
+        # Load moved to depth -a (module docstring); points above the tangent plane clamped.
+        z = ti.max(d.dot(e3), 0.0) + loads[k, 15]
+        u = _local_displacement(x, y, z, loads[k, 12], loads[k, 13], loads[k, 14], shear_modulus, poisson_ratio)
+        total += u[0] * e1 + u[1] * e2 + u[2] * e3
+    return total
 
 
 def _as_points(points) -> np.ndarray:
@@ -178,12 +185,22 @@ def point_loads_displacement(points, contact_points, normals_in, forces, shear_m
     paid ~0.2 ms of Python argument handling per contact and launch). (N,3) float64 [m]."""
     runtime.init()
     pts = _as_points(points)
+    loads = load_rows(contact_points, normals_in, forces, contact_radii)
+    _check_material(shear_modulus, poisson_ratio)
+    out = np.zeros_like(pts)
+    if len(pts) and len(loads):
+        _point_loads_kernel(pts, loads, float(shear_modulus), float(poisson_ratio), out)
+    return out
+
+
+def load_rows(contact_points, normals_in, forces, contact_radii) -> np.ndarray:
+    """(K,16) the kernels' load rows of K contacts (``_point_loads_kernel``): origin,
+    local frame, P, Qx, Qy [N] and the regularisation radius a [m]."""
     origins = np.asarray(contact_points, dtype=np.float64).reshape(-1, 3)
     count = len(origins)
     normals = np.asarray(normals_in, dtype=np.float64).reshape(count, 3)
     forces = np.asarray(forces, dtype=np.float64).reshape(count, 3)
     radii = np.asarray(contact_radii, dtype=np.float64).reshape(count)
-    _check_material(shear_modulus, poisson_ratio)
     loads = np.zeros((count, 16))
     for k in range(count):
         frame, p, qx, qy = _loads(normals[k], forces[k])
@@ -193,10 +210,7 @@ def point_loads_displacement(points, contact_points, normals_in, forces, shear_m
         loads[k, 0:3] = origins[k]
         loads[k, 3:12] = frame.reshape(-1)
         loads[k, 12:16] = (p, qx, qy, a)
-    out = np.zeros_like(pts)
-    if len(pts) and count:
-        _point_loads_kernel(pts, loads, float(shear_modulus), float(poisson_ratio), out)
-    return out
+    return loads
 
 
 # --- numpy reference (tests, benchmarks): same field, and its exact gradient -----------------

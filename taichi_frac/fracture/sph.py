@@ -228,6 +228,43 @@ def neighbor_lists(points, radius):
 
 # --- displacement gradient (eq. 7), plain or Bonet-Lok corrected -----------------------------
 
+@ti.func
+def gradient_at(points: ti.template(), volumes: ti.template(), i, begin, end, indices: ti.template(),
+                smoothing_length, corrected, min_eigen_ratio, displacement: ti.template()):
+    """grad u at particle ``i`` from its neighbours ``indices[begin:end]`` (eq. 7, plain or
+    Bonet-Lok corrected; the arguments as :func:`_gradient_kernel`'s): (grad (3,3) [-],
+    fallback: 1 when the correction was skipped)."""
+    xi = _vec3(points[i, 0], points[i, 1], points[i, 2])
+    ui = _vec3(displacement[i, 0], displacement[i, 1], displacement[i, 2])
+    grad = _mat3(0.0)
+    moment = _mat3(0.0)  # M_i = sum_j V_j (x_j - x_i) (x) grad_i W_ij  (= L_i^-T)
+    for k in range(begin, end):
+        j = indices[k]
+        d = _vec3(points[j, 0], points[j, 1], points[j, 2]) - xi
+        r = d.norm()
+        if j != i and r > 0.0 and r < smoothing_length:
+            # grad_i W(x_i - x_j, h) = W'(r) (x_i - x_j) / r
+            grad_w = -cubic_spline_dwdr(r, smoothing_length) / r * d
+            uj = _vec3(displacement[j, 0], displacement[j, 1], displacement[j, 2])
+            grad += volumes[j] * (uj - ui).outer_product(grad_w)
+            moment += volumes[j] * d.outer_product(grad_w)
+    fallback = 0
+    if corrected != 0:
+        # Bonet & Lok 1999: grad~W = L grad W with L = (sum V grad W (x) (x_j - x_i))^-1,
+        # so grad u = (sum V (u_j - u_i) (x) grad W) L^T = G M^-1, exact for linear u.
+        # M is symmetric PSD (grad W is parallel to x_j - x_i); its eigenvalue ratio
+        # guards the inverse (f64 cofactor formula). The extreme eigenvalues in closed
+        # form: Jacobi sweeps for them took half the corrected kernel's time.
+        scale = moment.trace()
+        fallback = 1
+        if scale > 0.0:
+            low, high = sym_eig3_extremes_f64(moment / scale)
+            if low > min_eigen_ratio * high:
+                grad = grad @ moment.inverse()
+                fallback = 0
+    return grad, fallback
+
+
 @ti.kernel
 def _gradient_kernel(
     # Model:
@@ -245,35 +282,8 @@ def _gradient_kernel(
     fallback_out: ti.types.ndarray(dtype=ti.i32, ndim=1),  # (Q,) 1 = correction skipped
 ):
     for q in range(query.shape[0]):
-        i = query[q]
-        xi = _vec3(points[i, 0], points[i, 1], points[i, 2])
-        ui = _vec3(displacement[i, 0], displacement[i, 1], displacement[i, 2])
-        grad = _mat3(0.0)
-        moment = _mat3(0.0)  # M_i = sum_j V_j (x_j - x_i) (x) grad_i W_ij  (= L_i^-T)
-        for k in range(row_begin[q], row_end[q]):
-            j = indices[k]
-            d = _vec3(points[j, 0], points[j, 1], points[j, 2]) - xi
-            r = d.norm()
-            if j != i and r > 0.0 and r < smoothing_length:
-                # grad_i W(x_i - x_j, h) = W'(r) (x_i - x_j) / r
-                grad_w = -cubic_spline_dwdr(r, smoothing_length) / r * d
-                uj = _vec3(displacement[j, 0], displacement[j, 1], displacement[j, 2])
-                grad += volumes[j] * (uj - ui).outer_product(grad_w)
-                moment += volumes[j] * d.outer_product(grad_w)
-        fallback = 0
-        if corrected != 0:
-            # Bonet & Lok 1999: grad~W = L grad W with L = (sum V grad W (x) (x_j - x_i))^-1,
-            # so grad u = (sum V (u_j - u_i) (x) grad W) L^T = G M^-1, exact for linear u.
-            # M is symmetric PSD (grad W is parallel to x_j - x_i); its eigenvalue ratio
-            # guards the inverse (f64 cofactor formula). The extreme eigenvalues in closed
-            # form: Jacobi sweeps for them took half the corrected kernel's time.
-            scale = moment.trace()
-            fallback = 1
-            if scale > 0.0:
-                low, high = sym_eig3_extremes_f64(moment / scale)
-                if low > min_eigen_ratio * high:
-                    grad = grad @ moment.inverse()
-                    fallback = 0
+        grad, fallback = gradient_at(points, volumes, query[q], row_begin[q], row_end[q], indices, smoothing_length,
+                                     corrected, min_eigen_ratio, displacement)
         fallback_out[q] = fallback
         for a, b in ti.static(ti.ndrange(3, 3)):
             grad_out[q, a, b] = grad[a, b]

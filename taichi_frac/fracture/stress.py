@@ -157,10 +157,17 @@ def _stress_kernel(
     stress_out: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) [Pa] Data out
 ):
     for q in range(grad.shape[0]):
-        e = _green_strain(_load3(grad, q))
-        s = 2.0 * shear_modulus * e + lame_lambda * e.trace() * ti.Matrix.identity(ti.f64, 3)
+        s = stress_of(_load3(grad, q), lame_lambda, shear_modulus)
         for r, c in ti.static(ti.ndrange(3, 3)):
             stress_out[q, r, c] = s[r, c]
+
+
+@ti.func
+def stress_of(grad, lame_lambda, shear_modulus):
+    """Stress [Pa] (3,3) = lambda tr(E) I + 2 mu E of the Green-Saint-Venant strain E of
+    F = I + grad."""
+    e = _green_strain(grad)
+    return 2.0 * shear_modulus * e + lame_lambda * e.trace() * ti.Matrix.identity(ti.f64, 3)
 
 
 @ti.kernel
