@@ -356,18 +356,15 @@ def analyze_impact(
         """Steps 5-7 at particles ``query`` (None: all): the superposed half-space
         displacement of every contact where the SPH sums read it, then the gradient
         (every neighbour), stress and largest principal stress."""
-        where = slice(None)
         if query is None:
             lists["all"] = model_neighbor_lists(model, h)
             q_off, q_idx = lists["all"]
-            q_ids = np.arange(t_count)
+            q_ids = where = np.arange(t_count)
         else:
             lists["local"] = q_off, q_idx = neighbor_rows(model, h, query)
             q_ids = query
             where = np.unique(np.concatenate([query, q_idx]))
         displacement = np.zeros((t_count, 3))
-        if isinstance(where, slice):
-            where = np.arange(t_count)
         stress = _stress_at(points, volumes, displacement, loads, where, q_ids, q_off, q_idx, h,
                             options.corrected_gradient, material)
         return displacement, stress, largest_principal_stress(stress)

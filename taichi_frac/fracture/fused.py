@@ -1,8 +1,9 @@
 """Steps 5-7 of an impact analysis in one kernel launch (``cracks.analyze_impact``): the
 half-space displacement (``field.py``), the SPH gradient (``sph.py``) and the stress
-(``stress.py``), each through the same ``ti.func`` their own kernels use, so the numbers
-are the same bit for bit. A local analysis evaluates a few hundred particles, where three
-launches' Python argument handling (~0.55 ms) was most of its cost."""
+(``stress.py``), each through the same ``ti.func`` their own kernels use: the same
+arithmetic (to ~1e-16 relative, not bit for bit: LLVM's fast math may contract it
+differently in another kernel). A local analysis evaluates a few hundred particles, where
+three launches' Python argument handling (~0.55 ms) was most of its cost."""
 
 import numpy as np
 import taichi as ti
@@ -34,10 +35,9 @@ def _stress_kernel(
 ):
     """Steps 5-7 of an analysis in one launch: the superposed half-space displacement at
     ``where`` (``field.displacement_at``), then at each query the SPH gradient
-    (``sph.gradient_at``) and the stress (``stress.stress_of``). The same functions, and
-    so the same numbers, as ``point_loads_displacement``, ``gradient_rows`` and
-    ``stress_from_gradient`` in three launches, whose Python argument handling cost more
-    than a local analysis's few hundred particles (~0.55 ms a field)."""
+    (``sph.gradient_at``) and the stress (``stress.stress_of``): the functions of
+    ``point_loads_displacement``, ``gradient_rows`` and ``stress_from_gradient`` in one
+    launch."""
     for w in range(where_count):
         i = where[w]
         u = displacement_at(points, i, loads, shear_modulus, poisson_ratio)

@@ -361,11 +361,12 @@ def displacement_gradient(points, volumes, displacement, offsets, indices, smoot
 
 def gradient_rows(points, volumes, displacement, begin, end, indices, smoothing_length, corrected, query):
     """:func:`displacement_gradient` without its argument checks, for callers whose lists
-    are already known good (the fracture analysis: lists built by :func:`neighbor_lists`,
-    queries of its own): the checks read every neighbour index, ~0.2 ms a call on a
-    ring's 130k pairs, more than the kernel for a few dozen queries. ``points``,
-    ``volumes``, ``displacement``: (N,3), (N,), (N,3) [m, m^3, m]; ``begin``, ``end`` (Q,): row q is
-    ``indices[begin[q]:end[q]]``; ``query`` (Q,). Returns (grad (Q,3,3), fallback (Q,) i32)."""
+    are already known good (lists built by :func:`neighbor_lists`, queries of its own):
+    the checks read every neighbour index, ~0.2 ms a call on a ring's 130k pairs. (The
+    fracture analysis now runs this kernel's ``gradient_at`` inside ``fused.stress_at``.)
+    ``points``, ``volumes``, ``displacement``: (N,3), (N,), (N,3) [m, m^3, m]; ``begin``,
+    ``end`` (Q,): row q is ``indices[begin[q]:end[q]]``; ``query`` (Q,). Returns (grad
+    (Q,3,3), fallback (Q,) i32)."""
     n_query = len(query)
     grad = np.zeros((n_query, 3, 3))
     fallback = np.zeros(n_query, np.int32)
