@@ -8,6 +8,7 @@ compiles for it beyond what the suite compiles anyway.
 
 from __future__ import annotations
 
+import dataclasses
 import re
 
 import numpy as np
@@ -46,7 +47,12 @@ def row_of(markdown: str, label: str) -> list[str]:
 def test_tables_report_the_models_counts_and_the_runs_frames(ctx):
     scene = tiny_ring_scene()
     model, _ = scene.objects[0].prepare()
-    section = tables.run(ctx, cases=[tables.SceneCase("tiny ring", scene, timed=True)], frames=4)
+    shifted = Scene(name="tiny_ring", objects=[dataclasses.replace(
+        scene.objects[0], fracture=dataclasses.replace(scene.objects[0].fracture, seed=scene.objects[0].fracture.seed + 1))],
+        colliders=scene.colliders, simulation=scene.simulation)
+    case = tables.SceneCase("tiny ring", scene, timed=True, target_ms=1e6,
+                            variants=((f"{tables.SCENE_ROW}, seeds + 1", shifted),))
+    section = tables.run(ctx, cases=[case], frames=4)
     cells = row_of(section.markdown.split("**Table 2")[0], "tiny ring")
     assert cells[1:4] == [f"{model.tet_count:,}", f"{model.surface_particle_count:,}",
                           f"{model.boundary_particle_count:,}"]
@@ -57,6 +63,11 @@ def test_tables_report_the_models_counts_and_the_runs_frames(ctx):
     assert table2[2] == f"{model.boundary_particle_count:,} / {model.surface_particle_count:,}"
     assert table2[3] == f"{summary.ms_per_frame['mean']:.1f} / {summary.ms_per_frame['max']:.1f}"
     assert section.figures and section.figures[0].read_bytes().startswith(PNG)
+    # The spread over seed sets: the scene's run and the shifted one, against the target.
+    fragments = [row[2] for row in section.headline["variants"]]
+    spread = row_of(section.markdown.split("The spread over seed sets")[1], "tiny ring")
+    assert spread[1] == "2" and spread[4:] == ["1e+06", "yes"]
+    assert spread[2] == f"{min(fragments)}-{max(fragments)} ({np.mean(fragments):.1f})"
 
 
 def test_grouping_counts_collision_particles_per_n_and_measures_the_drop(ctx):

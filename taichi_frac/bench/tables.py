@@ -39,13 +39,16 @@ class SceneCase:
     """A scene of the tables: ``label`` is the paper's row name (a key of PAPER_TABLE1, or
     any name for a scene the paper does not have); ``timed`` puts it in Table 2.
     ``variants``: (name, scene) pairs of other crack controls, run with fracture on for the
-    table of fragments against time."""
+    table of fragments against time; those named ``SCENE_ROW + ", seeds + k"`` are the scene
+    with its crack seeds shifted, summed up with the scene's own run in the table of the
+    spread over seed sets (against ``target_ms``)."""
 
     label: str
     scene: object
     timed: bool = False
     note: str = ""
     variants: tuple = ()
+    target_ms: float | None = None  # issue 6's target [ms/frame], fracture on
 
 
 #: The glass walls at fewer cracks per impact (the seventh session's controls): cheaper,
@@ -64,6 +67,14 @@ RINGS_SHORT_CRACKS = ["ring00.fracture.crack_length=none", "ring05.fracture.crac
 #: The name of a timed scene's own row in the table of fragments against time.
 SCENE_ROW = "the scene's"
 
+#: Crack-seed shifts the report runs besides each scene's own seeds. A run of these chaotic
+#: scenes is one draw: a change of ~1e-16 in the stresses moved the 13 rings' own seeds
+#: from 95 fragments at 5.0-5.6 ms/frame to 116 at 5.5, while 13 seed sets gave 95-163
+#: fragments at 5.1-7.5 ms/frame with either code (ninth session). The targets are judged
+#: on the mean over these sets.
+RINGS_SEED_SHIFTS = (13, 26, 39, 52, 65, 78, 91)
+GLASS_SEED_SHIFTS = (3, 6, 9, 12)
+
 
 def other_seeds(scene, shift: int) -> list[str]:
     """Overrides that shift every breakable object's crack seed by ``shift``: the same
@@ -80,12 +91,12 @@ def default_cases() -> list[SceneCase]:
         SceneCase("single ring, control 1", load_scene(ring, ["ring.fracture.crack_count=1"]), note="crack_count 1"),
         SceneCase("single ring, control 2", load_scene(ring, ["ring.fracture.crack_count=3"]), note="crack_count 3"),
         SceneCase("single ring, control 3", load_scene(ring, ["ring.fracture.crack_count=5"]), note="crack_count 5"),
-        SceneCase("3 glass walls", glass_scene, timed=True, variants=(
-            *[(f"{SCENE_ROW}, seeds + {k}", load_scene(glass, other_seeds(glass_scene, k))) for k in (3, 6)],
+        SceneCase("3 glass walls", glass_scene, timed=True, target_ms=20.0, variants=(
+            *[(f"{SCENE_ROW}, seeds + {k}", load_scene(glass, other_seeds(glass_scene, k))) for k in GLASS_SEED_SHIFTS],
             ("crack_count 4, 3, 2 and two rings (the scene: 8, 7, 6 and three)", load_scene(glass, GLASS_FEWER_CRACKS)),
             ("radial cracks only (ring_crack_count 0; the scene: 3)", load_scene(glass, GLASS_RADIAL_ONLY)))),
-        SceneCase("13 rings", rings_scene, timed=True, variants=(
-            *[(f"{SCENE_ROW}, seeds + {k}", load_scene(rings, other_seeds(rings_scene, k))) for k in (13, 26)],
+        SceneCase("13 rings", rings_scene, timed=True, target_ms=5.0, variants=(
+            *[(f"{SCENE_ROW}, seeds + {k}", load_scene(rings, other_seeds(rings_scene, k))) for k in RINGS_SEED_SHIFTS],
             ("five rings cut short (one cut, or none, across the tube)", load_scene(rings, RINGS_SHORT_CRACKS)))),
     ]
 
@@ -166,16 +177,19 @@ def run(ctx: BenchContext, cases: list[SceneCase] | None = None, frames: int | N
                      f"off {off.ms_per_frame['mean']:.1f}, single-scale {single.ms_per_frame['mean']:.1f}")
 
     variants = []
+    mean_ms = {}  # (scene, crack controls) -> ms per frame, unrounded
     for case in cases:
         if not case.timed:
             continue
         summary, _ = runs[case.label]["on"]
         variants.append([case.label, SCENE_ROW, summary.fragments, summary.fractures,
                          ms_pair(summary.ms_per_frame["mean"], summary.ms_per_frame["max"])])
+        mean_ms[(case.label, SCENE_ROW)] = summary.ms_per_frame["mean"]
         for name, scene in case.variants:
             _, other, _ = run_scene(ctx, scene, f"{case.label}, {name}", frames=frames)
             variants.append([case.label, name, other.fragments, other.fractures,
                              ms_pair(other.ms_per_frame["mean"], other.ms_per_frame["max"])])
+            mean_ms[(case.label, name)] = other.ms_per_frame["mean"]
             ctx.progress(f"variants: {case.label}, {name}: {other.fragments} fragments, "
                          f"{other.ms_per_frame['mean']:.1f} ms/frame")
 
@@ -224,6 +238,16 @@ def run(ctx: BenchContext, cases: list[SceneCase] | None = None, frames: int | N
             md_table(["scene", "crack controls", "fragments", "fracture events", "ms per frame, average / maximum"],
                      variants, "llrrr"),
         ]
+    spread = seed_spread(cases, variants, mean_ms)
+    if spread:
+        parts += [
+            "",
+            "The spread over seed sets (the scene's own seeds and the shifted ones above): one run of "
+            "these chaotic scenes is one draw, so the targets are judged on the mean.",
+            "",
+            md_table(["scene", "seed sets", "fragments, range (mean)", "ms per frame, range (mean)",
+                      "target [ms/frame]", "mean under the target"], spread, "lrrrrc"),
+        ]
     figures, headline = [], {}
     if table2:
         path, link = _plot_table2(ctx, table2_rows(cases, runs))
@@ -235,6 +259,26 @@ def run(ctx: BenchContext, cases: list[SceneCase] | None = None, frames: int | N
     parts += ["", f"*Part time: {time.perf_counter() - t0:.0f} s.*"]
     return Section("tables", "Tables 1 and 2 beside the paper", "\n".join(parts), figures,
                    headline | {"runs": runs, "variants": variants})
+
+
+def seed_spread(cases, variants, mean_ms) -> list[list]:
+    """One row per timed scene with shifted-seed variants: how many seed sets, the range and
+    mean of their fragments and of their mean ms per frame, the target and whether the mean
+    is under it. ``variants``: the rows of the fragments-against-time table (scene, crack
+    controls, fragments, ...); ``mean_ms``: (scene, crack controls) -> ms per frame."""
+    rows = []
+    for case in cases:
+        seeded = [row for row in variants if row[0] == case.label
+                  and (row[1] == SCENE_ROW or row[1].startswith(f"{SCENE_ROW}, seeds + "))]
+        if len(seeded) < 2:
+            continue
+        fragments = np.array([row[2] for row in seeded], dtype=float)
+        ms = np.array([mean_ms[(row[0], row[1])] for row in seeded])
+        met = "" if case.target_ms is None else ("yes" if ms.mean() < case.target_ms else "no")
+        rows.append([case.label, len(seeded), f"{fragments.min():.0f}-{fragments.max():.0f} ({fragments.mean():.1f})",
+                     f"{ms.min():.1f}-{ms.max():.1f} ({ms.mean():.2f})",
+                     "" if case.target_ms is None else f"{case.target_ms:g}", met])
+    return rows
 
 
 def table2_rows(cases, runs) -> list[tuple[str, list[tuple[str, float, float]]]]:
