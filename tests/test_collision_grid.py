@@ -267,17 +267,18 @@ def test_broadphase_neighbour_lists_equal_testing_every_pair():
 
 @ti.kernel
 def _cull_parallel(f: ti.template(), margin: ti.f32, dt: ti.f32):
-    broadphase.body_cull_parallel(f.bodies, f.statics, f.grid, margin, dt)
+    broadphase.body_cull_passes(f.bodies, f.statics, f.grid, margin, dt, False)
 
 
 @ti.kernel
 def _cull_serial(f: ti.template(), margin: ti.f32, dt: ti.f32):
-    broadphase.body_cull_serial(f.bodies, f.statics, f.grid, margin, dt)
+    broadphase.body_cull_passes(f.bodies, f.statics, f.grid, margin, dt, True)
 
 
 def test_parallel_broadphase_makes_the_serial_lists():
-    """``body_cull_parallel`` (the GPU's passes: atomics, entries in any order) run on the
-    CPU's threads gives the serial passes' lists, counts and static-collider flags."""
+    """``body_cull_passes`` as parallel loops (the GPU's passes: atomics, entries in any
+    order) run on the CPU's threads gives the serial passes' lists, counts and
+    static-collider flags."""
     world, bodies, asleep = _scattered_bodies()
     world.add_ground(-0.02)
     margin, dt = world.options.contact_margin, 4e-3

@@ -269,48 +269,34 @@ def body_cull(bodies: ti.template(), statics: ti.template(), grid: ti.template()
     (grown bounding spheres overlap, at least one of the two awake, grown by how far the
     pair can close this substep, ``bounds.pair_motion``; more than ``max_neighbors``
     neighbours set the count to -1 and the narrowphase then tries every body) and whether
-    it reaches a static collider. One serial task on the CPU (``runtime.SERIAL_SMALL_LOOPS``),
-    parallel passes elsewhere (the order the entries land in differs from run to run
-    there, but each list is sorted)."""
-    if ti.static(runtime.SERIAL_SMALL_LOOPS):
-        body_cull_serial(bodies, statics, grid, margin, dt)
-    else:
-        body_cull_parallel(bodies, statics, grid, margin, dt)
+    it reaches a static collider. Serial passes on the CPU (``runtime.SERIAL_SMALL_LOOPS``),
+    parallel ones elsewhere (the order the entries land in differs from run to run there,
+    but each list is sorted)."""
+    body_cull_passes(bodies, statics, grid, margin, dt, runtime.SERIAL_SMALL_LOOPS)
 
 
 @ti.func
-def body_cull_serial(bodies: ti.template(), statics: ti.template(), grid: ti.template(), margin, dt):
-    ti.loop_config(serialize=True)
-    for _ in range(1):
-        grid.grown_total[None] = 0.0
-        grid.active_count[None] = 0
-        for b in range(bodies.slot_end[None]):
-            _body_motion(bodies, statics, b, dt)
-            _body_grown(bodies, statics, grid, b, margin, dt)
-        _grid_setup(bodies, grid)
-        for b in range(bodies.slot_end[None]):
-            _body_box(bodies, grid, b)
-        _grid_scan(grid)
-        for b in range(bodies.slot_end[None]):
-            _body_scatter(bodies, grid, b)
-        for b in range(bodies.slot_end[None]):
-            _body_neighbors(bodies, statics, grid, b, margin, dt)
-
-
-@ti.func
-def body_cull_parallel(bodies: ti.template(), statics: ti.template(), grid: ti.template(), margin, dt):
+def body_cull_passes(bodies: ti.template(), statics: ti.template(), grid: ti.template(), margin, dt,
+                     serial: ti.template()):
+    """``body_cull``'s passes, each a serial loop when ``serial`` (compile time), else a
+    parallel one (atomics for the sums, counts, entries and large list); the prefix sum is
+    serial either way."""
     grid.grown_total[None] = 0.0
     grid.active_count[None] = 0
+    ti.loop_config(serialize=serial)
     for b in range(bodies.slot_end[None]):
         _body_motion(bodies, statics, b, dt)
         _body_grown(bodies, statics, grid, b, margin, dt)
     _grid_setup(bodies, grid)
+    ti.loop_config(serialize=serial)
     for b in range(bodies.slot_end[None]):
         _body_box(bodies, grid, b)
     ti.loop_config(serialize=True)
     for _ in range(1):
         _grid_scan(grid)
+    ti.loop_config(serialize=serial)
     for b in range(bodies.slot_end[None]):
         _body_scatter(bodies, grid, b)
+    ti.loop_config(serialize=serial)
     for b in range(bodies.slot_end[None]):
         _body_neighbors(bodies, statics, grid, b, margin, dt)
