@@ -252,14 +252,13 @@ def test_neighbor_rows_of_a_piece_are_its_restricted_lists_rows():
 @pytest.mark.parametrize("corrected", [True, False])
 def test_fused_stress_kernel_equals_the_three_kernels(corrected):
     """``fused.stress_at`` (displacement, SPH gradient and stress in one launch, the
-    analysis's path) against ``point_loads_displacement``, ``gradient_rows`` and
+    analysis's path) against ``point_loads_displacement``, ``displacement_gradient`` and
     ``stress_from_gradient`` run one after the other on a ring's impact: the displacement
     where asked, zero elsewhere, and the stress at a few hundred particles near the
     contact and at scattered ones (the same functions: to 1e-12 of the largest stress)."""
     from taichi_frac.fracture.cracks import model_neighbor_lists, neighbor_rows, smoothing_length
     from taichi_frac.fracture.field import load_rows, point_loads_displacement
     from taichi_frac.fracture.fused import stress_at
-    from taichi_frac.fracture.sph import gradient_rows
     from taichi_frac.fracture.stress import stress_from_gradient
 
     model = ring_model()
@@ -279,7 +278,7 @@ def test_fused_stress_kernel_equals_the_three_kernels(corrected):
     u = np.zeros((model.tet_count, 3))
     u[where] = point_loads_displacement(points[where], RING_CONTACT[None], RING_NORMAL[None], RING_FORCE[None],
                                         material.shear_modulus, material.poisson_ratio, radius)
-    grad, _ = gradient_rows(points, model.tet_volume, u, offsets[:-1], offsets[1:], indices, h, corrected, query)
+    grad = displacement_gradient(points, model.tet_volume, u, offsets, indices, h, corrected, query)
     separate = stress_from_gradient(grad, material.young_modulus, material.poisson_ratio)
     assert len(query) > 200 and np.abs(separate).max() > 1e6
     np.testing.assert_allclose(fused_u, u, rtol=1e-12, atol=1e-12 * np.abs(u).max())

@@ -162,8 +162,6 @@ def clear_contacts(contacts: ti.template()):
     contacts.count[None] = 0
 
 
-
-
 @ti.func
 def _pair_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
                    contacts: ti.template(), margin, sleep_time, dt, i, a, xi, ri, o, closing):

@@ -36,7 +36,7 @@ def _stress_kernel(
     """Steps 5-7 of an analysis in one launch: the superposed half-space displacement at
     ``where`` (``field.displacement_at``), then at each query the SPH gradient
     (``sph.gradient_at``) and the stress (``stress.stress_of``): the functions of
-    ``point_loads_displacement``, ``gradient_rows`` and ``stress_from_gradient`` in one
+    ``point_loads_displacement``, ``displacement_gradient`` and ``stress_from_gradient`` in one
     launch."""
     for w in range(where_count):
         i = where[w]

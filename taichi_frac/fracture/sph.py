@@ -353,32 +353,12 @@ def displacement_gradient(points, volumes, displacement, offsets, indices, smoot
     h = float(smoothing_length)
     if not (np.isfinite(h) and h > 0.0):
         raise ValueError(f"smoothing_length must be > 0, got {smoothing_length!r}")
-    grad, fallback = gradient_rows(pts, vol, disp, begin, end, idx, h, corrected, q_ids)
-    if return_fallback:
-        return grad, fallback.astype(bool)
-    return grad
-
-
-def gradient_rows(points, volumes, displacement, begin, end, indices, smoothing_length, corrected, query):
-    """:func:`displacement_gradient` without its argument checks, for callers whose lists
-    are already known good (lists built by :func:`neighbor_lists`, queries of its own):
-    the checks read every neighbour index, ~0.2 ms a call on a ring's 130k pairs. (The
-    fracture analysis now runs this kernel's ``gradient_at`` inside ``fused.stress_at``.)
-    ``points``, ``volumes``, ``displacement``: (N,3), (N,), (N,3) [m, m^3, m]; ``begin``,
-    ``end`` (Q,): row q is ``indices[begin[q]:end[q]]``; ``query`` (Q,). Returns (grad
-    (Q,3,3), fallback (Q,) i32)."""
-    n_query = len(query)
     grad = np.zeros((n_query, 3, 3))
     fallback = np.zeros(n_query, np.int32)
     if n_query:
-        idx = np.ascontiguousarray(indices, dtype=np.int32)
-        if len(idx) == 0:
-            idx = np.zeros(1, np.int32)  # no pairs at all: every row is empty
-        f64 = np.float64  # (no copies when the arrays are already contiguous f64)
-        points, volumes = np.ascontiguousarray(points, dtype=f64), np.ascontiguousarray(volumes, dtype=f64)
-        displacement = np.ascontiguousarray(displacement, dtype=f64)
-        _gradient_kernel(points, volumes, np.ascontiguousarray(query, dtype=np.int32),
-                         np.ascontiguousarray(begin, dtype=np.int32), np.ascontiguousarray(end, dtype=np.int32),
-                         idx, float(smoothing_length), int(bool(corrected)), CORRECTION_MIN_EIGEN_RATIO,
-                         displacement, grad, fallback)
-    return grad, fallback
+        _gradient_kernel(pts, vol, q_ids, np.ascontiguousarray(begin, dtype=np.int32),
+                         np.ascontiguousarray(end, dtype=np.int32), idx if len(idx) else np.zeros(1, np.int32),
+                         h, int(bool(corrected)), CORRECTION_MIN_EIGEN_RATIO, disp, grad, fallback)
+    if return_fallback:
+        return grad, fallback.astype(bool)
+    return grad
