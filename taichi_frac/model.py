@@ -28,7 +28,6 @@ from .geometry.topology import (
     compact_vertices,
     orient_tets,
     signed_volumes,
-    subset_neighbors,
     tet_neighbors,
 )
 
@@ -255,9 +254,10 @@ def build_body_model(
     vol = signed_volumes(vertices, tets)
     if np.any(vol <= 0):
         raise ValueError(f"{int(np.sum(vol <= 0))} degenerate (zero-volume) tets")
-    return _assemble(vertices, tets, vol, tet_neighbors(tets), density, boundary_group_size, keep_leftovers,
+    return _assemble(vertices, tets, vol, tet_neighbors(tets), np.array([0, len(tets)]),
+                     np.array([0, len(vertices)]), density, boundary_group_size, keep_leftovers,
                      np.arange(len(tets)) if source_tet is None else np.asarray(source_tet),
-                     spacing=float(np.mean(np.cbrt(vol))), root=None)
+                     spacing=float(np.mean(np.cbrt(vol))), root=None, props=[None])[0]
 
 
 def build_fragment_model(
@@ -267,40 +267,100 @@ def build_fragment_model(
     boundary_group_size: int = 4,
     keep_leftovers: bool = True,
 ) -> BodyModel:
-    """The model of the piece of ``parent`` made of its tets ``tets`` (ascending indices),
-    in the parent's body frame as source frame: the tets, mass properties and physics
-    particles ``build_body_model`` would build from ``parent.vertices`` and
-    ``parent.tets[tets]``, with the topology restricted from the parent's instead of
-    rebuilt and the SPH discretisation (``particle_spacing``, ``root``) inherited.
+    """The model of the piece of ``parent`` made of its tets ``tets`` (ascending indices):
+    ``build_fragment_models`` for one piece."""
+    return build_fragment_models(parent, [tets], boundary_group_size=boundary_group_size,
+                                 keep_leftovers=keep_leftovers)[0]
+
+
+def build_fragment_models(
+    parent: BodyModel,
+    pieces,
+    *,
+    boundary_group_size: int = 4,
+    keep_leftovers: bool = True,
+) -> list[BodyModel]:
+    """The models of the pieces of ``parent`` made of its tets ``pieces`` (a sequence of
+    disjoint, ascending index arrays), each in the parent's body frame as source frame:
+    the tets, mass properties and physics particles ``build_body_model`` would build from
+    ``parent.vertices`` and ``parent.tets[piece]``, with the topology restricted from the
+    parent's instead of rebuilt and the SPH discretisation (``particle_spacing``,
+    ``root``) inherited.
 
     The boundary layer is inherited where the surface is the parent's: a parent group
     whose members are all in the piece and touch no crack face is kept as it was (the
     same sphere, and the same collision centre unless a crack face lies within reach of
     its inward ray), and only the surface particles along the cracks are grouped afresh.
     So a piece collides where its parent did the instant it is born, and the build costs
-    in proportion to the crack, not to the piece's surface."""
-    tets = np.asarray(tets, dtype=np.int64)
-    if tets.ndim != 1 or len(tets) == 0 or np.any(np.diff(tets) <= 0):
-        raise ValueError("tets must be a non-empty ascending array of the parent's tet indices")
-    vertices, sub, _ = compact_vertices(parent.vertices, parent.tets[tets])
-    neighbor = subset_neighbors(parent.tet_neighbor, tets)
-    crack_face = (parent.tet_neighbor[tets] >= 0) & (neighbor < 0)  # (T,4) faces the cut opened
+    in proportion to the crack, not to the piece's surface.
+
+    The pieces of one split are built together: each step is one numpy pass over the
+    rows of all of them (a piece's rows are contiguous, in the order its own build would
+    have them), so a split pays numpy's per-call cost once rather than once a piece (a
+    ring's 15-tet chip cost ~0.7 ms alone, nearly all of it that). Every piece's model is
+    the one it gets built alone, to the bit (tests/test_fracture_fragments.py)."""
+    pieces = [np.asarray(p, dtype=np.int64) for p in pieces]
+    for p in pieces:
+        if p.ndim != 1 or len(p) == 0 or np.any(np.diff(p) <= 0):
+            raise ValueError("each piece must be a non-empty ascending array of the parent's tet indices")
+    if not pieces:
+        return []
+    piece_count = len(pieces)
+    tet_start = np.zeros(piece_count + 1, dtype=np.int64)
+    np.cumsum([len(p) for p in pieces], out=tet_start[1:])
+    all_tets = np.concatenate(pieces)
+    piece_of_tet = np.repeat(np.arange(piece_count), np.diff(tet_start))
+    t_parent = parent.tet_count
+    if all_tets.max() >= t_parent:
+        raise ValueError(f"tet index {int(all_tets.max())} is out of range: the parent has {t_parent} tets")
+    label = np.full(t_parent + 1, -1, dtype=np.int64)  # last slot: a boundary face's -1
+    label[all_tets] = piece_of_tet
+    if np.any(label[all_tets] != piece_of_tet):
+        raise ValueError("the pieces overlap: a tet is in more than one")
+    index = np.full(t_parent + 1, -1, dtype=np.int64)  # parent tet -> row of the batch
+    index[all_tets] = np.arange(len(all_tets))
+
+    # Each piece's own vertices, ascending (what compact_vertices keeps of each alone).
+    v_parent = len(parent.vertices)
+    key = piece_of_tet[:, None] * v_parent + parent.tets[all_tets]
+    if piece_count * v_parent <= 8 * key.size + 1_000_000:
+        used = np.zeros(piece_count * v_parent, dtype=bool)
+        used[key.reshape(-1)] = True
+        vertex_key = np.nonzero(used)[0]
+        tets = (np.cumsum(used) - 1)[key]
+    else:  # (many pieces of a large parent: a sort instead of a piece x vertex table)
+        vertex_key, inverse = np.unique(key, return_inverse=True)
+        tets = inverse.reshape(key.shape)
+    vertex_piece = vertex_key // v_parent
+    vertex_start = np.zeros(piece_count + 1, dtype=np.int64)
+    np.cumsum(np.bincount(vertex_piece, minlength=piece_count), out=vertex_start[1:])
+
+    # Face neighbours within the piece (rows of the batch), -1 across a crack or outside.
+    parent_neighbor = parent.tet_neighbor[all_tets].astype(np.int64)
+    across = np.where(parent_neighbor < 0, t_parent, parent_neighbor)
+    same = label[across] == piece_of_tet[:, None]
+    neighbor = np.where(same, index[across], -1)
+    crack_face = (parent_neighbor >= 0) & ~same  # (T,4) faces the cut opened
+
     inherited = None
     if boundary_group_size == parent.boundary_group_size and boundary_group_size > 1:
-        local = np.full(parent.tet_count, -1, dtype=np.int64)
-        local[tets] = np.arange(len(tets))
         off, members = parent.boundary_member_offsets, parent.boundary_members
-        owner = np.repeat(np.arange(len(off) - 1), np.diff(off))
-        mapped = local[members]
-        spoilt = np.zeros(len(off) - 1, dtype=bool)  # a member outside the piece or on a crack
-        np.logical_or.at(spoilt, owner, (mapped < 0) | crack_face[np.maximum(mapped, 0)].any(axis=1))
+        sizes = np.diff(off)
+        owner = np.repeat(np.arange(len(sizes)), sizes)
+        mapped = index[members]
+        member_piece = label[members]
+        group_piece = member_piece[off[:-1]]
+        # spoilt: a member outside the pieces, on a crack, or in another piece than the first
+        bad = (mapped < 0) | crack_face[np.maximum(mapped, 0)].any(axis=1) | (member_piece != group_piece[owner])
+        spoilt = np.bincount(owner, weights=bad, minlength=len(sizes)) > 0
         keep = np.nonzero(~spoilt)[0]
-        groups = [mapped[off[g]:off[g + 1]] for g in keep]
-        inherited = (groups, parent.collision_position[keep], crack_face)
-    return _assemble(vertices, sub, parent.tet_volume[tets], neighbor, parent.density, boundary_group_size,
-                     keep_leftovers, parent.source_tet[tets], spacing=parent.spacing,
+        inherited = (mapped[~spoilt[owner]], sizes[keep], group_piece[keep], parent.collision_position[keep],
+                     crack_face)
+    return _assemble(parent.vertices[vertex_key - vertex_piece * v_parent], tets, parent.tet_volume[all_tets],
+                     neighbor, tet_start, vertex_start, parent.density, boundary_group_size, keep_leftovers,
+                     parent.source_tet[all_tets], spacing=parent.spacing,
                      root=parent.root if parent.root is not None else parent, inherited=inherited,
-                     props=_mass_by_subtraction(parent, tets))
+                     props=[_mass_by_subtraction(parent, p) for p in pieces])
 
 
 def _mass_by_subtraction(parent: BodyModel, tets: np.ndarray) -> MassProperties | None:
@@ -334,101 +394,148 @@ def _mass_by_subtraction(parent: BodyModel, tets: np.ndarray) -> MassProperties 
                           volume=float(parent.volume - removed.volume))
 
 
-def _assemble(vertices, tets, vol, neighbor, density, boundary_group_size, keep_leftovers, source_tet, *,
-              spacing, root, inherited=None, props=None) -> BodyModel:
-    """The model of clean, positively oriented ``tets`` (T,4) over ``vertices`` (V,3) [m,
-    source frame] with volumes ``vol`` (T,) [m^3] and face neighbours ``neighbor`` (T,4).
-    ``inherited``: (kept groups (lists of tet indices), their collision centres (K,3) [m,
-    source frame], crack faces (T,4) bool) from ``build_fragment_model``; ``props``: the
-    tets' mass properties when the caller has them (source frame), else integrated."""
-    if props is None:
-        props = tet_mass_properties(vertices, tets, density, vol)
-    com = props.center_of_mass
-    vertices = vertices - com
-    faces, face_tet, face_local = boundary_faces(tets, neighbor)
+def _ranges(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """The indices start, start+1, ..., start+length-1 of every (start, length), in order."""
+    ends = np.cumsum(lengths)
+    return np.repeat(starts - (ends - lengths), lengths) + np.arange(ends[-1] if len(ends) else 0)
+
+
+def _starts(piece_of_row: np.ndarray, piece_count: int) -> np.ndarray:
+    """(P+1,) where each piece's rows begin in an array whose rows are piece-major, given
+    each row's piece (non-decreasing)."""
+    return np.searchsorted(piece_of_row, np.arange(piece_count + 1), side="left")
+
+
+def _assemble(vertices, tets, vol, neighbor, tet_start, vertex_start, density, boundary_group_size, keep_leftovers,
+              source_tet, *, spacing, root, props, inherited=None) -> list[BodyModel]:
+    """The models of P pieces given as one batch: the rows of piece k are ``tet_start[k]``
+    to ``tet_start[k+1]`` of ``tets`` (T,4) (clean, positively oriented, indexing
+    ``vertices`` (V,3) [m, source frame], whose piece k rows are ``vertex_start[k]`` to
+    ``vertex_start[k+1]``), ``vol`` (T,) [m^3] and face neighbours ``neighbor`` (T,4)
+    (rows of the batch, within the piece; -1 on its boundary). ``props``: each piece's
+    mass properties (source frame), or None to integrate them. ``inherited``: (the kept
+    parent groups' members (rows, group after group), their sizes (K,), pieces (K,) and
+    collision centres (K,3) [m, source frame], crack faces (T,4) bool) from
+    ``build_fragment_models``. Every step treats a piece's rows as its own build would:
+    the same rows in the same order, so each model is the one built alone."""
+    piece_count = len(tet_start) - 1
+    piece_of_tet = np.repeat(np.arange(piece_count), np.diff(tet_start))
+    piece_of_vertex = np.repeat(np.arange(piece_count), np.diff(vertex_start))
+    props = [p if p is not None else tet_mass_properties(
+        vertices[vertex_start[k]:vertex_start[k + 1]], tets[tet_start[k]:tet_start[k + 1]] - vertex_start[k],
+        density, vol[tet_start[k]:tet_start[k + 1]]) for k, p in enumerate(props)]
+    com = np.array([p.center_of_mass for p in props])  # (P,3)
+    vertices = vertices - com[piece_of_vertex]
+    faces, face_tet, face_local = boundary_faces(tets, neighbor)  # piece-major rows
+    face_piece = piece_of_tet[face_tet]
     centroids = rows.corner_mean(vertices[tets])
     mass = density * vol
     radius = np.cbrt(3.0 * vol / (4.0 * np.pi))
     is_surface = np.zeros(len(tets), dtype=bool)
     is_surface[face_tet] = True
-    surface = np.nonzero(is_surface)[0].astype(np.int32)
+    surface = np.nonzero(is_surface)[0]
 
+    # Boundary groups: the kept parent groups, then the surface particles they leave grouped
+    # afresh. One greedy walk over all pieces: no two pieces share a vertex row, so a piece's
+    # walk meets only its own particles, in its own order.
     if inherited is None:
-        groups, dropped = group_surface_particles(
-            centroids, surface, face_tet, faces, boundary_group_size, keep_leftovers
-        )
-        kept = 0
+        kept_members, kept_sizes, kept_piece = (np.zeros(0, dtype=np.int64),) * 3
+        kept_centres, crack_face = np.zeros((0, 3)), None
     else:
-        groups, kept_centres, crack_face = inherited
-        kept = len(groups)
-        covered = np.zeros(len(tets), dtype=bool)
-        if kept:
-            covered[np.concatenate(groups)] = True
-        rest = surface[~covered[surface]]
-        dropped = np.zeros(0, dtype=np.int32)
-        if len(rest):
-            on_rest = ~covered[face_tet]
-            fresh, dropped = group_surface_particles(
-                centroids, rest, face_tet[on_rest], faces[on_rest], boundary_group_size, keep_leftovers
-            )
-            groups = list(groups) + fresh
-    sizes = np.array([len(g) for g in groups], dtype=np.int64)
-    offsets = np.zeros(len(groups) + 1, dtype=np.int64)
+        kept_members, kept_sizes, kept_piece, kept_centres, crack_face = inherited
+    covered = np.zeros(len(tets), dtype=bool)
+    covered[kept_members] = True
+    rest = surface[~covered[surface]]
+    fresh, dropped = [], np.zeros(0, dtype=np.int64)
+    if len(rest):
+        on_rest = ~covered[face_tet]
+        fresh, dropped = group_surface_particles(centroids, rest, face_tet[on_rest], faces[on_rest],
+                                                 boundary_group_size, keep_leftovers)
+    fresh_sizes = np.array([len(g) for g in fresh], dtype=np.int64)
+    fresh_members = np.concatenate(fresh) if fresh else np.zeros(0, dtype=np.int64)
+    fresh_piece = piece_of_tet[fresh_members[np.cumsum(fresh_sizes) - fresh_sizes]]
+    # Each piece's groups: its kept ones (in the parent's order), then its fresh ones.
+    kept = len(kept_sizes)
+    order = np.argsort(np.concatenate([2 * kept_piece, 2 * fresh_piece + 1]), kind="stable")
+    all_sizes = np.concatenate([kept_sizes, fresh_sizes])
+    sizes = all_sizes[order]
+    members = np.concatenate([kept_members, fresh_members])[_ranges((np.cumsum(all_sizes) - all_sizes)[order], sizes)]
+    group_piece = np.concatenate([kept_piece, fresh_piece])[order]
+    group_count = len(sizes)
+    offsets = np.zeros(group_count + 1, dtype=np.int64)
     np.cumsum(sizes, out=offsets[1:])
-    members = np.concatenate(groups).astype(np.int32) if groups else np.zeros(0, np.int32)
-    owner = np.repeat(np.arange(len(groups)), sizes)
-    b_mass = np.bincount(owner, weights=mass[members], minlength=len(groups))
+    owner = np.repeat(np.arange(group_count), sizes)
+    b_mass = np.bincount(owner, weights=mass[members], minlength=group_count)
     b_pos = np.stack(
-        [np.bincount(owner, weights=centroids[members, k], minlength=len(groups)) for k in range(3)], axis=1
+        [np.bincount(owner, weights=centroids[members, k], minlength=group_count) for k in range(3)], axis=1
     ) / np.maximum(sizes, 1)[:, None]
     reach = rows.norm(centroids[members] - b_pos[owner]) + radius[members]
-    b_radius = np.zeros(len(groups))
+    b_radius = np.zeros(group_count)
     np.maximum.at(b_radius, owner, reach)
-    if inherited is None:
-        contact_pos = contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius)
-    else:
-        contact_pos = np.empty_like(b_pos)
-        contact_pos[:kept] = kept_centres - com
-        redo = np.ones(len(groups), dtype=bool)
-        redo[:kept] = _near_faces(vertices, faces[crack_face[face_tet, face_local]], b_pos[:kept],
-                                  CENTRE_REACH * b_radius[:kept])
-        which = np.nonzero(redo)[0]
-        if len(which):
-            sub = np.isin(owner, which)
-            renumber = np.cumsum(redo) - 1
-            contact_pos[which] = contact_sphere_centres(vertices, faces, face_tet, centroids, members[sub],
-                                                        renumber[owner[sub]], b_pos[which], b_radius[which])
 
-    return BodyModel(
-        vertices=vertices,
-        tets=tets.astype(np.int32),
-        tet_volume=vol,
-        tet_neighbor=neighbor,
-        bonds=bonds_from_neighbors(neighbor),
-        particle_position=centroids,
-        particle_mass=mass,
-        particle_radius=radius,
-        is_surface=is_surface,
-        surface_particles=surface,
-        surface_faces=faces,
-        surface_face_tet=face_tet,
-        surface_face_local=face_local,
-        boundary_position=b_pos,
-        boundary_mass=b_mass,
-        boundary_radius=b_radius,
-        boundary_member_offsets=offsets.astype(np.int32),
-        boundary_members=members,
-        dropped_surface_particles=dropped.astype(np.int32),
-        density=float(density),
-        mass=props.mass,
-        inertia=props.inertia,
-        com_in_source=com,
-        source_tet=np.asarray(source_tet).astype(np.int32),
-        boundary_group_size=int(boundary_group_size),
-        boundary_contact_position=contact_pos,
-        particle_spacing=float(spacing),
-        root=root,
-    )
+    # Collision centres: a kept group's is its parent's unless a crack face comes near it.
+    contact_pos = np.empty_like(b_pos)
+    redo = order >= kept
+    slots = np.nonzero(~redo)[0]
+    contact_pos[slots] = kept_centres[order[slots]] - com[group_piece[slots]]
+    if len(slots):
+        crack = crack_face[face_tet, face_local]
+        for k in np.unique(group_piece[slots]):
+            mine = slots[group_piece[slots] == k]
+            redo[mine] = _near_faces(vertices, faces[crack & (face_piece == k)], b_pos[mine],
+                                     CENTRE_REACH * b_radius[mine])
+    which = np.nonzero(redo)[0]
+    if len(which):
+        sub = redo[owner]
+        renumber = np.cumsum(redo) - 1
+        contact_pos[which] = contact_sphere_centres(vertices, faces, face_tet, centroids, members[sub],
+                                                    renumber[owner[sub]], b_pos[which], b_radius[which],
+                                                    group_piece=group_piece[which], face_piece=face_piece)
+
+    bonds = bonds_from_neighbors(neighbor)  # rows of the batch, piece-major
+    face_start = _starts(face_piece, piece_count)
+    group_start = _starts(group_piece, piece_count)
+    surface_start = np.searchsorted(surface, tet_start)
+    bond_start = np.searchsorted(bonds[:, 0], tet_start)
+    dropped_start = _starts(piece_of_tet[dropped], piece_count)
+    models = []
+    for k in range(piece_count):
+        t0, t1 = tet_start[k], tet_start[k + 1]
+        v0, v1 = vertex_start[k], vertex_start[k + 1]
+        g0, g1 = group_start[k], group_start[k + 1]
+        f0, f1 = face_start[k], face_start[k + 1]
+        own_neighbor = neighbor[t0:t1]
+        models.append(BodyModel(
+            vertices=vertices[v0:v1],
+            tets=(tets[t0:t1] - v0).astype(np.int32),
+            tet_volume=vol[t0:t1],
+            tet_neighbor=np.where(own_neighbor >= 0, own_neighbor - t0, -1).astype(np.int32),
+            bonds=(bonds[bond_start[k]:bond_start[k + 1]] - t0).astype(np.int32),
+            particle_position=centroids[t0:t1],
+            particle_mass=mass[t0:t1],
+            particle_radius=radius[t0:t1],
+            is_surface=is_surface[t0:t1],
+            surface_particles=(surface[surface_start[k]:surface_start[k + 1]] - t0).astype(np.int32),
+            surface_faces=(faces[f0:f1] - v0).astype(np.int32),
+            surface_face_tet=(face_tet[f0:f1] - t0).astype(np.int32),
+            surface_face_local=face_local[f0:f1],
+            boundary_position=b_pos[g0:g1],
+            boundary_mass=b_mass[g0:g1],
+            boundary_radius=b_radius[g0:g1],
+            boundary_member_offsets=(offsets[g0:g1 + 1] - offsets[g0]).astype(np.int32),
+            boundary_members=(members[offsets[g0]:offsets[g1]] - t0).astype(np.int32),
+            dropped_surface_particles=(dropped[dropped_start[k]:dropped_start[k + 1]] - t0).astype(np.int32),
+            density=float(density),
+            mass=props[k].mass,
+            inertia=props[k].inertia,
+            com_in_source=com[k],
+            source_tet=np.asarray(source_tet[t0:t1]).astype(np.int32),
+            boundary_group_size=int(boundary_group_size),
+            boundary_contact_position=contact_pos[g0:g1],
+            particle_spacing=float(spacing),
+            root=root,
+        ))
+    return models
 
 
 #: A kept boundary group's collision centre is computed again when a crack face lies
@@ -451,7 +558,8 @@ def _near_faces(vertices, faces, points, reach) -> np.ndarray:
     return distance < reach + float(radius.max())
 
 
-def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius):
+def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius, *,
+                           group_piece=None, face_piece=None):
     """Collision centres of the boundary spheres (see ``BodyModel.boundary_contact_position``).
 
     For each group: its outward normal n (area-weighted normals of its members' boundary
@@ -467,6 +575,11 @@ def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner,
     that its cross-section at the surface stops covering its members (so neighbouring
     spheres leave no hole a small body could fall through, even on a coarse mesh), and
     never so far that it pokes out behind (t - R).
+
+    ``group_piece`` (G,) and ``face_piece`` (F,): the piece of each group and face when
+    several bodies' groups are given at once (``_assemble``): each group then looks only
+    at its own piece's faces, and the smallest normal counted as one is relative to its
+    own piece's largest. None: one body.
     """
     n_groups = len(b_pos)
     if n_groups == 0 or len(faces) == 0:
@@ -483,7 +596,11 @@ def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner,
     n_sum = np.zeros((n_groups, 3))
     np.add.at(n_sum, group, normal)
     length = rows.norm(n_sum)
-    has_normal = length > 1e-12 * max(float(length.max()), 1e-300)
+    if group_piece is None:
+        group_piece, face_piece = np.zeros(n_groups, dtype=np.int64), np.zeros(len(faces), dtype=np.int64)
+    largest = np.zeros(int(group_piece.max()) + 1)
+    np.maximum.at(largest, group_piece, length)
+    has_normal = length > 1e-12 * np.maximum(largest[group_piece], 1e-300)
     n_unit = np.where(has_normal[:, None], n_sum / np.maximum(length, 1e-300)[:, None], 0.0)
     rel = corners - b_pos[group][:, None, :]  # (Fm,3,3) face vertices from the centre
     heights = (rel * n_unit[group][:, None, :]).sum(axis=2)
@@ -500,15 +617,17 @@ def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner,
     if len(todo):
         thickness = np.full(n_groups, np.inf)
         thickness[todo] = ray_exit_distance(vertices, faces, b_pos[todo], -n_unit[todo],
-                                            shift[todo] + b_radius[todo])
+                                            shift[todo] + b_radius[todo], ray_group=group_piece[todo],
+                                            face_group=face_piece)
         shift = np.minimum(shift, thickness - b_radius)
     shift = np.maximum(shift, 0.0)
     return b_pos - shift[:, None] * n_unit
 
 
-def ray_exit_distance(vertices, faces, origin, direction, reach):
+def ray_exit_distance(vertices, faces, origin, direction, reach, *, ray_group=None, face_group=None):
     """Distance [m] along each ray (origin (P,3) [m], unit direction (P,3)) to the first
-    boundary face (F,3) it crosses within ``reach`` (P,) [m]; inf when none does.
+    boundary face (F,3) it crosses within ``reach`` (P,) [m]; inf when none does. With
+    ``ray_group`` (P,) and ``face_group`` (F,), a ray crosses only its own group's faces.
 
     ``geometry.rays.first_hits``: one kernel, each ray testing only the faces whose
     bounding sphere comes within its reach (Moller-Trumbore). The model build asks only
@@ -516,4 +635,4 @@ def ray_exit_distance(vertices, faces, origin, direction, reach):
     a general ray cast (trimesh's rtree cast took ~21 ms per fragment model, 60 % of its
     build; a KD-tree query in numpy, 2.9 ms for a ring's big piece).
     """
-    return first_hits(vertices, faces, origin, direction, reach)
+    return first_hits(vertices, faces, origin, direction, reach, ray_group=ray_group, face_group=face_group)

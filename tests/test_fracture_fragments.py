@@ -172,6 +172,41 @@ def test_fragment_model_restricted_from_parent_matches_a_fresh_build(ring_split)
     assert kept_total > 0.3 * sum(f.model.boundary_particle_count for f in frags)  # 294 of 589 here
 
 
+def test_pieces_built_together_are_the_pieces_built_alone():
+    """build_fragment_models builds a split's pieces in one batch. Each model is, array for
+    array and to the bit, the one built of that piece alone (a batch of one), also for
+    the pieces of a piece: the batch leaks nothing between pieces (their vertices,
+    boundary groups, inward rays, normals)."""
+    import dataclasses
+
+    from taichi_frac.model import BodyModel, build_fragment_model, build_fragment_models
+
+    model = ring_model()
+    opts = FractureOptions(crack_count=5, crack_length=0.3, seed=0, min_fragment_particles=1)
+    analysis = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, MATERIAL, opts)
+    pieces = split_body(model, analysis, opts).fragment_tets
+    sizes = sorted(len(p) for p in pieces)
+    assert len(pieces) >= 6 and sizes[0] < 30 and sizes[-1] > 1000  # chips and a big piece
+    parents = [model]
+    big = build_fragment_model(model, pieces[int(np.argmax([len(p) for p in pieces]))], boundary_group_size=4)
+    second = split_body(big, [CrackPlane(point=big.particle_position[k], normal=np.eye(3)[k % 3], extent=0.05,
+                                         peak_stress=2e6) for k in (0, big.tet_count // 2)], opts).fragment_tets
+    assert len(second) >= 2
+    for parent, parts in ((model, pieces), (big, second)):
+        together = build_fragment_models(parent, parts, boundary_group_size=4)
+        for tets, batched in zip(parts, together):
+            alone = build_fragment_model(parent, tets, boundary_group_size=4)
+            for f in dataclasses.fields(BodyModel):
+                a, b = getattr(batched, f.name), getattr(alone, f.name)
+                if isinstance(a, np.ndarray):
+                    assert a.dtype == b.dtype and a.shape == b.shape, f.name
+                    assert np.array_equal(a, b), f"{f.name} differs (piece of {len(tets)} tets)"
+                else:
+                    assert a is b or a == b, f.name
+    with pytest.raises(ValueError, match="overlap"):
+        build_fragment_models(model, [np.arange(10), np.arange(5, 20)])
+
+
 def corner_cracks(model, tet):
     """Crack discs on the faces of ``tet`` shared with neighbours: isolates it (and maybe a
     few tets beside it)."""

@@ -3,7 +3,7 @@
 Smith, Witkin & Baraff 2001: the tets of a body are joined by breakable links (here the
 face-sharing bonds of ``BodyModel.bonds``); a crack breaks links, never remeshes. After
 cutting, each connected set of tets is a new rigid body whose exact mass properties,
-surface and boundary particles come from ``build_fragment_model`` on that tet subset (the
+surface and boundary particles come from ``build_fragment_models`` on that tet subset (the
 parent's face adjacency restricted to it): faces whose neighbour is in another fragment
 become boundary faces, so crack faces are new surface automatically.
 
@@ -35,7 +35,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from ..geometry.rotation import quaternion_matrix
-from ..model import BodyModel, build_fragment_model
+from ..model import BodyModel, build_fragment_models
 from ..options import FractureOptions, Material, ParticleOptions
 from .cracks import ImpactAnalysis, cut_bonds
 
@@ -292,11 +292,10 @@ def make_fragments(
     can_break_again = options is None or (options.refracture and generation <= options.max_generations)
 
     fragments = []
-    for tets, is_debris, peak in zip(split.fragment_tets, split.fragment_is_debris, split.fragment_peak_stress):
-        frag_model = build_fragment_model(
-            model, tets, boundary_group_size=particle_options.boundary_group_size,
-            keep_leftovers=particle_options.keep_leftovers,
-        )
+    models = build_fragment_models(model, split.fragment_tets, boundary_group_size=particle_options.boundary_group_size,
+                                   keep_leftovers=particle_options.keep_leftovers)
+    for frag_model, tets, is_debris, peak in zip(models, split.fragment_tets, split.fragment_is_debris,
+                                                 split.fragment_peak_stress):
         offset = rot @ frag_model.com_in_source  # parent COM -> fragment COM, world frame
         fragments.append(Fragment(
             model=frag_model,

@@ -72,11 +72,15 @@ def face_bounds(corners: np.ndarray):
 
 
 def first_hits(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, direction: np.ndarray,
-               reach: np.ndarray) -> np.ndarray:
+               reach: np.ndarray, *, ray_group: np.ndarray | None = None,
+               face_group: np.ndarray | None = None) -> np.ndarray:
     """(P,) [m] distance along each ray (``origin`` (P,3) [m], unit ``direction`` (P,3)) to
     the first of the triangles ``faces`` (F,3) over ``vertices`` (V,3) [m] it crosses
     within ``reach`` (P,) [m]; inf when none does. Triangles seen edge-on (|det| <= 1e-18)
-    are not hit."""
+    are not hit. ``ray_group`` (P,) and ``face_group`` (F,) (ints, both or neither): a ray
+    crosses only the faces of its own group (the pieces of one split, built together);
+    each group is answered as it would be alone, all of them in at most one kernel launch
+    and one numpy pass."""
     origin = np.ascontiguousarray(origin, dtype=np.float64).reshape(-1, 3)
     result = np.full(len(origin), np.inf)
     if len(origin) == 0 or len(faces) == 0:
@@ -85,38 +89,70 @@ def first_hits(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, dire
     reach = np.ascontiguousarray(reach, dtype=np.float64).reshape(-1)
     corners = np.asarray(vertices, dtype=np.float64)[faces]  # (F,3,3)
     centre, radius = face_bounds(corners)
-    if len(origin) * len(corners) <= SMALL_PAIRS:
-        return _first_hits_numpy(corners, centre, radius, origin, direction, reach)
-    runtime.init()
-    # Faces sorted along the axis their centres spread most on: a ray scans only those
-    # whose centre lies within its reach plus the largest face radius of it along that
-    # axis (a slab: about a fifth of a ring piece's faces).
-    axis = int(np.argmax(np.ptp(centre, axis=0)))
-    order = np.argsort(centre[:, axis], kind="stable")
-    corners = np.ascontiguousarray(corners[order])
-    bounds = np.ascontiguousarray(np.column_stack([centre[order], radius[order]]))
-    grown = reach + float(radius.max())
-    scan = np.empty((len(origin), 2), dtype=np.int32)
-    scan[:, 0] = np.searchsorted(bounds[:, axis], origin[:, axis] - grown, side="left")
-    scan[:, 1] = np.searchsorted(bounds[:, axis], origin[:, axis] + grown, side="right")
-    _first_hits(corners, bounds, origin, direction, reach, scan, result)
+    if ray_group is None:
+        ray_group, face_group = np.zeros(len(origin), dtype=np.int64), np.zeros(len(faces), dtype=np.int64)
+    ray_order = np.argsort(ray_group, kind="stable")
+    face_order = np.argsort(face_group, kind="stable")
+    groups, ray_start = np.unique(ray_group[ray_order], return_index=True)
+    ray_start = np.append(ray_start, len(origin))
+    face_start = np.searchsorted(face_group[face_order], groups, side="left")
+    face_end = np.searchsorted(face_group[face_order], groups, side="right")
+    small_rays, small_faces, big = [], [], []
+    for k in range(len(groups)):
+        rays = ray_order[ray_start[k]:ray_start[k + 1]]
+        mine = face_order[face_start[k]:face_end[k]]
+        if len(mine) == 0:
+            continue
+        if len(rays) * len(mine) <= SMALL_PAIRS:
+            small_rays.append(np.repeat(rays, len(mine)))
+            small_faces.append(np.tile(mine, len(rays)))
+        else:
+            big.append((rays, mine))
+    if small_rays:
+        _first_hits_numpy(corners, centre, radius, origin, direction, reach, np.concatenate(small_rays),
+                          np.concatenate(small_faces), result)
+    if big:
+        runtime.init()
+        # Each group's faces sorted along the axis their centres spread most on: a ray scans
+        # only those of its group whose centre lies within its reach plus the group's
+        # largest face radius along that axis (a slab: about a fifth of a ring piece's faces).
+        sorted_faces, scans, rays_all, first = [], [], [], 0
+        for rays, mine in big:
+            axis = int(np.argmax(np.ptp(centre[mine], axis=0)))
+            mine = mine[np.argsort(centre[mine, axis], kind="stable")]
+            along = centre[mine, axis]
+            grown = reach[rays] + float(radius[mine].max())
+            scans.append(np.column_stack([np.searchsorted(along, origin[rays, axis] - grown, side="left"),
+                                          np.searchsorted(along, origin[rays, axis] + grown, side="right")])
+                         + first)
+            sorted_faces.append(mine)
+            rays_all.append(rays)
+            first += len(mine)
+        mine = np.concatenate(sorted_faces)
+        rays = np.concatenate(rays_all)
+        hits = np.empty(len(rays))
+        _first_hits(np.ascontiguousarray(corners[mine]), np.ascontiguousarray(np.column_stack([centre[mine],
+                    radius[mine]])), np.ascontiguousarray(origin[rays]), np.ascontiguousarray(direction[rays]),
+                    np.ascontiguousarray(reach[rays]), np.concatenate(scans).astype(np.int32), hits)
+        result[rays] = hits
     return result
 
 
-#: Up to this many ray-face pairs, every pair in numpy: a fragment's chip (a few rays, a few
-#: dozen faces) took ~0.6 ms through the kernel's launch and arguments, ~0.1 ms here.
+#: Up to this many ray-face pairs in a group, every pair in numpy: a fragment's chip (a few
+#: rays, a few dozen faces) took ~0.6 ms through the kernel's launch and arguments, ~0.1 ms
+#: in numpy.
 SMALL_PAIRS = 4096
 
 
-def _first_hits_numpy(corners, centre, radius, origin, direction, reach):
-    """``first_hits`` over every ray-face pair (the same bounding test and Moller-Trumbore
-    test as the kernel)."""
-    result = np.full(len(origin), np.inf)
-    gap = centre[None, :, :] - origin[:, None, :]  # (P,F,3)
-    grown = reach[:, None] + radius[None, :]
-    ray, face = np.nonzero(np.einsum("pfx,pfx->pf", gap, gap) <= grown * grown)
+def _first_hits_numpy(corners, centre, radius, origin, direction, reach, ray, face, result):
+    """``first_hits`` over the candidate ray-face pairs ``ray``, ``face`` (N,) (the same
+    bounding test and Moller-Trumbore test as the kernel), into ``result`` (P,)."""
+    gap = centre[face] - origin[ray]
+    grown = reach[ray] + radius[face]
+    near = rows.dot(gap, gap) <= grown * grown
+    ray, face = ray[near], face[near]
     if len(ray) == 0:
-        return result
+        return
     o, d = origin[ray], direction[ray]
     v0 = corners[face, 0]
     e1, e2 = corners[face, 1] - v0, corners[face, 2] - v0
@@ -131,4 +167,3 @@ def _first_hits_numpy(corners, centre, radius, origin, direction, reach):
     t = rows.dot(e2, q) * inv
     hit = ok & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > 0.0) & (t <= reach[ray])
     np.minimum.at(result, ray[hit], t[hit])
-    return result
