@@ -13,15 +13,14 @@ Layers:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 from .geometry import rows
 from .geometry.mass import MassProperties, tet_mass_properties
 from .geometry.rays import face_bounds, first_hits
+from .geometry.surface_groups import group_surface_particles
 from .geometry.topology import (
     bonds_from_neighbors,
     boundary_faces,
@@ -136,98 +135,6 @@ class BodyModel:
     @property
     def volume(self) -> float:
         return float(self.tet_volume.sum())
-
-
-def group_surface_particles(
-    positions: np.ndarray,
-    surface: np.ndarray,
-    face_tet: np.ndarray,
-    faces: np.ndarray,
-    group_size: int,
-    keep_leftovers: bool = True,
-):
-    """Merge adjacent surface particles into groups of about ``group_size``.
-
-    Two surface particles are adjacent when their tets share a boundary vertex. Seeds are
-    taken in breadth-first order over that graph (so groups tile the surface without gaps);
-    each seed takes its nearest still-free neighbours, widening to neighbours of the group
-    when the seed's own ring runs out, until the group has ``group_size`` members. A group
-    that ends with one member is a leftover: kept as its own boundary particle or dropped.
-
-    Returns (groups: list of int arrays of tet indices, dropped: int array).
-    """
-    if group_size == 1:
-        return [np.array([s]) for s in surface], np.zeros(0, dtype=np.int32)
-    s_count = len(surface)
-    local = np.full(int(surface.max()) + 1 if s_count else 1, -1, dtype=np.int64)
-    local[surface] = np.arange(s_count)
-    adjacent = _surface_adjacency(local[face_tet], faces, s_count)
-    # The greedy walk below is sequential; on a fragment's few hundred particles plain
-    # Python lists beat numpy's per-call overhead (~4x on a ring's 2,562).
-    pos = positions[surface].tolist()
-    free = [True] * s_count
-    visited = [False] * s_count
-    groups, dropped = [], []
-    for start in range(s_count):
-        if visited[start]:
-            continue
-        queue = [start]
-        visited[start] = True
-        head = 0
-        while head < len(queue):
-            seed = queue[head]
-            head += 1
-            nbrs = adjacent[seed]
-            for m in nbrs:
-                if not visited[m]:
-                    visited[m] = True
-                    queue.append(m)
-            if not free[seed]:
-                continue
-            members = [seed]
-            free[seed] = False
-            frontier = nbrs
-            seed_pos = pos[seed]
-            for _ in range(3):  # widen at most twice beyond the seed's own ring
-                cand = sorted({m for m in frontier if free[m]})
-                if cand:
-                    cand.sort(key=lambda m: math.dist(pos[m], seed_pos))  # stable: ties by index
-                    take = cand[: group_size - len(members)]
-                    for m in take:
-                        free[m] = False
-                    members.extend(take)
-                if len(members) >= group_size:
-                    break
-                frontier = [m for member in members for m in adjacent[member]]
-            if len(members) == 1 and not keep_leftovers:
-                dropped.append(seed)
-            else:
-                groups.append(surface[np.array(members)])
-    return groups, surface[np.array(dropped, dtype=np.int64)].astype(np.int32)
-
-
-def _surface_adjacency(owner: np.ndarray, faces: np.ndarray, count: int) -> list:
-    """rows[k]: the particles (ascending, k included) that share a boundary vertex with
-    particle k, where ``owner`` (F,) is the particle of each boundary face (F,3). Python
-    sets for a few hundred particles (the crack side of a fragment: scipy's sparse
-    product cost ~0.6 ms of overhead there), the incidence matrix squared above that."""
-    if count <= 400:
-        by_vertex: dict[int, set] = {}
-        for p, face in zip(owner.tolist(), faces.tolist()):
-            for v in face:
-                by_vertex.setdefault(v, set()).add(p)
-        near = [set() for _ in range(count)]
-        for sharing in by_vertex.values():
-            for p in sharing:
-                near[p] |= sharing
-        return [sorted(n) for n in near]
-    # Incidence particle x boundary vertex, then particle adjacency.
-    cols = faces.reshape(-1)
-    inc = sp.csr_matrix((np.ones(len(cols)), (np.repeat(owner, 3), cols)), shape=(count, int(cols.max()) + 1))
-    adj = (inc @ inc.T).tocsr()
-    adj.sort_indices()
-    flat, ptr = adj.indices.tolist(), adj.indptr.tolist()
-    return [flat[ptr[k]:ptr[k + 1]] for k in range(count)]  # (one tolist, not one per row)
 
 
 def build_body_model(
@@ -446,13 +353,9 @@ def _assemble(vertices, tets, vol, neighbor, tet_start, vertex_start, density, b
     covered = np.zeros(len(tets), dtype=bool)
     covered[kept_members] = True
     rest = surface[~covered[surface]]
-    fresh, dropped = [], np.zeros(0, dtype=np.int64)
-    if len(rest):
-        on_rest = ~covered[face_tet]
-        fresh, dropped = group_surface_particles(centroids, rest, face_tet[on_rest], faces[on_rest],
-                                                 boundary_group_size, keep_leftovers)
-    fresh_sizes = np.array([len(g) for g in fresh], dtype=np.int64)
-    fresh_members = np.concatenate(fresh) if fresh else np.zeros(0, dtype=np.int64)
+    on_rest = ~covered[face_tet]
+    fresh_members, fresh_sizes, dropped = group_surface_particles(centroids, rest, face_tet[on_rest],
+                                                                  faces[on_rest], boundary_group_size, keep_leftovers)
     fresh_piece = piece_of_tet[fresh_members[np.cumsum(fresh_sizes) - fresh_sizes]]
     # Each piece's groups: its kept ones (in the parent's order), then its fresh ones.
     kept = len(kept_sizes)

@@ -140,3 +140,71 @@ def test_ray_exit_distance_matches_a_hand_computed_box():
     got = ray_exit_distance(vertices, faces, origin, direction, reach)
     np.testing.assert_allclose(got[:3], [0.5, 0.9, 0.5 * np.sqrt(2.0)], rtol=1e-12)
     assert got[3] == np.inf
+
+
+def reference_groups(positions, surface, face_tet, faces, group_size, keep_leftovers):
+    """The greedy grouping walk of ``geometry.surface_groups`` written plainly in Python
+    (adjacency from sets of the particles at each boundary vertex): the reference the
+    kernel is checked against. Returns (groups: lists of tet indices, dropped)."""
+    local = {int(t): k for k, t in enumerate(surface)}
+    at_vertex = {}
+    for t, face in zip(face_tet.tolist(), faces.tolist()):
+        for v in face:
+            at_vertex.setdefault(v, set()).add(local[t])
+    adjacent = [set() for _ in surface]
+    for sharing in at_vertex.values():
+        for p in sharing:
+            adjacent[p] |= sharing
+    adjacent = [sorted(a) for a in adjacent]
+    pos = positions[surface].tolist()
+    free, visited = [True] * len(surface), [False] * len(surface)
+    groups, dropped = [], []
+    for start in range(len(surface)):
+        if visited[start]:
+            continue
+        queue, visited[start] = [start], True
+        for seed in queue:  # (the list grows while it is walked: breadth first)
+            for m in adjacent[seed]:
+                if not visited[m]:
+                    visited[m] = True
+                    queue.append(m)
+            if not free[seed]:
+                continue
+            members, free[seed], frontier = [seed], False, adjacent[seed]
+            for _ in range(3):
+                cand = sorted({m for m in frontier if free[m]}, key=lambda m: (math.dist(pos[m], pos[seed]), m))
+                for m in cand[:group_size - len(members)]:
+                    free[m] = False
+                    members.append(m)
+                if len(members) >= group_size:
+                    break
+                frontier = [m for member in members for m in adjacent[member]]
+            if len(members) == 1 and not keep_leftovers:
+                dropped.append(int(surface[seed]))
+            else:
+                groups.append([int(surface[m]) for m in members])
+    return groups, dropped
+
+
+@pytest.mark.parametrize("group_size,keep", [(4, True), (3, False), (8, True)])
+def test_grouping_walk_matches_a_python_reference(ring, group_size, keep):
+    """The kernel's greedy walk makes the groups the plain Python walk makes, member for
+    member and in order, on the ring's whole surface and on a patch of it (a crack side's
+    few hundred particles). They may part only at near-ties: two candidates whose
+    distances to the seed round to the same value in one arithmetic and not the other
+    (the kernel compares squared distances), so >= 99 % of the groups must agree."""
+    from taichi_frac.geometry.surface_groups import group_surface_particles
+
+    for surface in (ring.surface_particles, ring.surface_particles[:300]):
+        on = np.isin(ring.surface_face_tet, surface)
+        args = (ring.particle_position, surface, ring.surface_face_tet[on], ring.surface_faces[on], group_size, keep)
+        members, sizes, dropped = group_surface_particles(*args)
+        expected, expected_dropped = reference_groups(*args)
+        got = [g.tolist() for g in np.split(members, np.cumsum(sizes)[:-1])]
+        assert abs(len(got) - len(expected)) <= 0.01 * len(expected)
+        same = len({tuple(g) for g in got} & {tuple(g) for g in expected})
+        assert same >= 0.99 * len(expected), f"{same} of {len(expected)} groups agree"
+        if keep:
+            assert len(dropped) == len(expected_dropped) == 0
+        else:
+            assert abs(len(dropped) - len(expected_dropped)) <= max(2, 0.01 * len(surface))
