@@ -404,14 +404,14 @@ class Simulation:
                 self.writer.end_fragment(rec.cache_id, frame)
             self.mass_dropped += split.dropped_mass
             self.fracture_events += 1
-            for k, piece in enumerate(pieces):
-                piece = self._lift_out_of_ground(piece)
-                child = self.world.add_body(
-                    piece.model, piece.position, piece.orientation, piece.linear_velocity,
-                    piece.angular_velocity, friction=rec.friction, restitution=rec.restitution,
-                    breakable=piece.breakable, young_modulus=rec.material.young_modulus,
-                    poisson_ratio=rec.material.poisson_ratio,
-                )
+            pieces = [self._lift_out_of_ground(piece) for piece in pieces]
+            children = self.world.add_bodies(
+                [p.model for p in pieces], [p.position for p in pieces], [p.orientation for p in pieces],
+                [p.linear_velocity for p in pieces], [p.angular_velocity for p in pieces], friction=rec.friction,
+                restitution=rec.restitution, breakable=[p.breakable for p in pieces],
+                young_modulus=rec.material.young_modulus, poisson_ratio=rec.material.poisson_ratio,
+            )
+            for k, (piece, child) in enumerate(zip(pieces, children)):
                 child_rec = BodyRecord(
                     name=f"{rec.name}_{k}", model=piece.model, root=rec.root, material=rec.material,
                     fracture=rec.fracture, particles=rec.particles, breakable=piece.breakable,

@@ -16,7 +16,6 @@ import taichi as ti
 from .. import runtime
 from ..collision.grid import CELLS_PER_SPHERE, body_grid
 from ..collision import broadphase, narrowphase
-from ..geometry import rows
 from ..geometry.rotation import quaternion_matrix
 from ..model import BodyModel
 from . import impacts as impact_kernels
@@ -67,55 +66,136 @@ class WorldStats:
     last_frame_seconds: float = 0.0
 
 
-#: Layout of ``_write_body``'s ``row`` (f32, 43): pose (13: position, orientation wxyz,
+#: Layout of a ``_write_bodies`` row (f32, 43): pose (13: position, orientation wxyz,
 #: linear and angular velocity), inertia and inverse inertia (row-major 3x3), the scalars
 #: (inverse mass, friction, restitution, compliance, contact radius), the sphere grid's
 #: origin, edge and dims (``grid.body_grid``).
 _ROW_INERTIA, _ROW_INVERSE_INERTIA, _ROW_SCALARS, _ROW_GRID = 13, 22, 31, 36  # (the pose at 0)
+#: Columns of a ``_write_bodies`` ints row (i32): body slot, first particle slot, fixed,
+#: its spheres' first and last + 1 row, its grid entries' first and last + 1 row, cluster
+#: spheres asked.
+_INT_SLOT, _INT_START, _INT_FIXED, _INT_SPHERES, _INT_SPHERES_END, _INT_GRID, _INT_GRID_END, _INT_CLUSTERS = range(8)
+
+
+@ti.func
+def _cluster_spheres(bodies: ti.template(), slot, spheres: ti.template(), begin, end, wanted,
+                     nearest: ti.template()):
+    """Body ``slot``'s cluster spheres (``Bodies.cluster``) over its collision spheres (rows
+    ``begin`` to ``end`` of ``spheres`` (N,4) f64: body-frame centre [m], radius [m]):
+    at most ``wanted`` seeds by farthest-point sampling (the first the sphere farthest
+    from their mean), each cluster sphere at the mean of the spheres nearest its seed,
+    its radius reaching the far side of every member (|offset - centre| + radius).
+    ``nearest`` (N,) f64 is scratch (each sphere's squared distance to the nearest seed,
+    then its cluster). Ties go to the lower index, as numpy's argmax/argmin."""
+    mean = ti.math.vec3(0.0)
+    for k in range(begin, end):
+        mean += ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2])
+    mean /= end - begin
+    first = begin
+    far = -1.0
+    for k in range(begin, end):
+        d = ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2]) - mean
+        if d.dot(d) > far:
+            far = d.dot(d)
+            first = k
+    seed = ti.math.vec3(spheres[first, 0], spheres[first, 1], spheres[first, 2])
+    bodies.cluster[slot, 0] = ti.math.vec4(seed, 0.0)
+    for k in range(begin, end):
+        d = ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2]) - seed
+        nearest[k] = d.dot(d)
+    seeds = 1
+    while seeds < wanted:
+        pick = begin
+        for k in range(begin, end):
+            if nearest[k] > nearest[pick]:
+                pick = k
+        if nearest[pick] <= 0.0:  # (coincident centres: fewer seeds)
+            break
+        seed = ti.math.vec3(spheres[pick, 0], spheres[pick, 1], spheres[pick, 2])
+        bodies.cluster[slot, seeds] = ti.math.vec4(seed, 0.0)
+        seeds += 1
+        for k in range(begin, end):
+            d = ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2]) - seed
+            nearest[k] = ti.min(nearest[k], d.dot(d))
+    # Each sphere's cluster (its nearest seed), then each cluster's mean, then its reach.
+    for k in range(begin, end):
+        o = ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2])
+        label = 0
+        best = 1e300
+        for m in range(seeds):
+            d = o - ti.math.vec3(bodies.cluster[slot, m][0], bodies.cluster[slot, m][1], bodies.cluster[slot, m][2])
+            if d.dot(d) < best:
+                best = d.dot(d)
+                label = m
+        nearest[k] = label
+    sums = ti.Matrix([[0.0] * 4 for _ in range(MAX_CLUSTERS)], ti.f64)  # centre sum, count; then centre, reach
+    for k in range(begin, end):
+        m = ti.cast(nearest[k], ti.i32)
+        for x in ti.static(range(3)):
+            sums[m, x] += spheres[k, x]
+        sums[m, 3] += 1.0
+    for m in range(seeds):
+        for x in ti.static(range(3)):
+            sums[m, x] /= sums[m, 3]
+        sums[m, 3] = 0.0
+    for k in range(begin, end):
+        m = ti.cast(nearest[k], ti.i32)
+        o = ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2])
+        sums[m, 3] = ti.max(sums[m, 3], (o - ti.math.vec3(sums[m, 0], sums[m, 1], sums[m, 2])).norm() + spheres[k, 3])
+    for m in range(seeds):
+        bodies.cluster[slot, m] = ti.math.vec4(sums[m, 0], sums[m, 1], sums[m, 2], sums[m, 3])
+    bodies.cluster_count[slot] = seeds
 
 
 @ti.kernel
-def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32, start: ti.i32, fixed: ti.i32,
-                row: ti.types.ndarray(dtype=ti.f32, ndim=1),
-                spheres: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                clusters: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                grid_ints: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-    """Fill one body slot and its particle range: ``row`` (see ``_ROW_*``), ``spheres``
-    (N,4) collision spheres (body-frame centre [m], radius [m]), ``clusters`` (K,4),
-    ``grid_ints`` the sphere grid's order (N,) then its cell starts (cells + 1,),
-    body-relative. Few array arguments: each costs ~11 us of Python a launch (17
-    arguments took ~0.25 ms a body added)."""
+def _write_bodies(bodies: ti.template(), particles: ti.template(),
+                  ints: ti.types.ndarray(dtype=ti.i32, ndim=2),
+                  row: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                  spheres: ti.types.ndarray(dtype=ti.f64, ndim=2),
+                  grid_ints: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                  nearest: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+    """Fill K body slots and their particle ranges in one launch: ``ints`` (K,8) (see
+    ``_INT_*``), ``row`` (K,43) (see ``_ROW_*``), ``spheres`` (N,4) every body's collision
+    spheres, body after body (body-frame centre [m], radius [m]), ``grid_ints`` each
+    body's sphere-grid order (its spheres' count) then cell starts (cells + 1),
+    body-relative, body after body; ``nearest`` (N,) scratch. Few array arguments: each
+    costs ~11 us of Python a launch, and one launch serves all the pieces of a split."""
     ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for _ in range(1):
-        bodies.position[slot] = ti.math.vec3(row[0], row[1], row[2])
-        bodies.orientation[slot] = ti.math.vec4(row[3], row[4], row[5], row[6]).normalized()
-        bodies.linear_velocity[slot] = ti.math.vec3(row[7], row[8], row[9])
-        bodies.angular_velocity[slot] = ti.math.vec3(row[10], row[11], row[12])
+    for b in range(ints.shape[0]):
+        slot = ints[b, _INT_SLOT]
+        start = ints[b, _INT_START]
+        begin = ints[b, _INT_SPHERES]
+        end = ints[b, _INT_SPHERES_END]
+        bodies.position[slot] = ti.math.vec3(row[b, 0], row[b, 1], row[b, 2])
+        bodies.orientation[slot] = ti.math.vec4(row[b, 3], row[b, 4], row[b, 5], row[b, 6]).normalized()
+        bodies.linear_velocity[slot] = ti.math.vec3(row[b, 7], row[b, 8], row[b, 9])
+        bodies.angular_velocity[slot] = ti.math.vec3(row[b, 10], row[b, 11], row[b, 12])
         bodies.pseudo_linear_velocity[slot] = ti.math.vec3(0.0)
         bodies.pseudo_angular_velocity[slot] = ti.math.vec3(0.0)
         for r, c in ti.static(ti.ndrange(3, 3)):
-            bodies.inertia_body[slot][r, c] = row[_ROW_INERTIA + 3 * r + c]
-            bodies.inverse_inertia_body[slot][r, c] = row[_ROW_INVERSE_INERTIA + 3 * r + c]
-        bodies.inverse_mass[slot] = row[_ROW_SCALARS]
-        bodies.friction[slot] = row[_ROW_SCALARS + 1]
-        bodies.restitution[slot] = row[_ROW_SCALARS + 2]
-        bodies.contact_compliance[slot] = row[_ROW_SCALARS + 3]
-        bodies.contact_radius[slot] = row[_ROW_SCALARS + 4]
-        bodies.fixed[slot] = fixed
+            bodies.inertia_body[slot][r, c] = row[b, _ROW_INERTIA + 3 * r + c]
+            bodies.inverse_inertia_body[slot][r, c] = row[b, _ROW_INVERSE_INERTIA + 3 * r + c]
+        bodies.inverse_mass[slot] = row[b, _ROW_SCALARS]
+        bodies.friction[slot] = row[b, _ROW_SCALARS + 1]
+        bodies.restitution[slot] = row[b, _ROW_SCALARS + 2]
+        bodies.contact_compliance[slot] = row[b, _ROW_SCALARS + 3]
+        bodies.contact_radius[slot] = row[b, _ROW_SCALARS + 4]
+        bodies.fixed[slot] = ints[b, _INT_FIXED]
         bodies.sleeping[slot] = 0
         bodies.sleep_timer[slot] = 0.0
         bodies.wake_request[slot] = 0
         bodies.particle_start[slot] = start
-        bodies.particle_count[slot] = spheres.shape[0]
+        bodies.particle_count[slot] = end - begin
         bodies.active[slot] = 1
         bounding = 0.0
         largest = 0.0
         total = 0.0
         lower = ti.math.vec3(1e30)
         upper = ti.math.vec3(-1e30)
-        for k in range(spheres.shape[0]):
-            offset = ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2])
-            r = spheres[k, 3]
+        for k in range(begin, end):
+            offset = ti.math.vec3(ti.cast(spheres[k, 0], ti.f32), ti.cast(spheres[k, 1], ti.f32),
+                                  ti.cast(spheres[k, 2], ti.f32))
+            r = ti.cast(spheres[k, 3], ti.f32)
             bounding = ti.max(bounding, offset.norm() + r)
             largest = ti.max(largest, r)
             total += r
@@ -123,32 +203,31 @@ def _write_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32, s
             upper = ti.max(upper, offset + r)
         bodies.bounding_radius[slot] = bounding
         bodies.max_particle_radius[slot] = largest
-        bodies.mean_particle_radius[slot] = total / spheres.shape[0]
+        bodies.mean_particle_radius[slot] = total / (end - begin)
         bodies.local_lower[slot] = lower
         bodies.local_upper[slot] = upper
         bodies.motion[slot] = 0.0
         g = _ROW_GRID
-        bodies.grid_origin[slot] = ti.math.vec3(row[g], row[g + 1], row[g + 2])
-        bodies.grid_edge[slot] = row[g + 3]
-        bodies.grid_dims[slot] = ti.math.ivec3(ti.cast(row[g + 4], ti.i32), ti.cast(row[g + 5], ti.i32),
-                                               ti.cast(row[g + 6], ti.i32))
-        bodies.cluster_count[slot] = clusters.shape[0]
-        for m in range(clusters.shape[0]):
-            bodies.cluster[slot, m] = ti.math.vec4(clusters[m, 0], clusters[m, 1], clusters[m, 2], clusters[m, 3])
-    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for k in range(spheres.shape[0]):
-        p = start + k
-        particles.body[p] = slot
-        particles.cache_stamp[0, p] = -1
-        particles.cache_stamp[1, p] = -1
-        particles.offset[p] = ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2])
-        particles.radius[p] = spheres[k, 3]
-        j = grid_ints[k]
-        particles.grid_sphere[p] = ti.math.vec4(spheres[j, 0], spheres[j, 1], spheres[j, 2], spheres[j, 3])
-        particles.grid_slot[p] = start + j
-    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for c in range(grid_ints.shape[0] - spheres.shape[0]):
-        particles.cell_first[ti.static(CELLS_PER_SPHERE) * start + c] = start + grid_ints[spheres.shape[0] + c]
+        bodies.grid_origin[slot] = ti.math.vec3(row[b, g], row[b, g + 1], row[b, g + 2])
+        bodies.grid_edge[slot] = row[b, g + 3]
+        bodies.grid_dims[slot] = ti.math.ivec3(ti.cast(row[b, g + 4], ti.i32), ti.cast(row[b, g + 5], ti.i32),
+                                               ti.cast(row[b, g + 6], ti.i32))
+        _cluster_spheres(bodies, slot, spheres, begin, end, ints[b, _INT_CLUSTERS], nearest)
+        grid = ints[b, _INT_GRID]
+        count = end - begin
+        for k in range(count):
+            p = start + k
+            particles.body[p] = slot
+            particles.cache_stamp[0, p] = -1
+            particles.cache_stamp[1, p] = -1
+            particles.offset[p] = ti.math.vec3(spheres[begin + k, 0], spheres[begin + k, 1], spheres[begin + k, 2])
+            particles.radius[p] = spheres[begin + k, 3]
+            j = grid_ints[grid + k]
+            particles.grid_sphere[p] = ti.math.vec4(spheres[begin + j, 0], spheres[begin + j, 1],
+                                                    spheres[begin + j, 2], spheres[begin + j, 3])
+            particles.grid_slot[p] = start + j
+        for c in range(ints[b, _INT_GRID_END] - grid - count):
+            particles.cell_first[ti.static(CELLS_PER_SPHERE) * start + c] = start + grid_ints[grid + count + c]
 
 
 @ti.kernel
@@ -294,38 +373,6 @@ def _body_rows(ids: np.ndarray, rows: np.ndarray) -> dict:
                 angular_velocity=rows[:, 10:13], active=rows[:, 13] != 0, sleeping=rows[:, 14] != 0)
 
 
-def cluster_spheres(offsets: np.ndarray, radii: np.ndarray, count: int) -> np.ndarray:
-    """(K, 4) spheres (centre [m], radius [m]) that together enclose every sphere
-    (``offsets`` (N,3) [m], ``radii`` (N,) [m]), K = min(count, N): seeds by farthest-point
-    sampling, each sphere at the mean of the spheres nearest its seed, its radius reaching
-    the far side of every member (|offset - centre| + radius)."""
-    offsets = np.asarray(offsets, dtype=np.float64)
-    radii = np.asarray(radii, dtype=np.float64)
-    k_count = min(count, len(offsets))
-    def distance2(point):  # squared: the same argmax
-        d = offsets - point
-        return rows.dot(d, d)
-
-    seeds = [int(np.argmax(distance2(offsets.mean(axis=0))))]
-    nearest = distance2(offsets[seeds[0]])
-    while len(seeds) < k_count and nearest.max() > 0.0:  # (coincident centres: fewer seeds)
-        seeds.append(int(np.argmax(nearest)))
-        np.minimum(nearest, distance2(offsets[seeds[-1]]), out=nearest)
-    k_count = len(seeds)
-    d = offsets[:, None, :] - offsets[seeds][None, :, :]
-    label = np.argmin(np.einsum("nki,nki->nk", d, d), axis=1)
-    # Per-sphere mean and reach over its members, by sorting on the label (one pass, not
-    # one masked pass per sphere: the whole function 0.92 -> 0.51 ms on a ring's 399 spheres).
-    order = np.argsort(label, kind="stable")
-    sizes = np.bincount(label, minlength=k_count)  # the seed itself is a member: never empty
-    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    spheres = np.zeros((k_count, 4))
-    spheres[:, :3] = np.add.reduceat(offsets[order], starts, axis=0) / sizes[:, None]
-    reach = rows.norm(offsets - spheres[label, :3]) + radii
-    spheres[:, 3] = np.maximum.reduceat(reach[order], starts)
-    return spheres
-
-
 class World:
     """Rigid bodies colliding through their particle layers (see docs/ARCHITECTURE.md).
 
@@ -378,49 +425,90 @@ class World:
         ``young_modulus`` [Pa] (None: rigid) and ``poisson_ratio`` give the Hertz contact
         time of its impacts; ``contact_radius`` [m] (default: the radius of the sphere of
         its volume) is the curvature it impacts with (see impacts.py)."""
-        single = self.options.single_scale if single_scale is None else bool(single_scale)
-        if single:
-            offsets = model.particle_position[model.surface_particles]
-            radii = model.particle_radius[model.surface_particles]
-        else:
-            offsets = model.collision_position
-            radii = model.boundary_radius
-        count = len(radii)
-        if count == 0:
-            raise ValueError("the body has no collision particles (empty boundary layer)")
-        slot = self._allocate_body_slot()
-        start = self._allocate_particles(count, slot_for_error=slot)
-        inertia = np.asarray(model.inertia, dtype=np.float64)
-        if fixed:
-            inverse_mass, inverse_inertia = 0.0, np.zeros((3, 3))
-        else:
-            inverse_mass, inverse_inertia = 1.0 / model.mass, np.linalg.inv(inertia)
+        return self.add_bodies([model], [position], [orientation_wxyz], [linear_velocity], [angular_velocity],
+                               friction=friction, restitution=restitution, single_scale=single_scale, fixed=fixed,
+                               breakable=breakable, young_modulus=young_modulus, poisson_ratio=poisson_ratio,
+                               contact_radius=contact_radius)[0]
+
+    def add_bodies(self, models, positions, orientations_wxyz, linear_velocities, angular_velocities, *,
+                   friction: float = 0.5, restitution: float = 0.2, single_scale: bool | None = None,
+                   fixed: bool = False, breakable=True, young_modulus: float | None = None,
+                   poisson_ratio: float = 0.25, contact_radius: float | None = None) -> list[int]:
+        """Add K bodies at once (the pieces of a split) in one launch; returns their slot
+        ids in order. Per body: ``models``, ``positions`` (K,3) [m], ``orientations_wxyz``
+        (K,4), ``linear_velocities`` (K,3) [m/s], ``angular_velocities`` (K,3) [rad/s] and
+        ``breakable`` (one bool for all, or K); the other arguments are shared and mean
+        what they mean for :meth:`add_body`. Either every body is added or none (a full
+        capacity raises CapacityError with nothing added)."""
+        count = len(models)
+        per_body = (positions, orientations_wxyz, linear_velocities, angular_velocities)
+        if any(len(a) != count for a in per_body):
+            raise ValueError(f"add_bodies needs one position, orientation and pair of velocities per model "
+                             f"({count} models), got {[len(a) for a in per_body]}")
+        if isinstance(breakable, (bool, np.bool_)):
+            breakable = [bool(breakable)] * count
+        if len(breakable) != count:
+            raise ValueError(f"breakable: one bool, or one per model ({count}), got {len(breakable)}")
         if young_modulus is not None and not young_modulus > 0:
             raise ValueError(f"young_modulus must be > 0 [Pa] or None (rigid), got {young_modulus!r}")
         compliance = 0.0 if young_modulus is None else (1.0 - poisson_ratio ** 2) / young_modulus
-        if contact_radius is None:
-            contact_radius = (3.0 * model.volume / (4.0 * np.pi)) ** (1.0 / 3.0)
-        pose = np.concatenate([position, orientation_wxyz, linear_velocity, angular_velocity]).astype(np.float32)
-        if pose.shape != (13,):
-            raise ValueError("position, velocities need 3 components and orientation_wxyz 4")
-        origin, edge, dims, cell_first, order = body_grid(offsets, radii, self.options.contact_margin)
-        row = np.concatenate([pose, inertia.reshape(-1), inverse_inertia.reshape(-1),
-                              [inverse_mass, friction, restitution, compliance, contact_radius], origin, [edge],
-                              dims]).astype(np.float32)
-        spheres = np.empty((count, 4), dtype=np.float32)
-        spheres[:, :3] = offsets
-        spheres[:, 3] = radii
-        _write_body(self.bodies, self.particles, slot, start, int(fixed), row, spheres,
-                    cluster_spheres(offsets, radii, min(MAX_CLUSTERS, max(1, count // 16))).astype(np.float32),
-                    np.concatenate([order, cell_first]).astype(np.int32))
-        self._body_range[slot] = (start, count)
+        single = self.options.single_scale if single_scale is None else bool(single_scale)
+        layers = []
+        for model in models:
+            if single:
+                offsets, radii = model.particle_position[model.surface_particles], \
+                    model.particle_radius[model.surface_particles]
+            else:
+                offsets, radii = model.collision_position, model.boundary_radius
+            if len(radii) == 0:
+                raise ValueError("the body has no collision particles (empty boundary layer)")
+            layers.append((offsets, radii))
+        taken = []  # (slot, start, count): given back if a later body does not fit
+        try:
+            for offsets, radii in layers:
+                slot = self._allocate_body_slot()
+                taken.append((slot, self._allocate_particles(len(radii), slot_for_error=slot), len(radii)))
+        except CapacityError:
+            for slot, start, n in reversed(taken):  # (so the slots go out again in the same order)
+                self._free_body_slots.insert(0, slot)
+                self._release_particles(start, n)
+            raise
+        ints = np.zeros((count, 8), dtype=np.int32)
+        rows_out = np.empty((count, 43), dtype=np.float32)
+        sphere_rows, grid_rows = [], []
+        spheres_so_far = grid_so_far = 0
+        for b, (model, (offsets, radii), (slot, start, n)) in enumerate(zip(models, layers, taken)):
+            inertia = np.asarray(model.inertia, dtype=np.float64)
+            if fixed:
+                inverse_mass, inverse_inertia = 0.0, np.zeros((3, 3))
+            else:
+                inverse_mass, inverse_inertia = 1.0 / model.mass, np.linalg.inv(inertia)
+            radius = contact_radius if contact_radius is not None else (3.0 * model.volume / (4.0 * np.pi)) ** (1 / 3)
+            pose = np.concatenate([positions[b], orientations_wxyz[b], linear_velocities[b], angular_velocities[b]])
+            if pose.shape != (13,):
+                raise ValueError("position, velocities need 3 components and orientation_wxyz 4")
+            origin, edge, dims, cell_first, order = body_grid(offsets, radii, self.options.contact_margin)
+            rows_out[b] = np.concatenate([pose, inertia.reshape(-1), inverse_inertia.reshape(-1),
+                                          [inverse_mass, friction, restitution, compliance, radius], origin, [edge],
+                                          dims])
+            sphere_rows.append(np.column_stack([offsets, radii]))
+            grid_rows.append(np.concatenate([order, cell_first]))
+            ints[b] = (slot, start, int(fixed), spheres_so_far, spheres_so_far + n, grid_so_far,
+                       grid_so_far + len(grid_rows[-1]), min(MAX_CLUSTERS, max(1, n // 16)))
+            spheres_so_far += n
+            grid_so_far += len(grid_rows[-1])
+        spheres = np.concatenate(sphere_rows).astype(np.float64)
+        _write_bodies(self.bodies, self.particles, ints, rows_out, spheres,
+                      np.concatenate(grid_rows).astype(np.int32), np.empty(len(spheres)))
         self.breakable = getattr(self, "breakable", {})
-        self.breakable[slot] = bool(breakable)
-        self._particles_in_use += count
-        self._particle_slot_end = max(self._particle_slot_end, start + count)
+        for (slot, start, n), can_break in zip(taken, breakable):
+            self._body_range[slot] = (start, n)
+            self.breakable[slot] = bool(can_break)
+            self._particles_in_use += n
+            self._particle_slot_end = max(self._particle_slot_end, start + n)
         self.particles.slot_end[None] = self._particle_slot_end
         self.bodies.slot_end[None] = self._body_slot_end
-        return slot
+        return [slot for slot, _, _ in taken]
 
     def remove_body(self, body: int) -> None:
         """Free a body's slot and particle range (a parent replaced by its fragments)."""
