@@ -227,7 +227,8 @@ def test_broadphase_neighbour_lists_equal_testing_every_pair():
     and ``bounds.pair_motion``, at least one of the two awake), in ascending slot order:
     bodies of many sizes, moving and spinning fast, some asleep, and one plate far larger
     than the cells (kept out of the grid, tested against every body; it has more
-    neighbours than its list holds, so its count is -1)."""
+    neighbours than its list holds, so its count is -1). A sleeping body gets no list (it
+    makes no contacts of its own: its awake neighbours' lists hold it)."""
     world, bodies, asleep = _scattered_bodies()
     margin, dt, g = world.options.contact_margin, 4e-3, 9.81
     stages.collide(world.fields, margin, dt, world.options.sleep_time)
@@ -254,7 +255,10 @@ def test_broadphase_neighbour_lists_equal_testing_every_pair():
     counts = f.neighbor_count.to_numpy()[ids]
     lists = f.neighbors.to_numpy()[ids]
     assert pair.sum() > 150
+    assert idle.sum() >= 3 and np.all(counts[idle] == 0)
     for k, b in enumerate(ids):
+        if idle[k]:
+            continue
         if counts[k] < 0:  # more neighbours than the list holds (the plate, under everyone)
             assert pair[k].sum() > f.max_neighbors
             continue

@@ -122,19 +122,18 @@ def _pair_grown_radius(bodies: ti.template(), statics: ti.template(), b, margin,
 
 
 @ti.func
-def _test_neighbor(bodies: ti.template(), statics: ti.template(), b, o, xb, rb, b_idle, count, margin, dt):
-    """Append ``o`` to b's neighbour list when their grown bounding spheres overlap (one
-    of the two awake); returns the new count (-1: the list overflowed)."""
-    if not (b_idle and is_idle(bodies, o)):
-        closing = pair_motion(bodies, statics, b, o, dt)
-        reach = rb + bodies.bounding_radius[o] + margin * bodies.max_particle_radius[o] + closing
-        if (bodies.position[o] - xb).norm_sqr() < reach * reach:
-            if count < bodies.max_neighbors:
-                bodies.neighbors[b, count] = o
-                bodies.neighbor_motion[b, count] = closing
-                count += 1
-            else:
-                count = -1
+def _test_neighbor(bodies: ti.template(), statics: ti.template(), b, o, xb, rb, count, margin, dt):
+    """Append ``o`` to awake body b's neighbour list when their grown bounding spheres
+    overlap; returns the new count (-1: the list overflowed)."""
+    closing = pair_motion(bodies, statics, b, o, dt)
+    reach = rb + bodies.bounding_radius[o] + margin * bodies.max_particle_radius[o] + closing
+    if (bodies.position[o] - xb).norm_sqr() < reach * reach:
+        if count < bodies.max_neighbors:
+            bodies.neighbors[b, count] = o
+            bodies.neighbor_motion[b, count] = closing
+            count += 1
+        else:
+            count = -1
     return count
 
 
@@ -218,19 +217,21 @@ def _body_scatter(bodies: ti.template(), grid: ti.template(), b):
 def _body_neighbors(bodies: ti.template(), statics: ti.template(), grid: ti.template(), b, margin, dt):
     """Body b's neighbour list: from the bodies sharing a cell with it (each pair in the
     first cell the two boxes share), every large body, and every body when b is large or
-    the grid overflowed; then sorted by body slot (the order testing every pair gives)."""
+    the grid overflowed; then sorted by body slot (the order testing every pair gives).
+    Only for an awake body: an idle one makes no contacts of its own, so nothing reads its
+    list or flags (it is found in its awake neighbours' lists); in a settling pile most
+    bodies sleep, and their lists were most of the broadphase's time."""
     count = 0
     near = 0
-    if bodies.active[b] == 1:
+    if bodies.active[b] == 1 and not is_idle(bodies, b):
         xb = bodies.position[b]
         rb = bodies.bounding_radius[b] + margin * bodies.max_particle_radius[b]
-        b_idle = is_idle(bodies, b)
         lower = grid.lower[b]
         upper = grid.upper[b]
         if grid.overflow[None] == 1 or (upper < lower).any():  # every body
             for o in range(bodies.slot_end[None]):
                 if o != b and bodies.active[o] == 1 and count >= 0:
-                    count = _test_neighbor(bodies, statics, b, o, xb, rb, b_idle, count, margin, dt)
+                    count = _test_neighbor(bodies, statics, b, o, xb, rb, count, margin, dt)
         else:
             size = grid.table_size[None]
             for i, j, k in ti.ndrange((lower[0], upper[0] + 1), (lower[1], upper[1] + 1), (lower[2], upper[2] + 1)):
@@ -240,10 +241,10 @@ def _body_neighbors(bodies: ti.template(), statics: ti.template(), grid: ti.temp
                     o = grid.entry_body[e]
                     if o != b and count >= 0 and (grid.entry_cell[e] == cell).all() \
                             and (ti.max(lower, grid.lower[o]) == cell).all():
-                        count = _test_neighbor(bodies, statics, b, o, xb, rb, b_idle, count, margin, dt)
+                        count = _test_neighbor(bodies, statics, b, o, xb, rb, count, margin, dt)
             for m in range(grid.large_count[None]):
                 if count >= 0:
-                    count = _test_neighbor(bodies, statics, b, grid.large[m], xb, rb, b_idle, count, margin, dt)
+                    count = _test_neighbor(bodies, statics, b, grid.large[m], xb, rb, count, margin, dt)
             # Insertion sort by slot (a few dozen entries), with the closings alongside.
             for m in range(1, ti.max(count, 0)):
                 o = bodies.neighbors[b, m]
@@ -255,8 +256,7 @@ def _body_neighbors(bodies: ti.template(), statics: ti.template(), grid: ti.temp
                     n -= 1
                 bodies.neighbors[b, n] = o
                 bodies.neighbor_motion[b, n] = closing
-        if not b_idle:
-            near = near_static(statics, xb, _grown_radius(bodies, b, margin))
+        near = near_static(statics, xb, _grown_radius(bodies, b, margin))
     bodies.neighbor_count[b] = count
     bodies.near_body[b] = 1 if count != 0 else 0
     bodies.near_static[b] = near

@@ -78,30 +78,45 @@ _INT_SLOT, _INT_START, _INT_FIXED, _INT_SPHERES, _INT_SPHERES_END, _INT_GRID, _I
 
 
 @ti.func
+def _sphere_f32(spheres: ti.template(), k):
+    """Row k of ``spheres`` (N,4) f64 as the f32 the fields hold (round to nearest, as
+    numpy's astype)."""
+    return ti.Vector([ti.cast(spheres[k, c], ti.f32) for c in ti.static(range(4))], dt=ti.f32)
+
+
+_vec3d = ti.types.vector(3, ti.f64)
+
+
+@ti.func
+def _centre(spheres: ti.template(), k):
+    return _vec3d(spheres[k, 0], spheres[k, 1], spheres[k, 2])
+
+
+@ti.func
 def _cluster_spheres(bodies: ti.template(), slot, spheres: ti.template(), begin, end, wanted,
                      nearest: ti.template()):
     """Body ``slot``'s cluster spheres (``Bodies.cluster``) over its collision spheres (rows
-    ``begin`` to ``end`` of ``spheres`` (N,4) f64: body-frame centre [m], radius [m]):
-    at most ``wanted`` seeds by farthest-point sampling (the first the sphere farthest
-    from their mean), each cluster sphere at the mean of the spheres nearest its seed,
-    its radius reaching the far side of every member (|offset - centre| + radius).
+    ``begin`` to ``end`` of ``spheres`` (N,4) f64: body-frame centre [m], radius [m]), in
+    f64: at most ``wanted`` seeds by farthest-point sampling (the first the sphere
+    farthest from their mean), each cluster sphere at the mean of the spheres nearest its
+    seed, its radius reaching the far side of every member (|offset - centre| + radius).
     ``nearest`` (N,) f64 is scratch (each sphere's squared distance to the nearest seed,
     then its cluster). Ties go to the lower index, as numpy's argmax/argmin."""
-    mean = ti.math.vec3(0.0)
+    mean = _vec3d(0.0)
     for k in range(begin, end):
-        mean += ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2])
-    mean /= end - begin
+        mean += _centre(spheres, k)
+    mean /= ti.cast(end - begin, ti.f64)
     first = begin
-    far = -1.0
+    far = ti.cast(-1.0, ti.f64)
     for k in range(begin, end):
-        d = ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2]) - mean
+        d = _centre(spheres, k) - mean
         if d.dot(d) > far:
             far = d.dot(d)
             first = k
-    seed = ti.math.vec3(spheres[first, 0], spheres[first, 1], spheres[first, 2])
-    bodies.cluster[slot, 0] = ti.math.vec4(seed, 0.0)
+    seed_index = ti.Vector([0] * MAX_CLUSTERS, dt=ti.i32)
+    seed_index[0] = first
     for k in range(begin, end):
-        d = ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2]) - seed
+        d = _centre(spheres, k) - _centre(spheres, first)
         nearest[k] = d.dot(d)
     seeds = 1
     while seeds < wanted:
@@ -111,19 +126,17 @@ def _cluster_spheres(bodies: ti.template(), slot, spheres: ti.template(), begin,
                 pick = k
         if nearest[pick] <= 0.0:  # (coincident centres: fewer seeds)
             break
-        seed = ti.math.vec3(spheres[pick, 0], spheres[pick, 1], spheres[pick, 2])
-        bodies.cluster[slot, seeds] = ti.math.vec4(seed, 0.0)
+        seed_index[seeds] = pick
         seeds += 1
         for k in range(begin, end):
-            d = ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2]) - seed
+            d = _centre(spheres, k) - _centre(spheres, pick)
             nearest[k] = ti.min(nearest[k], d.dot(d))
     # Each sphere's cluster (its nearest seed), then each cluster's mean, then its reach.
     for k in range(begin, end):
-        o = ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2])
         label = 0
-        best = 1e300
+        best = ti.cast(1e300, ti.f64)
         for m in range(seeds):
-            d = o - ti.math.vec3(bodies.cluster[slot, m][0], bodies.cluster[slot, m][1], bodies.cluster[slot, m][2])
+            d = _centre(spheres, k) - _centre(spheres, seed_index[m])
             if d.dot(d) < best:
                 best = d.dot(d)
                 label = m
@@ -140,10 +153,10 @@ def _cluster_spheres(bodies: ti.template(), slot, spheres: ti.template(), begin,
         sums[m, 3] = 0.0
     for k in range(begin, end):
         m = ti.cast(nearest[k], ti.i32)
-        o = ti.math.vec3(spheres[k, 0], spheres[k, 1], spheres[k, 2])
-        sums[m, 3] = ti.max(sums[m, 3], (o - ti.math.vec3(sums[m, 0], sums[m, 1], sums[m, 2])).norm() + spheres[k, 3])
+        centre = _vec3d(sums[m, 0], sums[m, 1], sums[m, 2])
+        sums[m, 3] = ti.max(sums[m, 3], (_centre(spheres, k) - centre).norm() + spheres[k, 3])
     for m in range(seeds):
-        bodies.cluster[slot, m] = ti.math.vec4(sums[m, 0], sums[m, 1], sums[m, 2], sums[m, 3])
+        bodies.cluster[slot, m] = ti.Vector([ti.cast(sums[m, c], ti.f32) for c in ti.static(range(4))], dt=ti.f32)
     bodies.cluster_count[slot] = seeds
 
 
@@ -193,9 +206,9 @@ def _write_bodies(bodies: ti.template(), particles: ti.template(),
         lower = ti.math.vec3(1e30)
         upper = ti.math.vec3(-1e30)
         for k in range(begin, end):
-            offset = ti.math.vec3(ti.cast(spheres[k, 0], ti.f32), ti.cast(spheres[k, 1], ti.f32),
-                                  ti.cast(spheres[k, 2], ti.f32))
-            r = ti.cast(spheres[k, 3], ti.f32)
+            sphere = _sphere_f32(spheres, k)
+            offset = ti.math.vec3(sphere[0], sphere[1], sphere[2])
+            r = sphere[3]
             bounding = ti.max(bounding, offset.norm() + r)
             largest = ti.max(largest, r)
             total += r
@@ -220,11 +233,11 @@ def _write_bodies(bodies: ti.template(), particles: ti.template(),
             particles.body[p] = slot
             particles.cache_stamp[0, p] = -1
             particles.cache_stamp[1, p] = -1
-            particles.offset[p] = ti.math.vec3(spheres[begin + k, 0], spheres[begin + k, 1], spheres[begin + k, 2])
-            particles.radius[p] = spheres[begin + k, 3]
+            sphere = _sphere_f32(spheres, begin + k)
+            particles.offset[p] = ti.math.vec3(sphere[0], sphere[1], sphere[2])
+            particles.radius[p] = sphere[3]
             j = grid_ints[grid + k]
-            particles.grid_sphere[p] = ti.math.vec4(spheres[begin + j, 0], spheres[begin + j, 1],
-                                                    spheres[begin + j, 2], spheres[begin + j, 3])
+            particles.grid_sphere[p] = _sphere_f32(spheres, begin + j)
             particles.grid_slot[p] = start + j
         for c in range(ints[b, _INT_GRID_END] - grid - count):
             particles.cell_first[ti.static(CELLS_PER_SPHERE) * start + c] = start + grid_ints[grid + count + c]
