@@ -289,3 +289,22 @@ def test_big_piece_mass_by_subtraction_matches_integration(generations):
     np.testing.assert_allclose(own.center_of_mass, 0.0, atol=1e-12 * np.ptp(root.vertices))
     np.testing.assert_allclose(piece.inertia, own.inertia, rtol=0, atol=1e-11 * np.abs(own.inertia).max())
     np.testing.assert_allclose(piece.inertia, direct.inertia, rtol=0, atol=1e-11 * np.abs(own.inertia).max())
+
+
+@pytest.mark.parametrize("cut_fraction", [0.0, 0.04, 0.3, 0.7])
+def test_connected_tets_match_scipy(cut_fraction):
+    """geometry.components.connected_tets (union-find in a kernel) against scipy's
+    connected_components on the ring's bonds with a random fraction cut: the same count
+    and the same labels (numbered by smallest tet), from one piece to thousands."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    from taichi_frac.geometry.components import connected_tets
+
+    model = ring_model()
+    cut = np.random.default_rng(int(100 * cut_fraction)).random(len(model.bonds)) < cut_fraction
+    kept = model.bonds[~cut]
+    graph = sp.coo_matrix((np.ones(len(kept)), (kept[:, 0], kept[:, 1])), shape=(model.tet_count,) * 2)
+    expected_count, expected = connected_components(graph, directed=False)
+    count, labels = connected_tets(model.tet_count, model.bonds, cut)
+    assert count == expected_count and np.array_equal(labels, expected)

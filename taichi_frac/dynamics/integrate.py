@@ -211,9 +211,8 @@ def _is_near(bodies: ti.template(), statics: ti.template(), b, grow, frame_dt, m
     return near
 
 
-@ti.kernel
-def substep_count(f: ti.template(), margin: ti.f32, frame_dt: ti.f32,
-                  substeps: ti.i32, motion_fraction: ti.f32) -> ti.i32:
+@ti.func
+def frame_substeps(f: ti.template(), margin, frame_dt, substeps, motion_fraction):
     """Substeps this frame needs: 0 when no body is awake, 1 when every awake body is in
     free flight (exact ballistic steps; fast spin is integrated in pieces by
     integrate_positions); otherwise the largest over the bodies that may touch something

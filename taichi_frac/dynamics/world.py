@@ -365,19 +365,23 @@ def _pack_kept(kept: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
 
 
 @ti.kernel
-def _reset_advance_counters(f: ti.template()):
+def _begin_advance(f: ti.template(), margin: ti.f32, frame_dt: ti.f32, substeps: ti.i32,
+                   motion_fraction: ti.f32) -> ti.i32:
+    """The advance's counters reset, and the substeps this frame needs
+    (``integrate.frame_substeps``), in one launch."""
     f.contacts.overflow[None] = 0
     f.contacts.peak[None] = 0
     f.impacts.count[None] = 0
     f.impacts.overflow[None] = 0
+    return integrate.frame_substeps(f, margin, frame_dt, substeps, motion_fraction)
 
 
 @ti.kernel
-def _advance_counters(f: ti.template()) -> ti.types.vector(4, ti.i32):
-    """(contacts in the last substep, peak, lost to capacity, impact rows lost) in one
-    launch instead of four field reads."""
+def _advance_counters(f: ti.template()) -> ti.types.vector(5, ti.i32):
+    """(contacts in the last substep, peak, lost to capacity, impact rows lost, impact rows
+    recorded) in one launch instead of five field reads."""
     return ti.Vector([f.contacts.count[None], f.contacts.peak[None], f.contacts.overflow[None],
-                      f.impacts.overflow[None]], dt=ti.i32)
+                      f.impacts.overflow[None], f.impacts.count[None]], dt=ti.i32)
 
 
 def _body_rows(ids: np.ndarray, rows: np.ndarray) -> dict:
@@ -423,6 +427,7 @@ class World:
         self._plane_count = 0
         self._box_count = 0
         self._substep_counter = 0
+        self._impact_rows = 0  # impact rows of the last advance, once it has ended
 
     # ---------------------------------------------------------------- bodies
 
@@ -617,9 +622,9 @@ class World:
         its place."""
         t_frame = time.perf_counter()
         opt = self.options
-        _reset_advance_counters(self.fields)
-        count = int(integrate.substep_count(self.fields, opt.contact_margin, frame_dt, int(substeps),
-                                            opt.substep_motion_fraction))
+        self._impact_rows = None  # (read live while the frame runs: a watch's fracture stage)
+        count = int(_begin_advance(self.fields, opt.contact_margin, frame_dt, int(substeps),
+                                   opt.substep_motion_fraction))
         if count > 0:  # someone is awake
             if count > opt.max_substeps:
                 self.stats.substep_limit_hits += 1
@@ -635,7 +640,8 @@ class World:
         self.stats.substeps = count
         self.stats.total_substeps += count
         self.stats.frames += 1
-        contacts, peak, overflow, impact_overflow = (int(v) for v in _advance_counters(self.fields))
+        contacts, peak, overflow, impact_overflow, impact_rows = (int(v) for v in _advance_counters(self.fields))
+        self._impact_rows = min(impact_rows, self.capacity.max_impacts)
         self.stats.contacts = contacts if count else 0
         self.stats.peak_contacts = max(peak, self.stats.contacts)
         self.stats.contact_overflows = overflow
@@ -704,7 +710,10 @@ class World:
         return _body_rows(ids, rows)
 
     def impact_count(self) -> int:
-        """Impact rows recorded so far in this advance (see :meth:`impacts`)."""
+        """Impact rows recorded so far in this advance (see :meth:`impacts`): the count the
+        advance read at its end, or, while it runs, the live one (a field read, a launch)."""
+        if self._impact_rows is not None:
+            return self._impact_rows
         return min(int(self.impact_buffer.count[None]), self.capacity.max_impacts)
 
     def checkpoint(self) -> Checkpoint:

@@ -31,9 +31,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
+from ..geometry.components import connected_tets
 from ..geometry.rotation import quaternion_matrix
 from ..model import BodyModel, build_fragment_models
 from ..options import FractureOptions, Material, ParticleOptions
@@ -125,13 +124,6 @@ class Fragment:
     breakable: bool = True
 
 
-def _labels(t_count: int, bonds: np.ndarray, keep: np.ndarray) -> tuple[int, np.ndarray]:
-    """Connected components of the tets joined by the bonds ``keep`` selects."""
-    b = bonds[keep]
-    graph = sp.coo_matrix((np.ones(len(b)), (b[:, 0], b[:, 1])), shape=(t_count, t_count))
-    return connected_components(graph, directed=False)
-
-
 def _merge_small(labels: np.ndarray, bonds: np.ndarray, cut: np.ndarray, min_size: int) -> np.ndarray:
     """The "merge" policy on component labels: the smallest small piece (ties: the lowest
     label) joins the piece it shares the most cut bonds with (ties: the lower label),
@@ -205,7 +197,7 @@ def split_body(
     cracks = list(cracks)
     t_count = model.tet_count
     cut = cut_bonds(model, cracks)
-    component_count, labels = _labels(t_count, model.bonds, ~cut)
+    component_count, labels = connected_tets(t_count, model.bonds, cut)
 
     small_limit = options.min_fragment_particles
     sizes = np.bincount(labels, minlength=component_count)
