@@ -136,10 +136,12 @@ def _merge_small(labels: np.ndarray, bonds: np.ndarray, cut: np.ndarray, min_siz
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     adjacent: dict[int, dict[int, int]] = {p: {} for p in sizes}
     if len(pairs):
-        both = np.concatenate([pairs, pairs[:, ::-1]])
-        uniq, counts = np.unique(both, axis=0, return_counts=True)
-        for (a, b), c in zip(uniq.tolist(), counts.tolist()):
-            adjacent[a][b] = c
+        # (pairs as one integer key: np.unique over rows sorts a structured view, ~10x slower)
+        span = int(labels.max()) + 1
+        keys, counts = np.unique(np.concatenate([pairs[:, 0] * span + pairs[:, 1], pairs[:, 1] * span + pairs[:, 0]]),
+                                 return_counts=True)
+        for key, c in zip(keys.tolist(), counts.tolist()):
+            adjacent[key // span][key % span] = c
     merged_into: dict[int, int] = {}
     while len(sizes) > 1:
         small = sorted((n, p) for p, n in sizes.items() if n < min_size)
