@@ -19,6 +19,7 @@ import numpy as np
 
 from .geometry import rows
 from .geometry.mass import MassProperties, tet_mass_properties
+from .geometry.collision_centres import collision_centres
 from .geometry.rays import face_bounds, first_hits
 from .geometry.surface_groups import group_surface_particles
 from .geometry.topology import (
@@ -482,60 +483,23 @@ def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner,
     ``group_piece`` (G,) and ``face_piece`` (F,): the piece of each group and face when
     several bodies' groups are given at once (``_assemble``): each group then looks only
     at its own piece's faces, and the smallest normal counted as one is relative to its
-    own piece's largest. None: one body.
+    own piece's largest. None: one body. One kernel launch
+    (``geometry.collision_centres``); tests/test_model_two_scale.py checks it against
+    this formula in numpy.
     """
-    n_groups = len(b_pos)
-    if n_groups == 0 or len(faces) == 0:
-        return b_pos.copy()
-    group_of_tet = np.full(len(centroids), -1, dtype=np.int64)
-    group_of_tet[members] = owner
-    group = group_of_tet[face_tet]
-    mine = np.nonzero(group >= 0)[0]  # the faces of these groups' members (all, or a few)
-    group = group[mine]
-    corners = vertices[faces[mine]]  # (Fm,3,3)
-    normal = rows.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    outward = np.sign(rows.dot(rows.corner_mean(corners) - centroids[face_tet[mine]], normal))
-    normal *= outward[:, None]  # away from the owning tet, whatever the winding
-    n_sum = np.zeros((n_groups, 3))
-    np.add.at(n_sum, group, normal)
-    length = rows.norm(n_sum)
     if group_piece is None:
-        group_piece, face_piece = np.zeros(n_groups, dtype=np.int64), np.zeros(len(faces), dtype=np.int64)
-    largest = np.zeros(int(group_piece.max()) + 1)
-    np.maximum.at(largest, group_piece, length)
-    has_normal = length > 1e-12 * np.maximum(largest[group_piece], 1e-300)
-    n_unit = np.where(has_normal[:, None], n_sum / np.maximum(length, 1e-300)[:, None], 0.0)
-    rel = corners - b_pos[group][:, None, :]  # (Fm,3,3) face vertices from the centre
-    heights = (rel * n_unit[group][:, None, :]).sum(axis=2)
-    h = np.full(n_groups, np.inf)
-    np.minimum.at(h, group, -heights.max(axis=1))
-    h = -h  # largest height of the group's faces above its centre
-    member_rel = centroids[members] - b_pos[owner]
-    along = rows.dot(member_rel, n_unit[owner])
-    rho = np.zeros(n_groups)
-    np.maximum.at(rho, owner, np.sqrt(np.maximum(rows.dot(member_rel, member_rel) - along ** 2, 0.0)))
-    cover = np.sqrt(np.maximum(b_radius ** 2 - rho ** 2, 0.0))
-    shift = np.where(has_normal & np.isfinite(h), np.minimum(b_radius, cover) - h, 0.0)
-    todo = np.nonzero(shift > 0)[0]
-    if len(todo):
-        thickness = np.full(n_groups, np.inf)
-        thickness[todo] = ray_exit_distance(vertices, faces, b_pos[todo], -n_unit[todo],
-                                            shift[todo] + b_radius[todo], ray_group=group_piece[todo],
-                                            face_group=face_piece)
-        shift = np.minimum(shift, thickness - b_radius)
-    shift = np.maximum(shift, 0.0)
-    return b_pos - shift[:, None] * n_unit
+        group_piece, face_piece = np.zeros(len(b_pos), dtype=np.int64), np.zeros(len(faces), dtype=np.int64)
+    return collision_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius,
+                             np.asarray(group_piece), np.asarray(face_piece))
 
 
-def ray_exit_distance(vertices, faces, origin, direction, reach, *, ray_group=None, face_group=None):
+def ray_exit_distance(vertices, faces, origin, direction, reach):
     """Distance [m] along each ray (origin (P,3) [m], unit direction (P,3)) to the first
-    boundary face (F,3) it crosses within ``reach`` (P,) [m]; inf when none does. With
-    ``ray_group`` (P,) and ``face_group`` (F,), a ray crosses only its own group's faces.
+    boundary face (F,3) it crosses within ``reach`` (P,) [m]; inf when none does.
 
     ``geometry.rays.first_hits``: one kernel, each ray testing only the faces whose
-    bounding sphere comes within its reach (Moller-Trumbore). The model build asks only
-    as far as the result can matter (a few particle radii), so this costs a fraction of
-    a general ray cast (trimesh's rtree cast took ~21 ms per fragment model, 60 % of its
-    build; a KD-tree query in numpy, 2.9 ms for a ring's big piece).
+    bounding sphere comes within its reach (Moller-Trumbore). The model build's own
+    thickness rays run inside ``geometry.collision_centres``' kernel (the same triangle
+    test); this is the general query, and the tests' reference for them.
     """
-    return first_hits(vertices, faces, origin, direction, reach, ray_group=ray_group, face_group=face_group)
+    return first_hits(vertices, faces, origin, direction, reach)

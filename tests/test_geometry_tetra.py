@@ -204,27 +204,3 @@ def test_first_hits_against_a_box_and_brute_force(path, monkeypatch):
     assert np.array_equal(np.isinf(got), np.isinf(expected)) and np.isfinite(expected).sum() > 20
     np.testing.assert_allclose(got[np.isfinite(got)], expected[np.isfinite(expected)], rtol=1e-12)
 
-
-@pytest.mark.parametrize("path", ["kernel", "numpy"])
-def test_first_hits_in_groups_see_only_their_own_faces(path, monkeypatch):
-    """first_hits with ray and face groups: two boxes, one inside the other (each box is
-    one group). Rays of the inner box's group from its centre hit the inner box's walls,
-    rays of the outer group from the same points pass the inner walls and hit the outer
-    ones; every group's answer equals the answer for that group alone."""
-    from taichi_frac.geometry import rays
-    from taichi_frac.geometry.rays import first_hits
-
-    monkeypatch.setattr(rays, "SMALL_PAIRS", 0 if path == "kernel" else 10**9)
-    inner = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
-    outer = trimesh.creation.box(extents=(3.0, 3.0, 3.0))
-    verts = np.concatenate([inner.vertices, outer.vertices]).astype(np.float64)
-    faces = np.concatenate([inner.faces, outer.faces + len(inner.vertices)])
-    face_group = np.repeat([0, 1], [len(inner.faces), len(outer.faces)])
-    origin = np.zeros((6, 3))
-    direction = np.concatenate([np.eye(3), -np.eye(3)])
-    ray_group = np.array([0, 1, 0, 1, 0, 1])
-    got = first_hits(verts, faces, origin, direction, np.full(6, 5.0), ray_group=ray_group, face_group=face_group)
-    np.testing.assert_allclose(got, [0.5, 1.5, 0.5, 1.5, 0.5, 1.5], atol=1e-12)
-    for g, box in enumerate((inner, outer)):
-        alone = first_hits(box.vertices, box.faces, origin[ray_group == g], direction[ray_group == g], np.full(3, 5.0))
-        assert np.array_equal(got[ray_group == g], alone)

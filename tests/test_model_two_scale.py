@@ -208,3 +208,63 @@ def test_grouping_walk_matches_a_python_reference(ring, group_size, keep):
             assert len(dropped) == len(expected_dropped) == 0
         else:
             assert abs(len(dropped) - len(expected_dropped)) <= max(2, 0.01 * len(surface))
+
+
+def numpy_collision_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius):
+    """``model.contact_sphere_centres``' formula written in numpy, one body (the kernel's
+    reference; the rays through ``ray_exit_distance``)."""
+    n_groups = len(b_pos)
+    group_of_tet = np.full(len(centroids), -1)
+    group_of_tet[members] = owner
+    group = group_of_tet[face_tet]
+    mine = np.nonzero(group >= 0)[0]
+    group = group[mine]
+    corners = vertices[faces[mine]]
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normal *= np.sign(((corners.mean(axis=1) - centroids[face_tet[mine]]) * normal).sum(axis=1))[:, None]
+    n_sum = np.zeros((n_groups, 3))
+    np.add.at(n_sum, group, normal)
+    length = np.linalg.norm(n_sum, axis=1)
+    has_normal = length > 1e-12 * length.max()
+    n_unit = np.where(has_normal[:, None], n_sum / np.maximum(length, 1e-300)[:, None], 0.0)
+    h = np.full(n_groups, -np.inf)
+    np.maximum.at(h, group, ((corners - b_pos[group][:, None, :]) * n_unit[group][:, None, :]).sum(axis=2).max(axis=1))
+    rel = centroids[members] - b_pos[owner]
+    along = (rel * n_unit[owner]).sum(axis=1)
+    rho = np.zeros(n_groups)
+    np.maximum.at(rho, owner, np.sqrt(np.maximum((rel * rel).sum(axis=1) - along ** 2, 0.0)))
+    shift = np.where(has_normal & np.isfinite(h), np.minimum(b_radius, np.sqrt(np.maximum(b_radius ** 2 - rho ** 2, 0)))
+                     - h, 0.0)
+    todo = shift > 0
+    thickness = np.full(n_groups, np.inf)
+    thickness[todo] = ray_exit_distance(vertices, faces, b_pos[todo], -n_unit[todo], shift[todo] + b_radius[todo])
+    shift = np.maximum(np.minimum(shift, thickness - b_radius), 0.0)
+    return b_pos - shift[:, None] * n_unit
+
+
+def test_collision_centres_kernel_matches_numpy(ring):
+    """The collision centres' kernel (geometry.collision_centres) against the formula in
+    numpy: on the ring's every group, and on the pieces of a split built together (each
+    piece's inward rays may cross only its own faces) against each piece alone."""
+    from _fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL
+    from taichi_frac.fracture.cracks import analyze_impact
+    from taichi_frac.fracture.fragments import split_body
+    from taichi_frac.model import build_fragment_models, contact_sphere_centres
+    from taichi_frac.options import FractureOptions, Material
+
+    def arguments(m):
+        owner = np.repeat(np.arange(m.boundary_particle_count), np.diff(m.boundary_member_offsets))
+        return (m.vertices, m.surface_faces, m.surface_face_tet, m.particle_position, m.boundary_members, owner,
+                m.boundary_position, m.boundary_radius)
+
+    expected = numpy_collision_centres(*arguments(ring))
+    assert np.abs(expected - ring.boundary_position).max() > 0.2 * ring.particle_radius.mean()  # they move
+    np.testing.assert_allclose(contact_sphere_centres(*arguments(ring)), expected, rtol=0, atol=1e-12)
+    material = Material(name="ring", density=DENSITY, young_modulus=70e9, poisson_ratio=0.2, tensile_strength=1e6)
+    opts = FractureOptions(crack_count=5, crack_length=0.1, seed=1, min_fragment_particles=1)
+    pieces = split_body(ring, analyze_impact(ring, RING_CONTACT, RING_NORMAL, RING_FORCE, material, opts),
+                        opts).fragment_tets
+    assert len(pieces) >= 4
+    for piece in build_fragment_models(ring, pieces, boundary_group_size=4):
+        np.testing.assert_allclose(piece.collision_position, numpy_collision_centres(*arguments(piece)), rtol=0,
+                                   atol=1e-12)
