@@ -32,34 +32,23 @@ def _stress_kernel(
     # Data in/out:
     displacement: ti.types.ndarray(dtype=ti.f64, ndim=2),  # (N,3) [m], rows ``where`` written
     stress_out: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) [Pa]
-    serial: ti.template(),  # both loops serial (small work: see SERIAL_BELOW)
 ):
     """Steps 5-7 of an analysis in one launch: the superposed half-space displacement at
     ``where`` (``field.displacement_at``), then at each query the SPH gradient
     (``sph.gradient_at``) and the stress (``stress.stress_of``): the functions of
     ``point_loads_displacement``, ``displacement_gradient`` and ``stress_from_gradient`` in one
     launch."""
-    ti.loop_config(serialize=serial)
     for w in range(where_count):
         i = where[w]
         u = displacement_at(points, i, loads, shear_modulus, poisson_ratio)
         for c in ti.static(range(3)):
             displacement[i, c] = u[c]
-    ti.loop_config(serialize=serial)
     for q in range(query_count):
         grad, _ = gradient_at(points, volumes, query[q], offsets[q], offsets[q + 1], indices, smoothing_length,
                               corrected, min_eigen_ratio, displacement)
         s = stress_of(grad, lame_lambda, shear_modulus)
         for a, b in ti.static(ti.ndrange(3, 3)):
             stress_out[q, a, b] = s[a, b]
-
-
-#: Below this much work (neighbour pairs plus displacement points) the kernel's loops run
-#: serially on the CPU: there a parallel task costs ~0.1 ms to dispatch (2 cores; a loop
-#: over 10 items took 134 us parallel, 35 us serial), more than a local analysis's work
-#: (a 3-particle query 0.34 -> 0.13 ms, 800 particles 0.88 -> 0.69; from ~1,100
-#: particles, ~26k pairs, the parallel loops are faster).
-SERIAL_BELOW = 25_000
 
 
 def stress_at(points, volumes, displacement, loads, where, query, offsets, indices, h, corrected,
@@ -77,6 +66,5 @@ def stress_at(points, volumes, displacement, loads, where, query, offsets, indic
         _stress_kernel(points, volumes, loads, i32([] if where is None else where), where_count, float(mu),
                        float(material.poisson_ratio), i32(query), len(query), i32(offsets), i32(indices), float(h),
                        int(bool(corrected)), CORRECTION_MIN_EIGEN_RATIO, float(lam), displacement,
-                       stress if len(query) else np.zeros((1, 3, 3)),
-                       runtime.SERIAL_SMALL_LOOPS and len(indices) + where_count < SERIAL_BELOW)
+                       stress if len(query) else np.zeros((1, 3, 3)))
     return stress

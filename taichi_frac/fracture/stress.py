@@ -175,9 +175,7 @@ def _principal_kernel(
     stress: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) [Pa] Data in
     values_out: ti.types.ndarray(dtype=ti.f64, ndim=2),  # (Q,3) [Pa] descending
     directions_out: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) columns
-    serial: ti.template(),  # a serial loop (few stresses: see PRINCIPAL_SERIAL_BELOW)
 ):
-    ti.loop_config(serialize=serial)
     for q in range(stress.shape[0]):
         raw = _load3(stress, q)
         sym = 0.5 * (raw + raw.transpose())
@@ -261,14 +259,8 @@ def principal_stresses(stress):
     values = np.zeros((len(s), 3))
     directions = np.zeros_like(s)
     if len(s):
-        _principal_kernel(s, values, directions, runtime.SERIAL_SMALL_LOOPS and len(s) < PRINCIPAL_SERIAL_BELOW)
+        _principal_kernel(s, values, directions)
     return values, directions
-
-
-#: Fewer stresses than this are decomposed in a serial loop on the CPU: a parallel task
-#: costs ~0.1 ms to dispatch there (2 cores), and the crack model asks for a handful (one
-#: per sector of each cracking contact).
-PRINCIPAL_SERIAL_BELOW = 2000
 
 
 def largest_principal_stress(stress) -> np.ndarray:

@@ -74,9 +74,7 @@ def _centres(
     work: ti.types.ndarray(dtype=ti.f64, ndim=2),  # (G,4) scratch: normal sum, its length
     largest: ti.types.ndarray(dtype=ti.f64, ndim=1),  # (P,) zeros: longest normal sum per piece
     out: ti.types.ndarray(dtype=ti.f64, ndim=2),  # (G,3) [m] collision centres
-    serial: ti.template(),  # both loops serial (few groups: see SERIAL_BELOW)
 ):
-    ti.loop_config(serialize=serial)
     for g in range(spheres.shape[0]):
         # The area-weighted normals of the members' boundary faces, away from the owning tet.
         n_sum = _vec3d(0.0)
@@ -95,7 +93,6 @@ def _centres(
             work[g, k] = n_sum[k]
         work[g, 3] = n_sum.norm()
         ti.atomic_max(largest[group_piece[g]], work[g, 3])
-    ti.loop_config(serialize=serial)
     for g in range(spheres.shape[0]):
         centre = _vec3d(spheres[g, 0], spheres[g, 1], spheres[g, 2])
         radius = spheres[g, 3]
@@ -157,11 +154,6 @@ def _centres(
             out[g, k] = centre[k] - shift * n_unit[k]
 
 
-#: Fewer groups than this run serially on the CPU: a parallel task costs ~0.1 ms to
-#: dispatch there (2 cores), about what 250 groups' work takes.
-SERIAL_BELOW = 250
-
-
 def collision_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius, group_piece, face_piece):
     """The kernel's arguments from ``model.contact_sphere_centres``' and its launch:
     (G,3) [m] collision centres. ``owner`` (M,) the group of each member (grouped
@@ -218,6 +210,5 @@ def collision_centres(vertices, faces, face_tet, centroids, members, owner, b_po
              np.ascontiguousarray(np.column_stack([b_pos, b_radius]), dtype=np.float64),
              np.ascontiguousarray(group_piece, dtype=np.int32), scan.astype(np.int32),
              np.ascontiguousarray(key[scan]), np.ascontiguousarray(np.column_stack([mid[scan], face_radius[scan]])),
-             cell_first, np.ascontiguousarray(pieces), np.empty((group_count, 4)), np.zeros(piece_count), out,
-             runtime.SERIAL_SMALL_LOOPS and group_count < SERIAL_BELOW)
+             cell_first, np.ascontiguousarray(pieces), np.empty((group_count, 4)), np.zeros(piece_count), out)
     return out
