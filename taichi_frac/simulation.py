@@ -331,6 +331,8 @@ class Simulation:
         from .fracture.fragments import fragment_peak_stress, make_fragments, split_body
 
         born: list[int] = []
+        if self.world.impact_count() <= first:  # (most frames: no impact, nothing to look at)
+            return born
         live = set(self.world.body_ids)
         breakable = np.array([b for b, r in self.records.items() if r.breakable and b in live])
         if len(breakable) == 0:
