@@ -10,6 +10,7 @@ not use costs nothing (no breakable body: the fracture stage is never entered).
 from __future__ import annotations
 
 import dataclasses
+import gc
 import json
 import time
 from dataclasses import dataclass, field
@@ -461,12 +462,19 @@ class Simulation:
         return sum(1 for b in self.world.body_ids if self.records[b].generation > 0)
 
     def run(self) -> RunSummary:
-        """Simulate every frame; Ctrl-C stops cleanly with a valid cache of the frames done."""
+        """Simulate every frame; Ctrl-C stops cleanly with a valid cache of the frames done.
+
+        The objects alive when the run starts (Taichi's, the models', the scene's: ~10^5)
+        are frozen out of Python's cyclic garbage collector for the run (``gc.freeze``,
+        undone at the end): otherwise each full collection walks them all, a pause of ~50
+        ms inside one frame of the 13 rings, and ~0.4 ms/frame on average."""
         start = time.perf_counter()
         interrupted = False
         sim = self.scene.simulation
         frame_ms: list[float] = []
         done = 0  # frames simulated and written (a Ctrl-C may land anywhere in a frame)
+        gc.collect()
+        gc.freeze()
         try:
             if self.output_path is not None:
                 self._open_cache()
@@ -490,6 +498,7 @@ class Simulation:
         except KeyboardInterrupt:
             interrupted = True
         finally:
+            gc.unfreeze()
             if self.writer is not None:
                 t = time.perf_counter()
                 self.writer.close(complete=not interrupted)
