@@ -69,15 +69,6 @@ def boundary_faces(tets: np.ndarray, neighbor: np.ndarray | None = None):
     return faces.astype(np.int32), owner.astype(np.int32), local.astype(np.int8)
 
 
-def subset_neighbors(neighbor: np.ndarray, subset: np.ndarray) -> np.ndarray:
-    """Neighbour table of the tets ``subset`` (indices into the parent), re-indexed to the
-    subset; faces whose neighbour is outside the subset become boundary (-1)."""
-    remap = np.full(len(neighbor) + 1, -1, dtype=np.int64)  # last slot maps parent's -1
-    remap[subset] = np.arange(len(subset))
-    sub = neighbor[subset].astype(np.int64)
-    return remap[np.where(sub < 0, len(neighbor), sub)].astype(np.int32)
-
-
 def compact_vertices(vertices: np.ndarray, tets: np.ndarray):
     """Drop unused vertices. Returns (vertices (V',3), tets re-indexed, used vertex ids (V',))."""
     used = np.unique(tets)
