@@ -112,4 +112,5 @@ def test_a_batch_that_does_not_fit_adds_nothing():
     assert world.body_ids == [] and world._particles_in_use == 0
     ids = world.add_bodies(models, *[[p[k] for p in poses] for k in range(4)])
     assert ids == [0, 1, 2, 3]
-    assert [world._body_range[b][0] for b in ids] == list(np.cumsum([0] + [len(m.boundary_radius) for m in models])[:-1])
+    starts = np.cumsum([0] + [len(m.boundary_radius) for m in models])[:-1]
+    assert [world._body_range[b][0] for b in ids] == list(starts)

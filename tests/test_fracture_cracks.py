@@ -48,6 +48,31 @@ def test_cut_bonds_by_plane_and_extent():
     assert split.fragment_count == 2 and [t.tolist() for t in split.fragment_tets] == [[0], [1]]
 
 
+@pytest.mark.parametrize("plane_count", [9, 70])
+def test_many_planes_cut_what_each_cuts_alone(plane_count):
+    """cut_bonds with many crack planes at once (their sides packed as the bits of one
+    integer per particle up to 62 planes, compared plane by plane above) cuts exactly the
+    union of what each plane cuts alone, on the ring's bonds."""
+    from _fracture_ring import ring_model
+
+    model = ring_model()
+    rng = np.random.default_rng(plane_count)
+    planes = []
+    for _ in range(plane_count):
+        normal = rng.normal(size=3)
+        # (points off the particles: a plane through a centroid puts it on the plane only
+        # up to the last bit, which one product and another round differently)
+        point = model.particle_position[rng.integers(model.tet_count)] + rng.normal(size=3) * 1e-3
+        planes.append(CrackPlane(point=point,
+                                 normal=normal / np.linalg.norm(normal), extent=float(rng.uniform(0.005, 0.05)),
+                                 peak_stress=1.0))
+    union = np.zeros(len(model.bonds), dtype=bool)
+    for plane in planes:
+        union |= cut_bonds(model, [plane])
+    together = cut_bonds(model, planes)
+    assert union.sum() > 100 and np.array_equal(together, union)
+
+
 def test_ring_crack_cuts_the_bonds_across_its_sphere():
     """A RingCrack cuts a bond when one centroid lies inside its sphere and the other not;
     on the ring, a sphere about a point of the tube cuts out exactly the tets whose

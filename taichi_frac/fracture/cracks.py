@@ -494,9 +494,20 @@ def cut_bonds(model: BodyModel, cracks) -> np.ndarray:
         nrm = np.stack([c.normal for c in planes])  # (C,3)
         ext = np.array([c.extent for c in planes])  # (C,)
         side = x @ nrm.T - rows.dot(p, nrm)  # (T,C) signed distances, per particle (not per bond end)
-        di, dj = side[first], side[second]
-        bond, crack = np.nonzero((di >= 0.0) != (dj >= 0.0))  # the crossings only (a few %)
-        t = di[bond, crack] / (di[bond, crack] - dj[bond, crack])
+        above = side >= 0.0
+        if len(planes) <= 62:
+            # Each particle's sides of all planes as the bits of one integer: a bond crosses
+            # plane c where its ends' codes differ in bit c (two integer gathers over the
+            # bonds instead of two of (B,C) floats; the same pairs, in the same order).
+            code = above.astype(np.int64) @ (np.int64(1) << np.arange(len(planes), dtype=np.int64))
+            flips = code[first] ^ code[second]
+            crossing = np.nonzero(flips)[0]
+            which, crack = np.nonzero((flips[crossing, None] >> np.arange(len(planes))) & 1)
+            bond = crossing[which]
+        else:
+            bond, crack = np.nonzero(above[first] != above[second])  # the crossings only (a few %)
+        di, dj = side[first[bond], crack], side[second[bond], crack]
+        t = di / (di - dj)
         xi = x[first[bond]]
         hit = xi + t[:, None] * (x[second[bond]] - xi) - p[crack]
         within = rows.dot(hit, hit) <= ext[crack] ** 2

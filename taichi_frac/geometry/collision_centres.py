@@ -82,7 +82,9 @@ def _centres(
             t = members[m]
             c = _vec3d(centroids[t, 0], centroids[t, 1], centroids[t, 2])
             for f in range(tet_faces[t], tet_faces[t + 1]):
-                v0, v1, v2 = _corner(vertices, faces, f, 0), _corner(vertices, faces, f, 1), _corner(vertices, faces, f, 2)
+                v0 = _corner(vertices, faces, f, 0)
+                v1 = _corner(vertices, faces, f, 1)
+                v2 = _corner(vertices, faces, f, 2)
                 normal = (v1 - v0).cross(v2 - v0)
                 side = ((v0 + v1 + v2) / 3.0 - c).dot(normal)
                 if side > 0.0:
