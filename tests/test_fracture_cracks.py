@@ -280,7 +280,10 @@ def test_fused_stress_kernel_equals_the_three_kernels(corrected):
     analysis's path) against ``point_loads_displacement``, ``displacement_gradient`` and
     ``stress_from_gradient`` run one after the other on a ring's impact: the displacement
     where asked, zero elsewhere, and the stress at a few hundred particles near the
-    contact and at scattered ones (the same functions: to 1e-12 of the largest stress)."""
+    contact and at scattered ones (the same functions: to 1e-12 of the largest stress).
+    Its principal stresses (the largest in closed form, and with ``decompose`` all three
+    and their directions) against ``largest_principal_stress`` and ``principal_stresses``
+    on the separate stress."""
     from taichi_frac.fracture.cracks import model_neighbor_lists, neighbor_rows, smoothing_length
     from taichi_frac.fracture.field import load_rows, point_loads_displacement
     from taichi_frac.fracture.fused import stress_at
@@ -299,7 +302,10 @@ def test_fused_stress_kernel_equals_the_three_kernels(corrected):
     loads = load_rows(RING_CONTACT[None], RING_NORMAL[None], RING_FORCE[None], radius)
 
     fused_u = np.zeros((model.tet_count, 3))
-    fused = stress_at(points, model.tet_volume, fused_u, loads, where, query, offsets, indices, h, corrected, material)
+    fused, largest = stress_at(points, model.tet_volume, fused_u, loads, where, query, offsets, indices, h, corrected,
+                               material)
+    _, largest_again, values, directions = stress_at(points, model.tet_volume, np.zeros_like(fused_u), loads, where,
+                                                     query, offsets, indices, h, corrected, material, decompose=True)
     u = np.zeros((model.tet_count, 3))
     u[where] = point_loads_displacement(points[where], RING_CONTACT[None], RING_NORMAL[None], RING_FORCE[None],
                                         material.shear_modulus, material.poisson_ratio, radius)
@@ -308,3 +314,12 @@ def test_fused_stress_kernel_equals_the_three_kernels(corrected):
     assert len(query) > 200 and np.abs(separate).max() > 1e6
     np.testing.assert_allclose(fused_u, u, rtol=1e-12, atol=1e-12 * np.abs(u).max())
     np.testing.assert_allclose(fused, separate, rtol=0, atol=1e-12 * np.abs(separate).max())
+    from taichi_frac.fracture.stress import largest_principal_stress, principal_stresses
+
+    scale = np.abs(separate).max()
+    np.testing.assert_allclose(largest, largest_principal_stress(separate), rtol=0, atol=1e-8 * scale)
+    assert np.array_equal(largest, largest_again)
+    expected_values, expected_directions = principal_stresses(separate)
+    np.testing.assert_allclose(values, expected_values, rtol=0, atol=1e-10 * scale)
+    np.testing.assert_allclose(values[:, 0], largest, rtol=0, atol=1e-8 * scale)
+    np.testing.assert_allclose(np.abs(np.einsum("qke,qke->qe", directions, expected_directions)), 1.0, atol=1e-6)

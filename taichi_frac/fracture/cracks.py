@@ -61,7 +61,6 @@ from ..options import FractureOptions, Material
 from .field import load_rows
 from .fused import stress_at as _stress_at
 from .sph import neighbor_lists
-from .stress import largest_principal_stress, principal_stresses
 
 # Analysis points are sought within this many smoothing lengths (kernel support radii,
 # fracture/sph.py) of the contact point.
@@ -365,9 +364,9 @@ def analyze_impact(
             q_ids = query
             where = np.unique(np.concatenate([query, q_idx]))
         displacement = np.zeros((t_count, 3))
-        stress = _stress_at(points, volumes, displacement, loads, where, q_ids, q_off, q_idx, h,
+        stress, peak = _stress_at(points, volumes, displacement, loads, where, q_ids, q_off, q_idx, h,
                             options.corrected_gradient, material)
-        return displacement, stress, largest_principal_stress(stress)
+        return displacement, stress, peak
 
     def neighbours_of(i):
         """Particle i's neighbours (i is a field particle: in ``local`` when local)."""
@@ -425,9 +424,9 @@ def analyze_impact(
         # give n noisy copies of one direction; the plain sum over a one-sided sector leans
         # toward the sector, which is what fans the n cracks out (module docstring).
         group_corrected = options.corrected_gradient if n_groups == 1 else False
-        stress_g = _stress_at(points, volumes, displacement, loads, None, np.asarray(query, dtype=np.int32),
-                              group_offsets, group_indices, h, group_corrected, material)
-        values_g, dirs_g = principal_stresses(stress_g)
+        stress_g, _, values_g, dirs_g = _stress_at(points, volumes, displacement, loads, None,
+                                                   np.asarray(query, dtype=np.int32), group_offsets, group_indices,
+                                                   h, group_corrected, material, decompose=True)
         group_stress[grouped] = stress_g.reshape(len(grouped), n_groups, 3, 3)
         g_values[grouped] = np.asarray(values_g).reshape(len(grouped), n_groups, 3)
         g_dirs[grouped] = np.asarray(dirs_g).reshape(len(grouped), n_groups, 3, 3)

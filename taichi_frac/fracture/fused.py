@@ -11,7 +11,7 @@ import taichi as ti
 from .. import runtime
 from .field import displacement_at
 from .sph import CORRECTION_MIN_EIGEN_RATIO, gradient_at
-from .stress import lame_parameters, stress_of
+from .stress import lame_parameters, largest_principal_of, principal_of, stress_of
 
 
 @ti.kernel
@@ -32,6 +32,10 @@ def _stress_kernel(
     # Data in/out:
     displacement: ti.types.ndarray(dtype=ti.f64, ndim=2),  # (N,3) [m], rows ``where`` written
     stress_out: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) [Pa]
+    largest_out: ti.types.ndarray(dtype=ti.f64, ndim=1),  # (Q,) [Pa] largest principal stress
+    decompose: ti.i32,  # 1: also every query's principal stresses and directions:
+    values_out: ti.types.ndarray(dtype=ti.f64, ndim=2),  # (Q,3) [Pa] descending
+    directions_out: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) unit columns
 ):
     """Steps 5-7 of an analysis in one launch: the superposed half-space displacement at
     ``where`` (``field.displacement_at``), then at each query the SPH gradient
@@ -49,22 +53,40 @@ def _stress_kernel(
         s = stress_of(grad, lame_lambda, shear_modulus)
         for a, b in ti.static(ti.ndrange(3, 3)):
             stress_out[q, a, b] = s[a, b]
+        largest_out[q] = largest_principal_of(s)
+        if decompose == 1:
+            values, directions = principal_of(s)
+            for e in ti.static(range(3)):
+                values_out[q, e] = values[e]
+                for k in ti.static(range(3)):
+                    directions_out[q, k, e] = directions[k, e]
 
 
 def stress_at(points, volumes, displacement, loads, where, query, offsets, indices, h, corrected,
-               material) -> np.ndarray:
+              material, *, decompose: bool = False):
     """``_stress_kernel``: fills ``displacement`` (N,3) at ``where`` (None: leave it as it
-    is) and returns the stress (Q,3,3) [Pa] at ``query`` from the CSR rows ``offsets``
-    (Q+1,), ``indices``."""
+    is) and returns, at ``query`` from the CSR rows ``offsets`` (Q+1,), ``indices``: the
+    stress (Q,3,3) [Pa] and its largest principal stress (Q,) [Pa] (the closed form of
+    ``stress.largest_principal_stress``); with ``decompose``, also the principal stresses
+    (Q,3) [Pa] and directions (Q,3,3) of ``stress.principal_stresses``. (In the launch: a
+    separate decomposition was a third launch, and the largest value a numpy pass.)"""
     runtime.init()
     lam, mu = lame_parameters(material.young_modulus, material.poisson_ratio)
-    stress = np.zeros((len(query), 3, 3))
+    count = len(query)
+    stress = np.zeros((count, 3, 3))
+    largest = np.zeros(count)
+    values = np.zeros((count if decompose else 1, 3))
+    directions = np.zeros((count if decompose else 1, 3, 3))
     where_count = 0 if where is None else len(where)
-    if len(query) or where_count:
+    if count or where_count:
         def i32(a):  # (a one-element stand-in for an empty array, which a kernel cannot take)
             return np.ascontiguousarray(a if len(a) else [0], dtype=np.int32)
         _stress_kernel(points, volumes, loads, i32([] if where is None else where), where_count, float(mu),
-                       float(material.poisson_ratio), i32(query), len(query), i32(offsets), i32(indices), float(h),
+                       float(material.poisson_ratio), i32(query), count, i32(offsets), i32(indices), float(h),
                        int(bool(corrected)), CORRECTION_MIN_EIGEN_RATIO, float(lam), displacement,
-                       stress if len(query) else np.zeros((1, 3, 3)))
-    return stress
+                       stress if count else np.zeros((1, 3, 3)), largest if count else np.zeros(1),
+                       int(bool(decompose and count)), values if count else np.zeros((1, 3)),
+                       directions if count else np.zeros((1, 3, 3)))
+    if decompose:
+        return stress, largest, values, directions
+    return stress, largest

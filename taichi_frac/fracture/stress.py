@@ -170,6 +170,68 @@ def stress_of(grad, lame_lambda, shear_modulus):
     return 2.0 * shear_modulus * e + lame_lambda * e.trace() * ti.Matrix.identity(ti.f64, 3)
 
 
+@ti.func
+def principal_of(raw):
+    """Principal stresses of the (3,3) f64 stress ``raw`` (symmetrised): values (vec3 [Pa],
+    descending) and directions (mat3, unit columns, each signed so its largest-magnitude
+    component is positive) by Jacobi rotations (``sym_eig3_f64``) on the matrix scaled to
+    unit max entry (the Jacobi skip test is absolute, so 1e-6 N and 1e9 N impacts are
+    treated alike). A zero stress gives zero values and the identity."""
+    sym = 0.5 * (raw + raw.transpose())
+    scale = ti.cast(0.0, ti.f64)  # bare literals would be the default f32
+    for r, c in ti.static(ti.ndrange(3, 3)):
+        scale = ti.max(scale, ti.abs(sym[r, c]))
+    values = _vec3(0.0)
+    vectors = ti.Matrix.identity(ti.f64, 3)
+    if scale > 0.0:
+        values, vectors = sym_eig3_f64(sym / scale)
+    # Sort descending: order[e] = column of the e-th largest value.
+    order = ti.Vector([0, 1, 2])
+    for _pass in ti.static(range(2)):
+        for k in ti.static(range(2)):
+            if values[order[k]] < values[order[k + 1]]:
+                tmp = order[k]
+                order[k] = order[k + 1]
+                order[k + 1] = tmp
+    # Written with fresh names and scalar stores on purpose: in Taichi 1.7.4 re-binding a
+    # local vector here (`v = v * sign`) was silently dropped (seen in a unit test).
+    sorted_values = _vec3(0.0)
+    directions = ti.Matrix.zero(ti.f64, 3, 3)
+    for e in ti.static(range(3)):
+        col = order[e]
+        column = _vec3(vectors[0, col], vectors[1, col], vectors[2, col])
+        unit = column.normalized()
+        largest = ti.abs(unit[0])
+        sign = ti.cast(1.0 if unit[0] >= 0.0 else -1.0, ti.f64)
+        for k in ti.static(range(1, 3)):
+            if ti.abs(unit[k]) > largest:
+                largest = ti.abs(unit[k])
+                sign = ti.cast(1.0 if unit[k] >= 0.0 else -1.0, ti.f64)
+        sorted_values[e] = values[col] * scale
+        for k in ti.static(range(3)):
+            directions[k, e] = unit[k] * sign
+    return sorted_values, directions
+
+
+@ti.func
+def largest_principal_of(raw):
+    """The largest principal stress [Pa] of the (3,3) f64 stress ``raw`` (symmetrised), in
+    closed form: the function of :func:`largest_principal_stress`, in a kernel."""
+    s = 0.5 * (raw + raw.transpose())
+    q = s.trace() / 3.0
+    off = s[0, 1] * s[0, 1] + s[0, 2] * s[0, 2] + s[1, 2] * s[1, 2]
+    d0, d1, d2 = s[0, 0] - q, s[1, 1] - q, s[2, 2] - q
+    p = ti.sqrt((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * off) / 6.0)
+    result = q
+    if p > 0.0:
+        b00, b11, b22 = d0 / p, d1 / p, d2 / p
+        b01, b02, b12 = s[0, 1] / p, s[0, 2] / p, s[1, 2] / p
+        det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02)
+        phi = ti.acos(ti.min(ti.max(0.5 * det, -1.0), 1.0)) / 3.0
+        result = q + 2.0 * p * ti.cos(phi)
+    return result
+
+
 @ti.kernel
 def _principal_kernel(
     stress: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) [Pa] Data in
@@ -177,40 +239,11 @@ def _principal_kernel(
     directions_out: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) columns
 ):
     for q in range(stress.shape[0]):
-        raw = _load3(stress, q)
-        sym = 0.5 * (raw + raw.transpose())
-        # Solve on the matrix scaled to unit max entry (the Jacobi skip test is absolute),
-        # so 1e-6 N and 1e9 N impacts are treated alike.
-        scale = ti.cast(0.0, ti.f64)  # bare literals would be the default f32
-        for r, c in ti.static(ti.ndrange(3, 3)):
-            scale = ti.max(scale, ti.abs(sym[r, c]))
-        values = _vec3(0.0)
-        vectors = ti.Matrix.identity(ti.f64, 3)
-        if scale > 0.0:
-            values, vectors = sym_eig3_f64(sym / scale)
-        # Sort descending: order[e] = column of the e-th largest value.
-        order = ti.Vector([0, 1, 2])
-        for _pass in ti.static(range(2)):
-            for k in ti.static(range(2)):
-                if values[order[k]] < values[order[k + 1]]:
-                    tmp = order[k]
-                    order[k] = order[k + 1]
-                    order[k + 1] = tmp
-        # Written with fresh names and scalar stores on purpose: in Taichi 1.7.4 re-binding a
-        # local vector here (`v = v * sign`) was silently dropped (seen in a unit test).
+        values, directions = principal_of(_load3(stress, q))
         for e in ti.static(range(3)):
-            col = order[e]
-            column = _vec3(vectors[0, col], vectors[1, col], vectors[2, col])
-            unit = column.normalized()
-            largest = ti.abs(unit[0])
-            sign = ti.cast(1.0 if unit[0] >= 0.0 else -1.0, ti.f64)
-            for k in ti.static(range(1, 3)):
-                if ti.abs(unit[k]) > largest:
-                    largest = ti.abs(unit[k])
-                    sign = ti.cast(1.0 if unit[k] >= 0.0 else -1.0, ti.f64)
-            values_out[q, e] = values[col] * scale
+            values_out[q, e] = values[e]
             for k in ti.static(range(3)):
-                directions_out[q, k, e] = unit[k] * sign
+                directions_out[q, k, e] = directions[k, e]
 
 
 def _as_tensors(a, name) -> np.ndarray:
