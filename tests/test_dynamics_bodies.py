@@ -100,8 +100,9 @@ def test_cluster_spheres_match_numpy_and_enclose_their_members():
 
 def test_a_batch_that_does_not_fit_adds_nothing():
     """A batch whose last body overflows max_boundary_particles raises CapacityError
-    naming it, and leaves the World as it was: no body added, every slot and particle
-    range free again (the next bodies go where they would have gone)."""
+    naming it, and a batch with a malformed pose ValueError; either leaves the World as it
+    was: no body added, every slot and particle range free again (the next bodies go where
+    they would have gone)."""
     rng = np.random.default_rng(5)
     models, poses = random_bodies(rng, 4)
     world = fresh_world()
@@ -109,6 +110,11 @@ def test_a_batch_that_does_not_fit_adds_nothing():
     with pytest.raises(CapacityError, match="max_boundary_particles"):
         world.add_bodies(models + [huge], *[[p[k] for p in poses] + [np.zeros(3) if k != 1 else np.array(
             [1.0, 0, 0, 0])] for k in range(4)])
+    assert world.body_ids == [] and world._particles_in_use == 0
+    bad = [[p[k] for p in poses] for k in range(4)]
+    bad[1][-1] = np.array([1.0, 0.0, 0.0])  # a 3-component orientation: refused before any slot is taken
+    with pytest.raises(ValueError, match="orientation_wxyz"):
+        world.add_bodies(models, *bad)
     assert world.body_ids == [] and world._particles_in_use == 0
     ids = world.add_bodies(models, *[[p[k] for p in poses] for k in range(4)])
     assert ids == [0, 1, 2, 3]

@@ -471,6 +471,10 @@ class World:
             raise ValueError(f"young_modulus must be > 0 [Pa] or None (rigid), got {young_modulus!r}")
         compliance = 0.0 if young_modulus is None else (1.0 - poisson_ratio ** 2) / young_modulus
         single = self.options.single_scale if single_scale is None else bool(single_scale)
+        poses = [np.concatenate([positions[b], orientations_wxyz[b], linear_velocities[b], angular_velocities[b]])
+                 for b in range(count)]
+        if any(pose.shape != (13,) for pose in poses):
+            raise ValueError("position, velocities need 3 components and orientation_wxyz 4")
         layers = []
         for model in models:
             if single:
@@ -502,11 +506,8 @@ class World:
             else:
                 inverse_mass, inverse_inertia = 1.0 / model.mass, np.linalg.inv(inertia)
             radius = contact_radius if contact_radius is not None else (3.0 * model.volume / (4.0 * np.pi)) ** (1 / 3)
-            pose = np.concatenate([positions[b], orientations_wxyz[b], linear_velocities[b], angular_velocities[b]])
-            if pose.shape != (13,):
-                raise ValueError("position, velocities need 3 components and orientation_wxyz 4")
             origin, edge, dims, cell_first, order = body_grid(offsets, radii, self.options.contact_margin)
-            rows_out[b] = np.concatenate([pose, inertia.reshape(-1), inverse_inertia.reshape(-1),
+            rows_out[b] = np.concatenate([poses[b], inertia.reshape(-1), inverse_inertia.reshape(-1),
                                           [inverse_mass, friction, restitution, compliance, radius], origin, [edge],
                                           dims])
             sphere_rows.append(np.column_stack([offsets, radii]))

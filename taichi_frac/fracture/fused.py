@@ -11,7 +11,7 @@ import taichi as ti
 from .. import runtime
 from .field import displacement_at
 from .sph import CORRECTION_MIN_EIGEN_RATIO, gradient_at
-from .stress import lame_parameters, largest_principal_of, principal_of, stress_of
+from .stress import lame_parameters, principal_of, stress_of, sym_eig3_extremes_f64
 
 
 @ti.kernel
@@ -53,7 +53,7 @@ def _stress_kernel(
         s = stress_of(grad, lame_lambda, shear_modulus)
         for a, b in ti.static(ti.ndrange(3, 3)):
             stress_out[q, a, b] = s[a, b]
-        largest_out[q] = largest_principal_of(s)
+        _, largest_out[q] = sym_eig3_extremes_f64(s)
         if decompose == 1:
             values, directions = principal_of(s)
             for e in ti.static(range(3)):

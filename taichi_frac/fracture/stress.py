@@ -213,25 +213,6 @@ def principal_of(raw):
     return sorted_values, directions
 
 
-@ti.func
-def largest_principal_of(raw):
-    """The largest principal stress [Pa] of the (3,3) f64 stress ``raw`` (symmetrised), in
-    closed form: the function of :func:`largest_principal_stress`, in a kernel."""
-    s = 0.5 * (raw + raw.transpose())
-    q = s.trace() / 3.0
-    off = s[0, 1] * s[0, 1] + s[0, 2] * s[0, 2] + s[1, 2] * s[1, 2]
-    d0, d1, d2 = s[0, 0] - q, s[1, 1] - q, s[2, 2] - q
-    p = ti.sqrt((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * off) / 6.0)
-    result = q
-    if p > 0.0:
-        b00, b11, b22 = d0 / p, d1 / p, d2 / p
-        b01, b02, b12 = s[0, 1] / p, s[0, 2] / p, s[1, 2] / p
-        det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02)
-        phi = ti.acos(ti.min(ti.max(0.5 * det, -1.0), 1.0)) / 3.0
-        result = q + 2.0 * p * ti.cos(phi)
-    return result
-
-
 @ti.kernel
 def _principal_kernel(
     stress: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) [Pa] Data in

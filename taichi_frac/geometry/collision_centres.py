@@ -28,27 +28,17 @@ def _corner(vertices: ti.template(), faces: ti.template(), f, k):
 
 
 @ti.func
-def _first_index(key: ti.template(), begin, end, x):
-    """The first index in [begin, end) whose ``key`` (ascending there) is >= x, by
-    binary search (``_first_index_above``: > x)."""
+def _first_index(key: ti.template(), begin, end, x, above: ti.template()):
+    """The first index in [begin, end) whose ``key`` (ascending there) is >= x (``above``:
+    > x), by binary search."""
     lo = begin
     hi = end
     while lo < hi:
         mid = (lo + hi) // 2
-        if key[mid] < x:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
-@ti.func
-def _first_index_above(key: ti.template(), begin, end, x):
-    lo = begin
-    hi = end
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if key[mid] <= x:
+        before = key[mid] < x
+        if ti.static(above):
+            before = key[mid] <= x
+        if before:
             lo = mid + 1
         else:
             hi = mid
@@ -138,8 +128,8 @@ def _centres(
             for cell in range(ti.max(home - span, 0), ti.min(home + span, cells - 1) + 1):
                 begin = cell_first[first_cell + cell]
                 end = cell_first[first_cell + cell + 1]
-                lo = _first_index(scan_key, begin, end, centre[axis_a] - grown)
-                hi = _first_index_above(scan_key, begin, end, centre[axis_a] + grown)
+                lo = _first_index(scan_key, begin, end, centre[axis_a] - grown, False)
+                hi = _first_index(scan_key, begin, end, centre[axis_a] + grown, True)
                 for s in range(lo, hi):
                     # Only a face whose bounding sphere meets the ray's segment can be hit
                     # (tested on the nearest point of the segment to the face's centre).
