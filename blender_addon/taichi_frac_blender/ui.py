@@ -4,6 +4,8 @@ generation or birth frame, and the stress heat-map view."""
 
 from __future__ import annotations
 
+import math
+
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
 
@@ -129,8 +131,8 @@ class VIEW3D_PT_taichi_frac(bpy.types.Panel):
                       f"Breaks at frame {props.death_frame:g} (cache {props.cache_death_frame})")
             col.label(text=f"Peak stress {props.peak_stress / 1e6:.3g} MPa")
             if props.has_impact:
-                force = props.impact_force
-                col.label(text=f"Impact force {force.length:.4g} N")
+                col.label(text=f"Impact force {math.hypot(*props.impact_force):.4g} N")
+                col.prop(props, "impact_force", text="Force [N]")
                 col.prop(props, "impact_point", text="Impact at")
             else:
                 col.label(text="A body of the scene (no impact made it)")

@@ -186,6 +186,41 @@ def check_selection(scene):
         got = select(by="BIRTH", birth_min=20, birth_max=30)
         check(got == ["sliver_1", "sliver_2"], f"born 20-30 selects {got}")
     check(hasattr(bpy.types, "VIEW3D_PT_taichi_frac"), "sidebar panel not registered")
+    sliver = fragments(scene)["sliver_1"]
+    with bpy.context.temp_override(scene=scene, view_layer=scene.view_layers[0], active_object=sliver):
+        texts = draw_panel()
+    # variants.py: sliver_1 born at 24 from shard_b (broken at 24), impact force (0, 0, 1500) N,
+    # peak stress 1 MPa; generation 2
+    for expected in ("Generation 2", "Born at frame 24 (cache 24)", "Never breaks", "Peak stress 1 MPa",
+                     "Impact force 1500 N"):
+        check(expected in texts, f"panel lacks {expected!r}: {texts}")
+
+
+class _Layout:
+    """Stands in for a UILayout: records label texts, accepts anything else."""
+
+    def __init__(self, texts):
+        self.texts = texts
+
+    def label(self, text="", **_):
+        self.texts.append(text)
+
+    def __getattr__(self, name):
+        return lambda *args, **kw: _Layout(self.texts)
+
+    def __setattr__(self, name, value):
+        object.__setattr__(self, name, value)
+
+
+def draw_panel():
+    """The sidebar panel's draw with a recording layout; returns its labels."""
+    texts = []
+
+    class Panel:
+        layout = _Layout(texts)
+
+    bpy.types.VIEW3D_PT_taichi_frac.draw(Panel(), bpy.context)
+    return texts
 
 
 def check_stress_view(scene):
