@@ -75,6 +75,8 @@ def test_addon_features_in_blender(tmp_path):
     variants.set_preview_inputs(spec["subset"], "outer", opacity=0.5)
     variants.set_preview_inputs(spec["subset"], "inner", opacity=0.8, opacityThreshold=0.5)
 
+    spec["tile"] = str(tmp_path / "tile.usdc")
+    variants.write(spec["tile"], [Piece("tile", 0, None, None, (0.5, 0.5, 0.1), (0, 0, 0))], FPS, 2)
     spec["incomplete"] = str(tmp_path / "incomplete.usdc")
     variants.write(spec["incomplete"], V1, FPS, 20, complete=False)
     spec["newer"] = str(tmp_path / "newer.usda")
@@ -97,5 +99,5 @@ def test_addon_features_in_blender(tmp_path):
     print(run.stdout[-6000:])
     assert run.returncode == 0, run.stdout[-6000:] + run.stderr[-4000:]
     assert "0 failures" in run.stdout
-    for section in ("re-import", "retime", "materials", "errors"):
+    for section in ("re-import", "retime", "materials", "heat render", "errors"):
         assert f"{section}: checked" in run.stdout

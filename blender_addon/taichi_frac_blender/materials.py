@@ -99,13 +99,6 @@ def set_stress_range(material, stress_max: float) -> None:
     material["taichi_frac_stress_max"] = float(stress_max)
 
 
-def ramp_color(material, fraction: float):
-    """The ramp's linear RGBA at ``fraction`` in [0, 1] (what a face at that share of the
-    maximum stress shows)."""
-    ramp = next(n for n in material.node_tree.nodes if n.type == "VALTORGB")
-    return tuple(ramp.color_ramp.evaluate(min(max(fraction, 0.0), 1.0)))
-
-
 def apply_stress_view(objects, material) -> int:
     """Show ``material`` on every slot of each object (object-level links; the mesh's
     materials are untouched); returns how many objects changed."""

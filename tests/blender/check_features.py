@@ -324,6 +324,56 @@ def section_materials(spec):
     print("materials: checked")
 
 
+def section_heat_render(spec):
+    """The heat map rendered (Cycles, 1 sample, black world, no light: each pixel is the
+    emission, 0.5 x the ramp's colour): the tile's top face is two triangles with face
+    stress 2.0e5 and 2.2e5 Pa, shown red at 4.4e5, so their pixels are the ramp at 10/22 and
+    11/22 (blue-green to yellow: distinct colours)."""
+    scene = new_scene("heat")
+    result, error = run_import(scene, spec["tile"])
+    check(result == {"FINISHED"}, f"tile import: {result} {error}")
+    tile = fragments(scene)["tile"]
+    with bpy.context.temp_override(scene=scene, view_layer=scene.view_layers[0], active_object=tile):
+        bpy.ops.taichi_frac.stress_view(show=True, stress_max=4.4e5)
+    heat = tile.material_slots[0].material
+    camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+    camera.data.type, camera.data.ortho_scale = "ORTHO", 1.2
+    camera.location = (0.0, 0.0, 5.0)  # looking down -z, +y up in the picture
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    scene.world = bpy.data.worlds.new("black")
+    scene.world.color = (0.0, 0.0, 0.0)
+    for node in (scene.world.node_tree.nodes if scene.world.node_tree else ()):
+        if node.type == "BACKGROUND":  # (a new world may come with a lit grey background)
+            node.inputs["Strength"].default_value = 0.0
+    scene.render.engine = "CYCLES"
+    scene.cycles.samples = 1
+    scene.cycles.device = "CPU"
+    scene.render.resolution_x = scene.render.resolution_y = 32
+    scene.render.resolution_percentage = 100
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.filepath = str(Path(spec["tile"]).with_name("heat.exr"))
+    scene.frame_set(0)
+    bpy.ops.render.render(write_still=True, scene=scene.name)
+    image = bpy.data.images.load(scene.render.filepath)
+    pixels = np.array(image.pixels[:], dtype=np.float64).reshape(32, 32, 4)  # rows from the bottom
+
+    def pixel(x, y):  # world (x, y) on the top face -> the pixel there
+        return pixels[int((y + 0.6) / 1.2 * 32), int((x + 0.6) / 1.2 * 32), :3]
+
+    for (x, y), face in (((0.3, -0.3), 10), ((-0.3, 0.3), 11)):  # triangles (1,5,7) and (1,7,3)
+        expected = 0.5 * np.array(_ramp(heat, 2e4 * face / 4.4e5))
+        got = pixel(x, y)
+        check(np.abs(got - expected).max() < 2e-3, f"heat-map pixel of face {face}: {got}, expected {expected}")
+    check(np.abs(pixel(0.3, -0.3) - pixel(-0.3, 0.3)).max() > 0.05, "the two faces' colours do not differ")
+    print("heat render: checked")
+
+
+def _ramp(material, fraction):
+    ramp = next(n for n in material.node_tree.nodes if n.type == "VALTORGB")
+    return tuple(ramp.color_ramp.evaluate(fraction))[:3]
+
+
 def section_errors(spec):
     """Each failure reaches the user as one line, never a traceback; an incomplete cache
     imports with a warning naming its last complete frame."""
@@ -370,7 +420,7 @@ def main(argv):
     spec = json.loads(Path(spec_path).read_text())
     result = bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
     check(result == {"FINISHED"}, f"extension install returned {result}")
-    for section in (section_reimport, section_retime, section_materials, section_errors):
+    for section in (section_reimport, section_retime, section_materials, section_heat_render, section_errors):
         try:
             section(spec)
         except Exception as exc:  # one section's crash must not hide the others' results
