@@ -175,6 +175,21 @@ def _find_collection(scene, key: str):
     return None
 
 
+def _imported_objects(scene, top, key: str) -> dict:
+    """Prim path -> object made from this cache before: those in ``top`` and those the artist
+    moved to a collection of their own (not those of another import of the same file)."""
+    others = set()
+    for collection in scene.collection.children_recursive:
+        if collection != top and collection.get("taichi_frac_cache"):
+            others.update(collection.all_objects)
+    found = {o.taichi_frac.prim_path: o for o in top.all_objects if o.taichi_frac.prim_path}
+    for obj in scene.objects:
+        prim = obj.taichi_frac.prim_path
+        if prim and prim not in found and obj not in others and cache_key(obj.taichi_frac.cache_path) == key:
+            found[prim] = obj
+    return found
+
+
 def _source_collection(top, source: str):
     """``top``'s child collection for the scene body ``source`` (prim path), made if new."""
     for child in top.children:
@@ -219,7 +234,8 @@ def build_scene(context, cache, options: retime.ImportOptions = retime.ImportOpt
 
     key = cache_key(cache.path)
     top = _find_collection(scene, key) if options.update_existing else None
-    if top is None:
+    found = top is not None
+    if not found:
         top = bpy.data.collections.new(os.path.splitext(os.path.basename(cache.path))[0])
         scene.collection.children.link(top)
         top["taichi_frac_cache"] = cache.path
@@ -234,7 +250,7 @@ def build_scene(context, cache, options: retime.ImportOptions = retime.ImportOpt
         materials[index] = material
     top["taichi_frac_materials"] = known
 
-    existing = {o.taichi_frac.prim_path: o for o in top.all_objects if o.taichi_frac.prim_path}
+    existing = _imported_objects(scene, top, key) if found else {}
     old_actions = {o.animation_data.action for o in existing.values() if o.animation_data and o.animation_data.action}
     action = bpy.data.actions.new(f"{top.name}Action")
     action["taichi_frac_cache"] = cache.path

@@ -132,12 +132,18 @@ def section_reimport(spec):
     artist = bpy.data.materials.new("ArtistGlass")
     objects["sliver_1"].data.materials[0] = artist
     hero_mesh = hero.data
+    heroes = bpy.data.collections.new("Heroes")  # sliver_1 moved out of the import's collections
+    scene.collection.children.link(heroes)
+    sliver_1 = objects["sliver_1"]
+    heroes.objects.link(sliver_1)
+    top.children["slab"].objects.unlink(sliver_1)
 
     shutil.copy(v2, sim)  # the re-simulation overwrites the file
     result, error = run_import(scene, sim)
     check(result == {"FINISHED"}, f"re-import v2: {result} {error}")
     objects = fragments(scene)
     check(set(objects) == {"slab", "shard_a", "sliver_1", "shard_c", "plate"}, f"after v2: {sorted(objects)}")
+    check(len([o for o in scene.objects if o.taichi_frac.prim_path]) == 5, "duplicated objects after re-import")
     check(len([c for c in scene.collection.children if c.get("taichi_frac_cache")]) == 1, "re-import made a new collection")
     check(objects["shard_a"] is hero and hero.name == "Hero" and hero.data is hero_mesh, "Hero not updated in place")
     check([m.type for m in hero.modifiers] == ["BEVEL"], f"Hero modifiers {[m.type for m in hero.modifiers]}")
@@ -149,6 +155,8 @@ def section_reimport(spec):
           == (0.0, 1.0, 0.0, 1.0), "edited material overwritten")
     check(bpy.data.materials.get("outer.001") is None, "materials duplicated")
     check(objects["sliver_1"].data.materials[0] == artist, "artist's material on sliver_1 lost")
+    check(objects["sliver_1"] is sliver_1 and list(sliver_1.users_collection) == [heroes],
+          f"moved sliver_1 not updated where it is: {[c.name for c in objects['sliver_1'].users_collection]}")
     check("shard_c" in [o.name for o in top.children["slab"].objects], "new piece not in its body's collection")
     check(objects["sliver_1"].taichi_frac.parent is hero, "sliver_1's parent in v2 is shard_a (Hero)")
     check(bpy.data.objects.get("shard_b") is None and bpy.data.objects.get("sliver_2") is None, "gone pieces not removed")
