@@ -135,3 +135,10 @@ def test_preview_surface_inputs_read_as_authored(tmp_path):
     assert outer.base_color == pytest.approx((0.80, 0.78, 0.72)) and outer.roughness == pytest.approx(0.30)
     inner = materials["inner"]
     assert (inner.opacity, inner.opacity_threshold, inner.ior) == (None, None, None)
+
+
+def test_material_names_follow_their_prim_paths():
+    name = reader._material_name
+    assert name("/Fracture/Materials/outer") == "outer"
+    assert name("/Fracture/Materials/ring_0/inner") == "ring_0_inner"
+    assert name("/Looks/glass") == "glass"

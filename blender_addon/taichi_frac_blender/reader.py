@@ -133,8 +133,18 @@ _PREVIEW_INPUTS = (("diffuseColor", "base_color"), ("roughness", "roughness"), (
                    ("opacity", "opacity"), ("opacityThreshold", "opacity_threshold"), ("ior", "ior"))
 
 
+def _material_name(prim_path: str) -> str:
+    """A Blender name for a material prim: its path below the materials scope ("outer",
+    "ring_0_outer" for .../Materials/ring_0/outer), else the prim's own name."""
+    scope = schema.MATERIALS_SCOPE + "/"
+    if prim_path.startswith(scope):
+        return prim_path[len(scope):].replace("/", "_")
+    return prim_path.rsplit("/", 1)[-1]
+
+
 def _read_material(material_prim, UsdShade) -> MaterialData:
-    data = MaterialData(name=material_prim.GetName(), prim_path=str(material_prim.GetPath()))
+    path = str(material_prim.GetPath())
+    data = MaterialData(name=_material_name(path), prim_path=path)
     material = UsdShade.Material(material_prim)
     source = material.ComputeSurfaceSource()
     shader = source[0] if source and source[0] else None
