@@ -59,14 +59,19 @@ def run_import(context, filepath: str, **options):
 
 
 def is_taichi_frac_cache(filepath: str) -> bool:
-    """Whether ``filepath`` is a readable taichi-frac cache (its layer data says so)."""
-    ensure_pxr()
+    """False only for a readable USD file without taichi-frac layer data (another tool's);
+    True when that cannot be told (unreadable file, no USD in this Blender), so that this
+    importer reports why."""
+    try:
+        ensure_pxr()
+    except ImportError:
+        return True
     from .reader import CacheError, layer_info
 
     try:
         return layer_info(filepath) is not None
     except CacheError:
-        return False
+        return True
 
 
 class IMPORT_SCENE_OT_taichi_frac(bpy.types.Operator, ImportHelper):

@@ -420,6 +420,15 @@ def section_errors(spec):
     check(result == {"FINISHED"} and [o.name.split(".")[0] for o in drop.objects] == ["Cube"],
           f"foreign drop: {result}, objects {[o.name for o in drop.objects]}")
     check(any("Blender's USD importer" in text for _, text in reports), f"drop reports {reports}")
+
+    class DroppedCorrupt(Dropped):  # unreadable: this importer says why, not Blender's
+        filepath = spec["corrupt"]
+
+        def execute(self, context):
+            return {"OURS"}
+
+    with bpy.context.temp_override(scene=drop):
+        check(operator.invoke(DroppedCorrupt(), bpy.context, None) == {"OURS"}, "a corrupt drop left to Blender")
     print("errors: checked")
 
 
