@@ -115,12 +115,12 @@ def main(argv):
         frames = [int(f) for f in args.frames.split(",")]
     else:
         frames = sorted({scene.frame_start, (scene.frame_start + scene.frame_end) // 2, scene.frame_end})
-    framed = list(collection.objects)
+    framed = list(collection.all_objects)
     if args.look_at:
         globs = [g.strip() for g in args.look_at.split(",") if g.strip()]
         framed = [o for o in framed if any(fnmatch.fnmatchcase(o.name, g) for g in globs)]
         if not framed:
-            names = ", ".join(sorted(o.name for o in collection.objects)[:10])
+            names = ", ".join(sorted(o.name for o in collection.all_objects)[:10])
             print(f"--look-at {args.look_at!r} matches no object (some names: {names})", file=sys.stderr)
             return 2
     low, high = visible_bounds(framed, frames)

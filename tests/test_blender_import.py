@@ -22,7 +22,12 @@ pytestmark = pytest.mark.blender
 
 
 def blender_python() -> Path:
-    """The Blender environment, or a skip outside CI (scripts/test.sh creates it; CI must have it)."""
+    """The Blender environment, or a skip outside CI (scripts/test.sh creates it; CI must have it).
+    TAICHI_FRAC_BLENDER_PYTHON names another one's python, e.g. one with the oldest bpy the
+    manifest allows (``pip install bpy==4.4.0`` in a Python 3.11 venv)."""
+    override = os.environ.get("TAICHI_FRAC_BLENDER_PYTHON")
+    if override:
+        return Path(override)
     if BLENDER_PYTHON.exists():
         return BLENDER_PYTHON
     message = f"{BLENDER_PYTHON} missing: run `bash -c 'source scripts/_setup.sh; setup_blender'`"

@@ -7,6 +7,8 @@ the cache's upAxis and metersPerUnit are undone here.
 
 from __future__ import annotations
 
+import os
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -14,14 +16,24 @@ import numpy as np
 from . import schema
 
 
+class CacheError(ValueError):
+    """A cache that cannot be read: missing, not USD, corrupt, or from a newer writer. The
+    message names the file and what to do; the add-on shows it in Blender's status bar."""
+
+
 @dataclass
 class MaterialData:
+    """A UsdPreviewSurface's constant inputs; None where the shader does not author one (the
+    importer then keeps Blender's default). Colours linear RGB."""
+
     name: str
     prim_path: str
-    base_color: tuple = (0.8, 0.8, 0.8)
-    roughness: float = 0.5
-    metallic: float = 0.0
-    opacity: float = 1.0
+    base_color: tuple | None = None          # diffuseColor
+    roughness: float | None = None
+    metallic: float | None = None
+    opacity: float | None = None
+    opacity_threshold: float | None = None   # > 0: a cut-out mask; 0: opacity is transmission
+    ior: float | None = None
 
 
 @dataclass
@@ -49,6 +61,8 @@ class FragmentData:
     impact_point: np.ndarray | None = None   # (3,) [m] world
     impact_force: np.ndarray | None = None   # (3,) [N] world
     peak_principal_stress: float | None = None  # [Pa]
+    generation: int = 0             # parent links up to the scene's original body
+    source: str = ""                # prim path of that original body (itself for a root)
 
     def visible_at(self, frame: float) -> bool:
         """Visibility as USD holds it: the last key at or before ``frame`` (first key before)."""
@@ -67,6 +81,7 @@ class CacheData:
     schema_version: int | None
     complete: bool | None
     last_frame: int | None
+    generator: str | None = None
     materials: list = field(default_factory=list)
     fragments: list = field(default_factory=list)
 
@@ -113,18 +128,32 @@ def make_sign_continuous(q: np.ndarray) -> np.ndarray:
     return q * np.concatenate([[1.0], np.cumprod(step)])[:, None]
 
 
+# UsdPreviewSurface input -> MaterialData field.
+_PREVIEW_INPUTS = (("diffuseColor", "base_color"), ("roughness", "roughness"), ("metallic", "metallic"),
+                   ("opacity", "opacity"), ("opacityThreshold", "opacity_threshold"), ("ior", "ior"))
+
+
+def _material_name(prim_path: str) -> str:
+    """A Blender name for a material prim: its path below the materials scope ("outer",
+    "ring_0_outer" for .../Materials/ring_0/outer), else the prim's own name."""
+    scope = schema.MATERIALS_SCOPE + "/"
+    if prim_path.startswith(scope):
+        return prim_path[len(scope):].replace("/", "_")
+    return prim_path.rsplit("/", 1)[-1]
+
+
 def _read_material(material_prim, UsdShade) -> MaterialData:
-    data = MaterialData(name=material_prim.GetName(), prim_path=str(material_prim.GetPath()))
+    path = str(material_prim.GetPath())
+    data = MaterialData(name=_material_name(path), prim_path=path)
     material = UsdShade.Material(material_prim)
     source = material.ComputeSurfaceSource()
     shader = source[0] if source and source[0] else None
     if shader is None or shader.GetIdAttr().Get() != "UsdPreviewSurface":
         return data
-    for input_name, attr in (("diffuseColor", "base_color"), ("roughness", "roughness"),
-                             ("metallic", "metallic"), ("opacity", "opacity")):
+    for input_name, attr in _PREVIEW_INPUTS:
         shader_input = shader.GetInput(input_name)
-        if shader_input and shader_input.Get() is not None:
-            value = shader_input.Get()
+        value = shader_input.Get() if shader_input else None  # (None too when a texture drives it)
+        if value is not None:
             setattr(data, attr, tuple(float(c) for c in value) if attr == "base_color" else float(value))
     return data
 
@@ -145,13 +174,72 @@ def _loop_values(primvar, face_vertices: np.ndarray, loop_count: int, width: int
     return None
 
 
+def _usd_message(exc) -> str:
+    """The commentary of each error in a Tf.ErrorException (the text USD quotes after the
+    C++ location), which is what a user can act on."""
+    found = re.findall(r"^\s*Error in .*? : '(.*?)'\s*$", str(exc), flags=re.MULTILINE | re.DOTALL)
+    return "; ".join(dict.fromkeys(m.strip() for m in found)) or str(exc).strip() or type(exc).__name__
+
+
+def _check_path(path) -> None:
+    if not os.path.exists(path):
+        raise CacheError(f"{path}: no such file")
+    if os.path.isdir(path):
+        raise CacheError(f"{path} is a folder, not a USD file")
+
+
+def layer_info(path) -> dict | None:
+    """The taichi-frac layer data of a USD file (schemaVersion, complete, lastFrame,
+    generator), or None when another tool wrote it. Reads the layer's metadata only."""
+    from pxr import Sdf, Tf
+
+    _check_path(path)
+    try:
+        layer = Sdf.Layer.OpenAsAnonymous(str(path), True)  # (metadataOnly)
+    except Tf.ErrorException as exc:
+        raise CacheError(f"{path} is not a readable USD file: {_usd_message(exc)}") from None
+    if layer is None:
+        raise CacheError(f"{path} is not a readable USD file")
+    data = dict(layer.customLayerData).get(schema.LAYER_DATA_KEY)
+    return dict(data) if data else None
+
+
 def read_cache(path) -> CacheData:
-    """Read every Mesh under the default prim (the whole stage if there is none)."""
+    """Read every Mesh under the default prim (the whole stage if there is none). Raises
+    CacheError, naming the file and USD's own reason, when it cannot."""
+    from pxr import Tf
+
+    _check_path(path)
+    try:
+        cache = _read_stage(path)
+    except Tf.ErrorException as exc:
+        raise CacheError(f"{path} is not a readable USD file: {_usd_message(exc)}") from None
+    if cache.schema_version is not None and int(cache.schema_version) > schema.SCHEMA_VERSION:
+        raise CacheError(f"{path} was written by a newer taichi-frac ({cache.generator}, cache schema "
+                         f"{cache.schema_version}); this add-on reads schema {schema.SCHEMA_VERSION}: update it")
+    _link_lineage(cache.fragments)
+    return cache
+
+
+def _link_lineage(fragments) -> None:
+    """Each fragment's generation (0 for a body of the scene) and source (that body's prim
+    path), by following parent links; a parent missing from the file ends the chain."""
+    by_path = {f.prim_path: f for f in fragments}
+    for fragment in fragments:
+        generation, node, seen = 0, fragment, {fragment.prim_path}
+        while node.parent in by_path and node.parent not in seen:
+            seen.add(node.parent)
+            node = by_path[node.parent]
+            generation += 1
+        fragment.generation, fragment.source = generation, node.prim_path
+
+
+def _read_stage(path) -> CacheData:
     from pxr import Usd, UsdGeom, UsdShade
 
     stage = Usd.Stage.Open(str(path))
     if stage is None:
-        raise OSError(f"USD cannot open {path}")
+        raise CacheError(f"USD cannot open {path}")
     up_axis = UsdGeom.GetStageUpAxis(stage)
     meters_per_unit = UsdGeom.GetStageMetersPerUnit(stage)
     axis_turn = _Y_TO_Z_UP if up_axis == "Y" else np.eye(3)
@@ -167,6 +255,7 @@ def read_cache(path) -> CacheData:
         schema_version=layer_data.get(schema.KEY_VERSION),
         complete=layer_data.get(schema.KEY_COMPLETE),
         last_frame=layer_data.get(schema.KEY_LAST_FRAME),
+        generator=layer_data.get(schema.KEY_GENERATOR),
     )
     material_index: dict[str, int] = {}
 

@@ -44,8 +44,8 @@ def import_cache(path):
     before = set(bpy.data.collections)
     result = bpy.ops.import_scene.taichi_frac(filepath=str(path))
     check(result == {"FINISHED"}, f"{path}: import returned {result}")
-    new = [c for c in bpy.data.collections if c not in before]
-    check(len(new) == 1, f"{path}: expected one new collection, got {len(new)}")
+    new = [c for c in bpy.data.collections if c not in before and c.get("taichi_frac_cache")]
+    check(len(new) == 1, f"{path}: expected one new cache collection, got {len(new)}")
     return new[0]
 
 
@@ -59,8 +59,8 @@ def check_cache(path):
     check(abs(fps - synthetic.FPS) < 1e-9, f"{label}: fps {fps}")
 
     objects = {}
-    for obj in collection.objects:
-        objects[obj["taichi_frac_prim"].rsplit("/", 1)[-1]] = obj
+    for obj in collection.all_objects:
+        objects[obj.taichi_frac.prim_path.rsplit("/", 1)[-1]] = obj
     check(sorted(objects) == sorted(synthetic.FRAGMENTS), f"{label}: objects {sorted(objects)}")
 
     for name, obj in objects.items():
@@ -88,16 +88,19 @@ def check_cache(path):
         mesh.attributes["peak_principal_stress"].data.foreach_get("value", stress)
         expected_stress = synthetic.face_stress(name, len(faces))
         check(np.allclose(stress, expected_stress, rtol=1e-6), f"{label}/{name}: face stress {stress}")
-        check(obj["taichi_frac_birth_frame"] == birth, f"{label}/{name}: birth {obj['taichi_frac_birth_frame']}")
-        check(obj["taichi_frac_death_frame"] == (-1 if death is None else death), f"{label}/{name}: death")
-        check(abs(obj["taichi_frac_peak_principal_stress"] - synthetic.peak_stress(name)) < 1e-3,
-              f"{label}/{name}: peak stress")
+        props = obj.taichi_frac
+        check(props.cache_birth_frame == birth and props.birth_frame == birth, f"{label}/{name}: birth {props.birth_frame}")
+        check(props.cache_death_frame == props.death_frame == (-1 if death is None else death), f"{label}/{name}: death")
+        check(abs(props.peak_stress - synthetic.peak_stress(name)) < 1e-6 * synthetic.peak_stress(name),
+              f"{label}/{name}: peak stress {props.peak_stress}")
+        check(props.parent == (None if parent is None else objects[parent]), f"{label}/{name}: parent {props.parent}")
+        check(props.has_impact == (parent is not None), f"{label}/{name}: has_impact")
         if parent is not None:
-            check(obj["taichi_frac_parent"] == objects[parent].name, f"{label}/{name}: parent {obj['taichi_frac_parent']}")
-            check(np.allclose(list(obj["taichi_frac_impact_force"]), synthetic.IMPACT["force"], atol=1e-9),
-                  f"{label}/{name}: impact force {list(obj['taichi_frac_impact_force'])}")
-            check(np.allclose(list(obj["taichi_frac_impact_point"]), synthetic.IMPACT["point"], atol=1e-9),
-                  f"{label}/{name}: impact point {list(obj['taichi_frac_impact_point'])}")
+            # (float32 properties: 1e-7 relative)
+            check(np.allclose(list(props.impact_force), synthetic.IMPACT["force"], rtol=1e-6, atol=1e-6),
+                  f"{label}/{name}: impact force {list(props.impact_force)}")
+            check(np.allclose(list(props.impact_point), synthetic.IMPACT["point"], atol=1e-7),
+                  f"{label}/{name}: impact point {list(props.impact_point)}")
 
     checked_matrices = 0
     for frame in range(synthetic.START_FRAME, synthetic.END_FRAME + 1):

@@ -20,20 +20,21 @@ def main(argv):
                                                       enable_on_install=True)
     assert result == {"FINISHED"}, result
     before = set(bpy.data.collections)
-    assert bpy.ops.import_scene.taichi_frac(filepath=cache) == {"FINISHED"}
-    (collection,) = [c for c in bpy.data.collections if c not in before]
+    # (every prim, the never-visible too: the test compares them all with pxr)
+    assert bpy.ops.import_scene.taichi_frac(filepath=cache, skip_never_visible=False) == {"FINISHED"}
+    (collection,) = [c for c in bpy.data.collections if c not in before and c.get("taichi_frac_cache")]
     scene = bpy.context.scene
-    dump = {"objects": len(collection.objects), "frames": {}}
+    dump = {"objects": len(collection.all_objects), "frames": {}}
     for frame in map(int, frames):
         scene.frame_set(frame)
         dump["frames"][str(frame)] = {
-            obj["taichi_frac_prim"]: dict(matrix=[list(row) for row in obj.matrix_world],
-                                          visible=not obj.hide_render)
-            for obj in collection.objects
+            obj.taichi_frac.prim_path: dict(matrix=[list(row) for row in obj.matrix_world],
+                                            visible=not obj.hide_render)
+            for obj in collection.all_objects
         }
     with open(out, "w") as fh:
         json.dump(dump, fh)
-    print(f"dumped {len(collection.objects)} objects at {len(frames)} frames")
+    print(f"dumped {len(collection.all_objects)} objects at {len(frames)} frames")
 
 
 if __name__ == "__main__":

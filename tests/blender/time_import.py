@@ -17,7 +17,7 @@ taichi_frac_blender.register()
 start = time.perf_counter()
 bpy.ops.import_scene.taichi_frac(filepath=sys.argv[1])
 elapsed = time.perf_counter() - start
-objects = [o for o in bpy.data.objects if "taichi_frac_prim" in o]
+objects = [o for o in bpy.data.objects if o.taichi_frac.prim_path]
 keys = sum(len(fc.keyframe_points) for o in objects
-           for fc in o.animation_data.action.layers[0].strips[0].channelbags[0].fcurves)
+           for fc in o.animation_data.action.layers[0].strips[0].channelbag(o.animation_data.action_slot).fcurves)
 print(f"import: {len(objects)} objects, {keys} keyframes in {elapsed:.2f} s")
