@@ -35,9 +35,9 @@ def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
 def crack_deviation(vertices, faces, face_is_inner, face_crack, cracks) -> float:
     """[m] RMS distance of the crack faces' corners from their crack surfaces
     (``CrackSurface``), each corner weighted by a third of its face's area; NaN without
-    crack faces."""
+    crack faces. Inner faces on no crack (``face_crack`` < 0) are not counted."""
     faces = np.asarray(faces, dtype=np.int64)
-    inner = np.nonzero(np.asarray(face_is_inner, dtype=bool))[0]
+    inner = np.nonzero(np.asarray(face_is_inner, dtype=bool) & (np.asarray(face_crack) >= 0))[0]
     if not len(inner):
         return float("nan")
     tri = np.asarray(vertices, dtype=np.float64)[faces[inner]]

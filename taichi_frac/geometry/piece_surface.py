@@ -63,6 +63,8 @@ _NORMAL = slice(3, 6)
 _UV = slice(6, 8)
 _CRACK = 8
 _PROPERTY_COUNT = 9
+#: The crack index of a carved piece's hull faces (inner faces on no crack).
+HULL_FACE = -2
 
 
 @dataclass(frozen=True)
@@ -107,7 +109,8 @@ class PieceMesh:
     """A render solid as a triangle mesh for the cache: vertices (V,3) [m], faces (F,3)
     outward, face_is_inner (F,) bool, normals (F,3,3) unit and uvs (F,3,2) per corner (UVs:
     the artist's on outer faces, [m] along the crack's tangent frame on inner ones),
-    face_crack (F,) index into ``cracks`` (-1 on outer faces)."""
+    face_crack (F,) index into ``cracks`` (-1 on outer faces, HULL_FACE on a carved piece's
+    faces that lie on no crack)."""
 
     vertices: np.ndarray
     faces: np.ndarray
@@ -367,8 +370,9 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
         cut = m3.Manifold.batch_boolean([render.solid, *slabs], m3.OpType.Subtract)
     else:
         cut = render.solid
-    parts = [part for part in cut.decompose() if part.volume() >= DUST_VOLUME_FACTOR * spacing**3]
-    stats["dust_parts"] = len(cut.decompose()) - len(parts) if slabs else 0
+    every_part = cut.decompose()
+    parts = [part for part in every_part if part.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+    stats["dust_parts"] = len(every_part) - len(parts)
     owner = _assign_parts(parts, model, labels, spacing)
     parts, owner = _carve_missing_pieces(parts, owner, model, fragment_tets)
     stats["parts"] = len(parts)
@@ -417,7 +421,8 @@ def _carve_missing_pieces(parts, owner, model, fragment_tets):
                 best, best_count = j, count
         if best is None:
             continue
-        hull = m3.Manifold.hull_points(np.ascontiguousarray(model.vertices[model.tets[tets]].reshape(-1, 3)))
+        hull = _with_crack_index(
+            m3.Manifold.hull_points(np.ascontiguousarray(model.vertices[model.tets[tets]].reshape(-1, 3))), HULL_FACE)
         carved = parts[best] ^ hull
         if carved.is_empty():
             continue
@@ -454,13 +459,17 @@ def piece_mesh(render: RenderSolid) -> PieceMesh:
     mesh = render.solid.to_mesh64()
     props = np.asarray(mesh.vert_properties, dtype=np.float64)
     tri_verts = np.asarray(mesh.tri_verts, dtype=np.int64)
-    # One vertex per position (property vertices repeat a position across seams).
-    positions, vertex_of = np.unique(props[:, :3], axis=0, return_inverse=True)
-    vertex_of = vertex_of.reshape(-1)
-    faces = vertex_of[tri_verts]
+    # One vertex per topological vertex: property vertices repeat one across UV and normal
+    # seams (the merge vectors say which), while two vertices the solid pinches together at
+    # one position stay two, so the mesh stays manifold.
+    topological = np.arange(len(props))
+    topological[np.asarray(mesh.merge_from_vert, dtype=np.int64)] = np.asarray(mesh.merge_to_vert, dtype=np.int64)
+    used, vertex_of = np.unique(topological, return_inverse=True)
+    positions = props[used, :3]
+    faces = vertex_of.reshape(-1)[tri_verts]
     corner = props[tri_verts]  # (F,3,P)
     crack = np.rint(corner[:, :, _CRACK].max(axis=1)).astype(np.int64)
-    inner = crack >= 0
+    inner = crack != -1
     tri = positions[faces]
     flat = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     flat /= np.maximum(np.linalg.norm(flat, axis=1, keepdims=True), 1e-300)
@@ -469,7 +478,8 @@ def piece_mesh(render: RenderSolid) -> PieceMesh:
     length = np.linalg.norm(normals, axis=2, keepdims=True)
     normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300), flat[:, None, :])
     uvs = corner[:, :, _UV].copy()
-    for index in np.unique(crack[inner]):
+    uvs[crack == HULL_FACE] = np.nan  # (the cache writer projects them on a box)
+    for index in np.unique(crack[crack >= 0]):
         rows = np.nonzero(crack == index)[0]
         surface = render.cracks[index]
         rel = tri[rows] - surface.point
@@ -481,4 +491,4 @@ def piece_mesh(render: RenderSolid) -> PieceMesh:
             uvs[rows] = np.stack([np.arctan2(rel[..., 1], rel[..., 0]) * surface.radius,
                                   np.arcsin(np.clip(rel[..., 2] / np.maximum(r, 1e-300), -1, 1)) * surface.radius],
                                  axis=2)
-    return PieceMesh(positions, faces, inner, normals, uvs, np.where(inner, crack, -1), render.cracks)
+    return PieceMesh(positions, faces, inner, normals, uvs, crack, render.cracks)
