@@ -50,6 +50,9 @@ SLAB_THICKNESS_FACTOR = 2e-4
 #: its points: beyond the surface where the plane meets it obliquely.
 SLAB_REACH_FACTOR = 4.0
 
+#: A part's vote reads at most about this many of its faces (evenly spread over its list).
+MAX_VOTING_FACES = 512
+
 #: Parts of the cut solid smaller than this [particle spacings cubed] are dropped: chips
 #: where two slabs' edges cross the surface, far below a render's resolution.
 DUST_VOLUME_FACTOR = 1e-2
@@ -232,16 +235,11 @@ def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, 
         _, first = np.unique(np.round(flat / (1e-9 * spacing)), axis=0, return_index=True)
         points = np.concatenate([flat[first], fence])
         diagram = Voronoi(points)
-        cells = []
-        for k in np.nonzero(~separating[first])[0]:
-            region = diagram.regions[diagram.point_region[k]]
-            if -1 in region or len(region) < 3:
-                continue
-            polygon = diagram.vertices[region]
-            signed = np.sum(polygon[:, 0] * np.roll(polygon[:, 1], -1) - np.roll(polygon[:, 0], -1) * polygon[:, 1])
-            cells.append(polygon if signed > 0 else polygon[::-1])
+        regions = (diagram.regions[diagram.point_region[k]] for k in np.nonzero(~separating[first])[0])
+        # (the cells do not overlap, so either winding fills them)
+        cells = [diagram.vertices[region] for region in regions if len(region) >= 3 and -1 not in region]
         if cells:
-            outline = outline - m3.CrossSection(cells, m3.FillRule.Positive)
+            outline = outline - m3.CrossSection(cells, m3.FillRule.NonZero)
     outline = outline.simplify(0.05 * spacing)
     if outline.is_empty():
         return None
@@ -443,7 +441,8 @@ def _assign_parts(parts, model, labels, spacing) -> list[int]:
     for part in parts:
         mesh = part.to_mesh64()
         vp = np.asarray(mesh.vert_properties)[:, :3]
-        tri = vp[np.asarray(mesh.tri_verts, dtype=np.int64)]
+        tri_verts = np.asarray(mesh.tri_verts, dtype=np.int64)
+        tri = vp[tri_verts[:: max(1, len(tri_verts) // MAX_VOTING_FACES)]]
         normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         area = 0.5 * np.linalg.norm(normal, axis=1)
         normal /= np.maximum(2.0 * area[:, None], 1e-300)
