@@ -53,6 +53,11 @@ SLAB_REACH_FACTOR = 4.0
 #: A part's vote reads at most about this many of its faces (evenly spread over its list).
 MAX_VOTING_FACES = 512
 
+#: A vote whose winner has less than this share of the area is settled by the tets inside.
+DECISIVE_VOTE = 0.8
+#: How many tets in a part's box that check reads at most.
+MAX_PROBED_TETS = 128
+
 #: Parts of the cut solid smaller than this [particle spacings cubed] are dropped: chips
 #: where two slabs' edges cross the surface, far below a render's resolution.
 DUST_VOLUME_FACTOR = 1e-2
@@ -449,8 +454,26 @@ def _assign_parts(parts, model, labels, spacing) -> list[int]:
         probe = tri.mean(axis=1) - 0.25 * spacing * normal
         _, nearest = tree.query(probe)
         votes = np.bincount(labels[nearest] + 1, weights=area)
+        if votes.max() < DECISIVE_VOTE * votes.sum():
+            # A thin part (three tets across a glass pane) can sit nearer a neighbour's tets
+            # than its own: ask which tets' centroids it holds, by their volume.
+            tets = _tets_inside(part, model, vp.min(axis=0), vp.max(axis=0), tri)
+            if len(tets):
+                votes = np.bincount(labels[tets] + 1, weights=model.tet_volume[tets])
         owners.append(int(np.argmax(votes)) - 1)
     return owners
+
+
+def _tets_inside(part, model, low, high, triangles) -> np.ndarray:
+    """Up to MAX_PROBED_TETS tets (evenly spread over those in the part's box) whose
+    centroids lie inside ``part``; ``triangles`` its faces."""
+    from .piece_checks import inside
+
+    in_box = np.nonzero(np.all((model.particle_position >= low) & (model.particle_position <= high), axis=1))[0]
+    in_box = in_box[:: max(1, len(in_box) // MAX_PROBED_TETS)]
+    mesh = part.to_mesh64()
+    every = np.asarray(mesh.vert_properties)[:, :3][np.asarray(mesh.tri_verts, dtype=np.int64)]
+    return in_box[inside(model.particle_position[in_box], every)]
 
 
 def piece_mesh(render: RenderSolid) -> PieceMesh:
