@@ -454,9 +454,11 @@ def _assign_parts(parts, model, labels, spacing) -> list[int]:
         probe = tri.mean(axis=1) - 0.25 * spacing * normal
         _, nearest = tree.query(probe)
         votes = np.bincount(labels[nearest] + 1, weights=area)
-        if votes.max() < DECISIVE_VOTE * votes.sum():
+        if votes.max() < DECISIVE_VOTE * votes.sum() and part.volume() >= spacing**3:
             # A thin part (three tets across a glass pane) can sit nearer a neighbour's tets
-            # than its own: ask which tets' centroids it holds, by their volume.
+            # than its own: ask which tets' centroids it holds, by their volume. (Not for
+            # chips under a spacing cubed: a refracture through a piece's hairline shells
+            # leaves dozens, and which side owns one is invisible.)
             tets = _tets_inside(part, model, vp.min(axis=0), vp.max(axis=0), tri)
             if len(tets):
                 votes = np.bincount(labels[tets] + 1, weights=model.tet_volume[tets])
