@@ -44,6 +44,9 @@ class BodyRecord:
     # every fragment of it: normals (Fr,3,3), uvs (Fr,3,2) or None.
     root_normals: np.ndarray | None = None
     root_uvs: np.ndarray | None = None
+    # What the cache draws (geometry/piece_surface.py), body frame: the artist's surface
+    # cut along the cracks; None when no cache is written.
+    render: object = None
 
 
 @dataclass
@@ -194,6 +197,8 @@ class Simulation:
         self.resimulated_substeps = 0
         self.mass_dropped = 0.0
         self.prepare_reports = []
+        # Per split that cut a render solid: (seconds, geometry/piece_surface.py's counts).
+        self.render_cuts: list[tuple[float, dict]] = []
         self._tet_peak_stress: dict[int, np.ndarray] = {}
         if output is None:
             output = scene.output_path
@@ -272,6 +277,12 @@ class Simulation:
                 corners = model.vertices[model.surface_faces] + model.com_in_source
                 rec = self.records[body]
                 rec.root_normals, rec.root_uvs = boundary_corner_attributes(report.surface, corners)
+            if self.output_path is not None:
+                from .geometry.piece_surface import render_solid_from_surface, render_solid_from_tets
+
+                rec = self.records[body]
+                rec.render = (render_solid_from_tets(model) if report.surface is None else
+                              render_solid_from_surface(report.surface, model.com_in_source, model.spacing))
         self.initial_mass = sum(r.model.mass for r in self.records.values())
         self._dynamics_seconds_at_start = dict(self.world.stats.seconds)  # a reused World keeps counting
         self.table1 = dict(
@@ -296,9 +307,19 @@ class Simulation:
         self._write_frame(0)
 
     def _add_to_cache(self, rec: BodyRecord, birth_frame: int, parent_cache=None, impact=None, peak=0.0,
-                      face_peak=None):
-        from .io.fragment_mesh import fragment_surface, root_faces_of, surface_corner_attributes
+                      tet_peak=None):
+        from .io.fragment_mesh import fragment_surface, render_surface, root_faces_of, surface_corner_attributes
 
+        if rec.render is not None:
+            vertices, faces, inner, normals, uvs, face_peak = render_surface(rec.render, rec.model, tet_peak)
+            rec.cache_id = self.writer.add_fragment(
+                rec.name, vertices, faces, inner, birth_frame, parent=parent_cache, impact=impact,
+                peak_principal_stress=float(peak), face_peak_stress=face_peak, normals=normals, uvs=uvs,
+                shade_inner=True,
+            )
+            return
+        # A piece the render solid gave no part to: its tets' boundary.
+        face_peak = None if tet_peak is None else tet_peak[rec.model.surface_face_tet]
         root_faces = root_faces_of(rec.model, rec.root)  # (both calls below need it)
         vertices, faces, inner = fragment_surface(rec.model, rec.root, root_faces)
         normals = uvs = None
@@ -399,6 +420,16 @@ class Simulation:
             if self.writer is not None:
                 peak_parent = np.maximum(self._tet_peak_stress.get(body, np.zeros(rec.model.tet_count)),
                                          analysis.particle_principal_stress)
+            renders = [None] * len(pieces)
+            if rec.render is not None:
+                from .geometry.piece_surface import cut_render_solid
+
+                t_cut = time.perf_counter()
+                renders, counts = cut_render_solid(
+                    rec.render, rec.model, split.fragment_tets, analysis.cracks,
+                    [p.model.com_in_source for p in pieces], roughness=rec.fracture.crack_roughness,
+                    roughness_scale=rec.fracture.crack_roughness_scale, seed=rec.fracture.seed)
+                self.render_cuts.append((time.perf_counter() - t_cut, counts))
             self.world.remove_body(body)
             if analysed is not None:  # its slot may go to a piece: forget what it went through
                 for key in [key for key in analysed if body in key]:
@@ -420,6 +451,7 @@ class Simulation:
                     fracture=rec.fracture, particles=rec.particles, breakable=piece.breakable,
                     generation=piece.generation, parent=body, birth_frame=frame, friction=rec.friction,
                     restitution=rec.restitution, root_normals=rec.root_normals, root_uvs=rec.root_uvs,
+                    render=renders[k],
                 )
                 # The world may hand the parent's freed slot to a child: the parent's record
                 # is no longer needed (its cache id and peak stress are held above).
@@ -430,8 +462,7 @@ class Simulation:
                     self._tet_peak_stress[child] = tet_peak
                     impact = None if piece.impact is None else dict(point=piece.impact.point, force=piece.impact.force)
                     self._add_to_cache(child_rec, frame, parent_cache=rec.cache_id, impact=impact,
-                                       peak=piece.peak_principal_stress,
-                                       face_peak=tet_peak[piece.model.surface_face_tet])
+                                       peak=piece.peak_principal_stress, tet_peak=tet_peak)
             self.times.fragment_split += time.perf_counter() - t
         return born
 

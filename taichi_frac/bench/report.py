@@ -10,7 +10,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from . import grouping, scaling, sph, stability, tables
+from . import grouping, pieces, scaling, sph, stability, tables
 from .common import REPO, BenchContext, Section, load_average, machine_info, md_table, warm_up
 
 #: The parts in report order: key -> (module, one-line help).
@@ -20,9 +20,10 @@ PARTS = {
     "sph": (sph, "SPH stress error against particle count and time (plain, corrected)"),
     "scaling": (scaling, "ms per frame and peak memory from 1e3 to 1e6 physics particles"),
     "stability": (stability, "the hard cases of the dynamics and fracture issues"),
+    "pieces": (pieces, "broken pieces' render surfaces: closed, on their cracks, what a split costs"),
 }
 #: Parts that need the report's World (and its warm-up).
-NEEDS_WORLD = ("tables", "grouping", "stability")
+NEEDS_WORLD = ("tables", "grouping", "stability", "pieces")
 
 
 def run_parts(ctx: BenchContext, keys) -> list[Section]:

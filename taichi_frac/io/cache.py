@@ -232,6 +232,7 @@ class CacheWriter:
         face_peak_stress=None,
         normals=None,
         uvs=None,
+        shade_inner: bool = False,
     ) -> int:
         """Add a fragment (or a whole unbroken body) and return its id for ``write_frame``.
 
@@ -243,6 +244,8 @@ class CacheWriter:
         uvs (V,2) or (F,3,2) of the input mesh, used on outer faces only (NaN = none there).
         Crack faces, and outer faces without input normals, get their flat face normal; faces
         without input UVs get a box projection of the body-frame position [m].
+        shade_inner: the normals and UVs given are the crack faces' too (a cut render solid's,
+        geometry/piece_surface.py, which projects UVs along each crack).
         """
         self._check_open()
         vertices = np.asarray(vertices, dtype=np.float64)
@@ -273,7 +276,7 @@ class CacheWriter:
         face_normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         face_normal /= np.maximum(np.linalg.norm(face_normal, axis=1, keepdims=True), 1e-300)
         flat = np.repeat(face_normal, 3, axis=0)
-        corner_inner = np.repeat(inner, 3)
+        corner_inner = np.repeat(inner, 3) & (not shade_inner)
         if corner_normals is None:
             corner_normals = flat
         else:

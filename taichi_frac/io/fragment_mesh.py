@@ -78,3 +78,23 @@ def surface_corner_attributes(model: BodyModel, root: BodyModel, root_normals, r
         uvs = np.full((len(root_face), 3, 2), np.nan)
         uvs[outer] = np.asarray(root_uvs)[rows, order]
     return normals, uvs
+
+
+def render_surface(render, model: BodyModel, tet_peak_stress=None):
+    """A piece's cut render solid (geometry/piece_surface.py) as the cache writer takes it.
+
+    Returns (vertices (V,3) [m] body frame, faces (F,3) outward, face_is_inner (F,) bool,
+    normals (F,3,3), uvs (F,3,2), face_peak_stress (F,) [Pa] or None). A face's peak stress
+    is that of the piece's tet nearest its centroid (``tet_peak_stress`` (T,) [Pa]), as the
+    tets' own boundary faces carry their tet's.
+    """
+    from scipy.spatial import cKDTree
+
+    from ..geometry.piece_surface import piece_mesh
+
+    mesh = piece_mesh(render)
+    face_peak = None
+    if tet_peak_stress is not None:
+        _, nearest = cKDTree(model.particle_position).query(mesh.vertices[mesh.faces].mean(axis=1))
+        face_peak = np.asarray(tet_peak_stress, dtype=np.float64)[nearest]
+    return mesh.vertices, mesh.faces, mesh.face_is_inner, mesh.normals, mesh.uvs, face_peak

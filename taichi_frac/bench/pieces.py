@@ -1,0 +1,153 @@
+"""Piece geometry: the render surfaces the cache gives broken pieces (geometry/piece_surface.py)
+measured on the paper's scenes and a mesh from ../shared/meshes, beside the tets' own
+boundary faces (what a piece looks like without them). Writes ``benchmarks/piece-geometry.md``.
+
+Per scene: the live pieces at the end of a run that writes a cache, each measured by
+geometry/piece_checks.py (open / non-manifold / misoriented edges, shells, crack faces' RMS
+distance from their cracks, volume against the tets', render-to-tets distance), and the
+cost of cutting the render solid per split. The timed rows of the tables part write no
+cache, so they build no render solid and this cost is not in them.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .common import REPO, SCENES, BenchContext, Section, load_average, md_table
+
+SHARED_MESH = REPO.parent / "shared" / "meshes" / "spot.obj"
+#: Pieces with at least this many tets are the "large" ones the volume bound is read on: a
+#: piece of a few tets where cracks meet is smaller than the planes' resolution.
+LARGE_PIECE_TETS = 100
+
+
+def _scene_cases(quick: bool):
+    from ..scenes import load_scene
+
+    frames = 40 if quick else None
+    return [
+        ("single ring, crack_count 5", load_scene(SCENES / "single_ring.toml", ["ring.fracture.crack_count=5"]), frames),
+        ("glass walls", load_scene(SCENES / "glass_walls.toml"), frames),
+        ("13 rings", load_scene(SCENES / "thirteen_rings.toml"), frames),
+    ]
+
+
+def measure_pieces(records) -> dict:
+    """Totals over pieces (BodyRecords with a model, root and render solid) of the render
+    surfaces' and the tets' boundary faces' measures."""
+    from ..geometry.piece_checks import edge_counts, piece_quality
+    from ..geometry.piece_surface import piece_mesh
+    from ..io.fragment_mesh import fragment_surface
+
+    rows, before = [], []
+    for rec in records:
+        _, tet_faces, _ = fragment_surface(rec.model, rec.root)
+        before.append(edge_counts(tet_faces))
+        if rec.render is not None:
+            rows.append((rec.model.tet_count, piece_quality(piece_mesh(rec.render), rec.model)))
+    quality = [q for _, q in rows]
+    large = [q for n, q in rows if n >= LARGE_PIECE_TETS]
+    volume = np.array([q["volume_error"] for q in quality]) if quality else np.zeros(1)
+    large_volume = np.array([q["volume_error"] for q in large]) if large else np.full(1, np.nan)
+    return dict(
+        pieces=len(before), rendered=len(quality),
+        before_nonmanifold=sum(b["nonmanifold_edges"] for b in before),
+        before_pieces_nonmanifold=sum(b["nonmanifold_edges"] > 0 for b in before),
+        nonmanifold=sum(q["nonmanifold_edges"] for q in quality), open=sum(q["open_edges"] for q in quality),
+        misoriented=sum(q["misoriented_edges"] for q in quality),
+        closed=sum(q["watertight"] and q["outward"] for q in quality),
+        multi_shell=sum(q["shells"] > 1 for q in quality),
+        crack_rms=float(np.nanmax([q["crack_rms_spacings"] for q in quality])) if quality else float("nan"),
+        large=len(large), large_volume=float(np.nanmax(np.abs(large_volume))),
+        median_volume=float(np.median(np.abs(volume))),
+        distance=float(np.max([q["distance_to_tets_spacings"] for q in quality])) if quality else float("nan"),
+        distance_large=float(np.max([q["distance_to_tets_spacings"] for q in large])) if large else float("nan"),
+    )
+
+
+def _mesh_case(ctx: BenchContext):
+    """spot.obj (full resolution, with UVs) struck once: prepare, analyse, split, cut."""
+    from ..fracture.cracks import analyze_impact
+    from ..fracture.fragments import make_fragments, split_body
+    from ..geometry.piece_surface import cut_render_solid, render_solid_from_surface
+    from ..geometry.prepare import prepare_body
+    from ..options import FractureOptions, ParticleOptions, material_preset
+    from ..simulation import BodyRecord
+
+    material = material_preset("porcelain")
+    particles = ParticleOptions(target_particles=3000 if ctx.quick else 5000)
+    model, report = prepare_body(str(SHARED_MESH), material=material, particles=particles)
+    options = FractureOptions(crack_count=4, crack_length=None, seed=3)
+    top = int(np.argmax(model.particle_position[:, 2]))
+    point = model.particle_position[top] + np.array([0.0, 0.0, model.spacing])
+    analysis = analyze_impact(model, point, [0.0, 0.0, -1.0], [0.0, 0.0, -4.0 * model.mass * 9.81 * 200.0],
+                              material, options)
+    split = split_body(model, analysis, options)
+    pieces = make_fragments(model, split, np.zeros(3), [1.0, 0.0, 0.0, 0.0], np.zeros(3), np.zeros(3), material,
+                            particles, options=options)
+    render = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)
+    t = time.perf_counter()
+    renders, counts = cut_render_solid(render, model, split.fragment_tets, analysis.cracks,
+                                       [p.model.com_in_source for p in pieces])
+    seconds = time.perf_counter() - t
+    records = [BodyRecord(name="spot", model=p.model, root=model, material=material, fracture=options,
+                          particles=particles, breakable=True, render=r) for p, r in zip(pieces, renders)]
+    return measure_pieces(records), [seconds], len(report.surface.faces), counts
+
+
+def run(ctx: BenchContext) -> Section:
+    from .tables import run_scene
+
+    t0 = time.perf_counter()
+    rows, cost_rows = [], []
+    with tempfile.TemporaryDirectory() as folder:
+        for label, scene, frames in _scene_cases(ctx.quick):
+            sim, summary, _ = run_scene(ctx, scene, label, frames=frames, output=Path(folder) / "cache.usdc")
+            records = [sim.records[b] for b in sim.world.body_ids if sim.records[b].generation > 0]
+            m = measure_pieces(records)
+            cuts = [s for s, _ in sim.render_cuts]
+            rows.append((label, m))
+            split_ms = 1e3 * sum(cuts) / max(summary.frames, 1)
+            cost_rows.append([label, len(cuts), f"{1e3 * np.mean(cuts):.0f}" if cuts else "-",
+                              f"{1e3 * np.max(cuts):.0f}" if cuts else "-", f"{split_ms:.2f}",
+                              f"{summary.ms_per_frame['mean']:.1f}"])
+            ctx.progress(f"{label}: {m['pieces']} pieces, {m['closed']} closed, crack RMS {m['crack_rms']:.1e}")
+    if SHARED_MESH.exists():
+        m, cuts, triangles, _ = _mesh_case(ctx)
+        rows.append((f"{SHARED_MESH.name} ({triangles:,} triangles), one impact", m))
+        cost_rows.append([f"{SHARED_MESH.name}, one impact", 1, f"{1e3 * cuts[0]:.0f}", f"{1e3 * cuts[0]:.0f}", "-",
+                          "-"])
+    quality_rows = [[label, m["pieces"], f"{m['before_nonmanifold']} in {m['before_pieces_nonmanifold']}",
+                     f"{m['nonmanifold']} / {m['open']} / {m['misoriented']}", f"{m['closed']} of {m['rendered']}",
+                     m["multi_shell"], f"{m['crack_rms']:.1e}", f"{100 * m['large_volume']:.1f} % ({m['large']})",
+                     f"{100 * m['median_volume']:.1f} %", f"{m['distance_large']:.2f} / {m['distance']:.2f}"]
+                    for label, m in rows]
+    markdown = "\n".join([
+        "Each broken piece's render surface is the artist's surface cut along the cracks "
+        "([docs/guide/fragment-geometry.md](../guide/fragment-geometry.md)). Measured on the live pieces at "
+        "the end of each run (a cache written), against the tets' boundary faces the cache held before "
+        f"(machine load {load_average()}; the machine was shared).",
+        "",
+        md_table(["case", "pieces", "tet faces: non-manifold edges (in pieces)",
+                  "render: non-manifold / open / misoriented edges", "closed and outward", "pieces with 2+ shells",
+                  "crack faces' RMS off their cracks [spacings]",
+                  f"largest volume error, pieces >= {LARGE_PIECE_TETS} tets (count)", "median volume error, all",
+                  "largest render-to-tets distance, large / all [spacings]"],
+                 quality_rows),
+        "",
+        "What cutting the render solids costs (only runs that write a cache pay it):",
+        "",
+        md_table(["case", "splits", "ms per split, mean", "max", "ms per frame from it", "ms per frame, whole run"],
+                 cost_rows),
+        "",
+        f"Part took {time.perf_counter() - t0:.0f} s.",
+    ])
+    path = ctx.markdown_dir / "benchmarks" / "piece-geometry.md"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("# Piece geometry\n\n" + markdown + "\n")
+    ctx.progress(f"wrote {path}")
+    return Section("pieces", "Piece geometry", markdown)

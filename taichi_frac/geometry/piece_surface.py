@@ -1,0 +1,518 @@
+"""Render surfaces of broken pieces: the artist's surface outside, the crack's own surface inside.
+
+The physics decides which pieces exist (tets joined by bonds, cut by crack discs and rings;
+``fracture/fragments.py``); this module only gives each piece the surface an artist sees.
+A body's *render solid* is the artist's closed surface (``PrepareReport.surface``, full
+resolution, with its corner normals and UVs) as an exact-arithmetic ``manifold3d`` solid in
+the body's frame. When the body breaks, the render solid is cut by thin slabs lying on the
+crack geometry, one per crack, covering exactly the part of the crack that separates two
+different pieces, and the connected parts that remain are handed to the pieces whose tets
+they hold. So:
+
+- crack faces lie on their crack plane (or ring sphere) to within half the slab thickness
+  (``SLAB_THICKNESS_FACTOR`` x the particle spacing), not on the tets' staircase;
+- the outside is the artist's triangles clipped at the crack faces, keeping their UVs and
+  normals (interpolated where a triangle is cut); inner faces get a planar projection along
+  their crack as UVs and their own flat normal;
+- every piece is closed, manifold and outward wound (the boolean library guarantees it);
+- a piece that breaks again cuts its own render solid.
+
+Why slabs and not plain half-space splits: a crack disc is finite, so a crack plane
+separates two pieces in one place and runs through one piece elsewhere. Splitting by the
+infinite plane and gluing the same piece's halves back is a union of solids that touch on
+coplanar faces, which exact booleans resolve by symbolic perturbation into separate shells
+(measured: 158 of 200 random fans of planes through a torus failed to glue). A slab is cut
+only where the tets say the crack separates different pieces: its 2-D outline is the union
+of the cut tet faces' projections onto the crack plane, grown by one particle spacing so it
+reaches through the surface. Where a crack ends against another crack the slab runs up to
+one spacing past it, a hairline notch in the piece beyond.
+
+``crack_roughness`` (FractureOptions) displaces the slabs' faces along the crack normal
+by smooth value noise, the same on both faces, so the two sides of a crack still fit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import manifold3d as m3
+import numpy as np
+import trimesh
+
+from .surface_attributes import input_corner_normals
+
+#: Slab thickness as a fraction of the particle spacing: the two pieces of a crack are this
+#: far apart and each crack face lies half of it off its plane (1e-4 spacings: far below
+#: what a render shows, far above the boolean library's float64 round-off).
+SLAB_THICKNESS_FACTOR = 2e-4
+
+#: How far [particle spacings] a crack's slab reaches from the bond crossing nearest each of
+#: its points: beyond the surface where the plane meets it obliquely.
+SLAB_REACH_FACTOR = 4.0
+
+#: A part's vote reads at most about this many of its faces (evenly spread over its list).
+MAX_VOTING_FACES = 512
+
+#: A vote whose winner has less than this share of the area is settled by the tets inside.
+DECISIVE_VOTE = 0.8
+#: How many tets in a part's box that check reads at most.
+MAX_PROBED_TETS = 128
+
+#: Parts of the cut solid smaller than this [particle spacings cubed] are dropped: chips
+#: where two slabs' edges cross the surface, far below a render's resolution.
+DUST_VOLUME_FACTOR = 1e-2
+
+#: Largest gap [particle spacings] between a ring crack's sphere and its polygon.
+SPHERE_SAGITTA_FACTOR = 0.02
+
+# Vertex property columns after x, y, z: corner normal (3), UV (2), crack index (-1: the
+# artist's surface).
+_NORMAL = slice(3, 6)
+_UV = slice(6, 8)
+_CRACK = 8
+_PROPERTY_COUNT = 9
+#: The crack index of a carved piece's hull faces (inner faces on no crack).
+HULL_FACE = -2
+
+
+@dataclass(frozen=True)
+class CrackSurface:
+    """The crack a piece's inner faces lie on, in the piece's body frame: a plane
+    (``radius`` None) through ``point`` (3,) [m] with unit ``normal`` (3,), or the sphere of
+    ``radius`` [m] about ``point`` (a ring crack)."""
+
+    point: np.ndarray
+    normal: np.ndarray
+    radius: float | None = None
+
+    def shifted(self, offset: np.ndarray) -> "CrackSurface":
+        return CrackSurface(self.point - offset, self.normal, self.radius)
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """(N,) [m] signed distance of ``points`` (N,3) from the crack surface."""
+        if self.radius is None:
+            return (points - self.point) @ self.normal
+        return np.linalg.norm(points - self.point, axis=1) - self.radius
+
+
+@dataclass(frozen=True, eq=False)
+class RenderSolid:
+    """A body's render surface, body frame [m]: ``solid`` a closed manifold whose vertex
+    properties carry the artist's corner normals and UVs and, on crack faces, the index of
+    their crack in ``cracks``; ``spacing`` [m] the body's particle spacing."""
+
+    solid: m3.Manifold
+    cracks: tuple
+    spacing: float
+
+    def moved(self, offset) -> "RenderSolid":
+        """The same solid in a frame whose origin is at ``offset`` (3,) [m] of this one."""
+        offset = np.asarray(offset, dtype=np.float64)
+        return RenderSolid(self.solid.translate(tuple(-offset)), tuple(c.shifted(offset) for c in self.cracks),
+                           self.spacing)
+
+
+@dataclass(frozen=True, eq=False)
+class PieceMesh:
+    """A render solid as a triangle mesh for the cache: vertices (V,3) [m], faces (F,3)
+    outward, face_is_inner (F,) bool, normals (F,3,3) unit and uvs (F,3,2) per corner (UVs:
+    the artist's on outer faces, [m] along the crack's tangent frame on inner ones),
+    face_crack (F,) index into ``cracks`` (-1 on outer faces, HULL_FACE on a carved piece's
+    faces that lie on no crack)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    face_is_inner: np.ndarray
+    normals: np.ndarray
+    uvs: np.ndarray
+    face_crack: np.ndarray
+    cracks: tuple
+
+
+def _to_manifold(vertices: np.ndarray, faces: np.ndarray, properties: np.ndarray) -> m3.Manifold:
+    """Manifold of a triangle mesh whose corners carry ``properties`` (F,3,P): one property
+    vertex per distinct (position, properties) row, shared positions merged."""
+    rows = np.concatenate([vertices[faces].reshape(-1, 3), properties.reshape(-1, properties.shape[2])], axis=1)
+    unique, corner = np.unique(rows, axis=0, return_inverse=True)
+    position_of = np.unique(unique[:, :3], axis=0, return_inverse=True)[1].reshape(-1)
+    first = np.full(position_of.max() + 1, -1, dtype=np.int64)
+    first[position_of[::-1]] = np.arange(len(unique))[::-1]  # each position's first property vertex
+    target = first[position_of]
+    distinct = np.nonzero(target != np.arange(len(unique)))[0]
+    pairs = np.stack([distinct, target[distinct]], axis=1)
+    mesh = m3.Mesh64(vert_properties=np.ascontiguousarray(unique, dtype=np.float64),
+                     tri_verts=np.ascontiguousarray(corner.reshape(-1, 3), dtype=np.uint64),
+                     merge_from_vert=np.ascontiguousarray(pairs[:, 0], dtype=np.uint64),
+                     merge_to_vert=np.ascontiguousarray(pairs[:, 1], dtype=np.uint64))
+    solid = m3.Manifold(mesh)
+    if solid.status() != m3.Error.NoError:
+        raise ValueError(f"the render surface is not a closed manifold ({solid.status()})")
+    return solid
+
+
+def render_solid_from_surface(surface: trimesh.Trimesh, origin, spacing: float) -> RenderSolid:
+    """The render solid of the artist's closed, outward-wound ``surface`` (source frame,
+    metres; its UVs where it has them, else zeros) in a body frame whose origin lies at
+    ``origin`` (3,) [m] of the source frame; ``spacing`` [m] the body's particle spacing."""
+    vertices = np.asarray(surface.vertices, dtype=np.float64) - np.asarray(origin, dtype=np.float64)
+    faces = np.asarray(surface.faces, dtype=np.int64)
+    props = np.zeros((len(faces), 3, _PROPERTY_COUNT - 3))
+    props[:, :, _NORMAL.start - 3:_NORMAL.stop - 3] = input_corner_normals(surface)
+    uv = getattr(surface.visual, "uv", None)
+    if uv is not None and len(uv) == len(vertices):
+        props[:, :, _UV.start - 3:_UV.stop - 3] = np.asarray(uv, dtype=np.float64)[faces]
+    props[:, :, _CRACK - 3] = -1.0
+    return RenderSolid(_to_manifold(vertices, faces, props), (), float(spacing))
+
+
+def render_solid_from_tets(model) -> RenderSolid:
+    """The render solid of a body with no artist's surface (a tet-mesh file): its tets'
+    boundary, flat-shaded, no UVs."""
+    faces = np.asarray(model.surface_faces, dtype=np.int64)
+    tri = model.vertices[faces]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    props = np.zeros((len(faces), 3, _PROPERTY_COUNT - 3))
+    props[:, :, 0:3] = normal[:, None, :]
+    props[:, :, _CRACK - 3] = -1.0
+    return RenderSolid(_to_manifold(model.vertices, faces, props), (), float(model.spacing))
+
+
+def _shared_faces(model, bonds: np.ndarray) -> np.ndarray:
+    """(B,3,3) [m] corners of the tet face each bond (tet pair) shares."""
+    first, second = model.tets[bonds[:, 0]], model.tets[bonds[:, 1]]
+    shared = (first[:, :, None] == second[:, None, :]).any(axis=2)  # (B,4), three True
+    keep = np.argsort(~shared, axis=1, kind="stable")[:, :3]
+    return model.vertices[np.take_along_axis(first, keep, axis=1)]
+
+
+def _value_noise(u: np.ndarray, v: np.ndarray, seed: int) -> np.ndarray:
+    """Smooth value noise in [-1, 1] of lattice coordinates (u, v), three octaves."""
+    total = np.zeros_like(u)
+    weight_sum = 0.0
+    for octave in range(3):
+        f, w = 2.0**octave, 0.5**octave
+        x, y = u * f, v * f
+        i, j = np.floor(x), np.floor(y)
+        fx, fy = x - i, y - j
+        sx, sy = fx * fx * (3 - 2 * fx), fy * fy * (3 - 2 * fy)
+
+        def lattice(a, b):
+            h = np.sin(a * 127.1 + b * 311.7 + (seed + 17 * octave) * 74.7) * 43758.5453
+            return 2.0 * (h - np.floor(h)) - 1.0
+
+        top = lattice(i, j) * (1 - sx) + lattice(i + 1, j) * sx
+        bottom = lattice(i, j + 1) * (1 - sx) + lattice(i + 1, j + 1) * sx
+        total += w * (top * (1 - sy) + bottom * sy)
+        weight_sum += w
+    return total / weight_sum
+
+
+def tangent_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The crack's in-plane axes (the analysis' own choice, fracture/cracks.py)."""
+    from ..fracture.cracks import tangent_frame as crack_frame
+
+    return crack_frame(normal)
+
+
+def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, spacing: float, roughness: float,
+                roughness_scale: float, seed: int, index: int) -> m3.Manifold | None:
+    """The thin slab on a plane crack over the part of the plane nearer a separating bond
+    crossing than any other: ``sites`` (N,3) [m] where bonds cross the plane, ``separating``
+    (N,) bool those between different pieces cut by this crack. Each separating site's
+    Voronoi cell (in the plane, bounded to SLAB_REACH_FACTOR spacings about it) joins the
+    outline, so the slab reaches the surface however obliquely the plane meets it, and stops
+    halfway to the nearest crossing inside one piece. Rough when ``roughness`` > 0."""
+    from scipy.spatial import Voronoi
+
+    e1, e2 = tangent_frame(crack.normal)
+    rel = sites - crack.point
+    flat = np.stack([rel @ e1, rel @ e2], axis=1)  # (N,2)
+    if not separating.any():
+        return None
+    reach = SLAB_REACH_FACTOR * spacing
+    box = np.array([[-reach, -reach], [reach, -reach], [reach, reach], [-reach, reach]])
+    # Where a separating crossing is within reach, less where another crossing is nearer.
+    outline = m3.CrossSection(list(flat[separating][:, None, :] + box[None]), m3.FillRule.Positive)
+    if not separating.all():
+        lo, hi = flat.min(axis=0) - 4 * reach, flat.max(axis=0) + 4 * reach
+        fence = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+        _, first = np.unique(np.round(flat / (1e-9 * spacing)), axis=0, return_index=True)
+        points = np.concatenate([flat[first], fence])
+        diagram = Voronoi(points)
+        regions = (diagram.regions[diagram.point_region[k]] for k in np.nonzero(~separating[first])[0])
+        # (the cells do not overlap, so either winding fills them)
+        cells = [diagram.vertices[region] for region in regions if len(region) >= 3 and -1 not in region]
+        if cells:
+            outline = outline - m3.CrossSection(cells, m3.FillRule.NonZero)
+    outline = outline.simplify(0.05 * spacing)
+    if outline.is_empty():
+        return None
+    thickness = SLAB_THICKNESS_FACTOR * spacing
+    slab = m3.Manifold.extrude(outline, thickness).translate((0.0, 0.0, -0.5 * thickness))
+    if roughness > 0:
+        slab = slab.refine_to_length(roughness_scale / 3.0)
+
+        def displace(points):
+            points = np.array(points, dtype=np.float64)
+            noise = _value_noise(points[:, 0] / roughness_scale, points[:, 1] / roughness_scale, seed * 1009 + index)
+            points[:, 2] += roughness * noise
+            return points
+
+        slab = slab.warp_batch(displace)
+    frame = np.column_stack([e1, e2, crack.normal, crack.point])  # (3,4): slab frame -> body
+    return slab.transform(frame)
+
+
+def _sphere_shell(crack: CrackSurface, spacing: float) -> m3.Manifold:
+    """The thin shell on a ring crack's sphere."""
+    half = 0.5 * SLAB_THICKNESS_FACTOR * spacing
+    sagitta = SPHERE_SAGITTA_FACTOR * spacing
+    segments = int(np.ceil(np.pi / np.arccos(max(1.0 - sagitta / crack.radius, -1.0)))) + 4
+    segments = min(segments, 512)
+    outer = m3.Manifold.sphere(crack.radius + half, segments)
+    inner = m3.Manifold.sphere(max(crack.radius - half, 1e-9), segments)
+    return (outer - inner).translate(tuple(crack.point))
+
+
+def _with_crack_index(slab: m3.Manifold, index: int) -> m3.Manifold:
+    """``slab`` with every vertex's crack-index property set to ``index`` (normals and UVs
+    zero: the piece's inner faces get theirs in ``piece_mesh``)."""
+    mesh = slab.to_mesh64()
+    positions = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3]
+    props = np.zeros((len(positions), _PROPERTY_COUNT))
+    props[:, :3] = positions
+    props[:, _CRACK] = index
+    return m3.Manifold(m3.Mesh64(vert_properties=props,
+                                 tri_verts=np.array(mesh.tri_verts, dtype=np.uint64)))
+
+
+def _separating_cracks(model, bonds, labels, cracks):
+    """For each crack: (sites (N,3) [m], cut (N,) bool): where bonds cross its plane and
+    which of them it cuts; empty when it separates no two pieces (a ring crack: (None, its
+    cuts between pieces))."""
+    from ..fracture.cracks import CrackPlane, RingCrack
+
+    x = model.particle_position
+    a, b = x[bonds[:, 0]], x[bonds[:, 1]]
+    separating = labels[bonds[:, 0]] != labels[bonds[:, 1]]
+    per_crack = []
+    for crack in cracks:
+        if isinstance(crack, CrackPlane):
+            da, db = (a - crack.point) @ crack.normal, (b - crack.point) @ crack.normal
+            cross = (da >= 0) != (db >= 0)
+            t = da / np.where(cross, da - db, 1.0)
+            hit = a + t[:, None] * (b - a)
+            offset = hit - crack.point
+            cut = cross & (np.einsum("ij,ij->i", offset, offset) <= crack.extent**2)
+            if not np.any(cut & separating):
+                per_crack.append((hit[:0], cut[:0]))  # it separates no two pieces: no slit either
+                continue
+            # Sites: every crossing but those between pieces another crack cut. A cut inside
+            # one piece (a merged small piece, a piece joined around) is cut too: that piece
+            # then has two shells a slab apart, as a hairline crack would look.
+            site = cross & (cut | ~separating)
+            per_crack.append((hit[site], cut[site]))
+        elif isinstance(crack, RingCrack):
+            inside_a = np.einsum("ij,ij->i", a - crack.point, a - crack.point) < crack.radius**2
+            inside_b = np.einsum("ij,ij->i", b - crack.point, b - crack.point) < crack.radius**2
+            cut = (inside_a != inside_b) & separating
+            per_crack.append((None, cut[cut]))  # (the whole sphere: rings run all round)
+        else:
+            raise TypeError(f"unknown crack type {type(crack).__name__}")
+    return per_crack
+
+
+def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_origins, *,
+                     roughness: float = 0.0, roughness_scale: float | None = None, seed: int = 0):
+    """Cut a body's render solid along the cracks that broke it.
+
+    Args:
+        render: the body's render solid (``model``'s body frame).
+        model: the body's BodyModel (tets, bonds, particle positions).
+        fragment_tets: the pieces' tet index arrays (``FractureResult.fragment_tets``); tets
+            in none (dropped) lose their part of the render solid.
+        cracks: the ``CrackPlane``/``RingCrack`` list that cut the bonds.
+        piece_origins: (F,3) [m] each piece's body-frame origin in ``model``'s frame (its
+            ``com_in_source``).
+        roughness: [m] crack-face noise amplitude (0: flat); roughness_scale [m] its
+            wavelength (None: 4 particle spacings); seed: the noise's seed.
+
+    Returns (pieces, stats): pieces a list of F RenderSolid or None (a piece that got no part
+    of the render solid: the caller falls back to its tets' boundary); stats a dict of counts
+    (slabs, parts, unassigned parts, pieces without a part).
+    """
+    from ..fracture.cracks import CrackPlane
+
+    spacing = render.spacing
+    roughness_scale = 4.0 * spacing if roughness_scale is None else float(roughness_scale)
+    labels = np.full(model.tet_count, -1, dtype=np.int64)
+    for k, tets in enumerate(fragment_tets):
+        labels[np.asarray(tets, dtype=np.int64)] = k
+    bonds = np.asarray(model.bonds, dtype=np.int64)
+    per_crack = _separating_cracks(model, bonds, labels, cracks)
+
+    new_cracks = list(render.cracks)
+    slabs = []
+    for crack, (sites, separating) in zip(cracks, per_crack):
+        if not len(separating) or not separating.any():
+            continue
+        index = len(new_cracks)
+        if isinstance(crack, CrackPlane):
+            surface = CrackSurface(np.asarray(crack.point, float), np.asarray(crack.normal, float))
+            slab = _plane_slab(surface, sites, separating, spacing, roughness, roughness_scale, seed, index)
+        else:
+            surface = CrackSurface(np.asarray(crack.point, float), np.zeros(3), float(crack.radius))
+            slab = _sphere_shell(surface, spacing)
+        if slab is None or slab.is_empty():
+            continue
+        new_cracks.append(surface)
+        slabs.append(_with_crack_index(slab, index))
+    stats = dict(slabs=len(slabs), parts=0, unassigned_parts=0, empty_pieces=0)
+    if slabs:
+        cut = m3.Manifold.batch_boolean([render.solid, *slabs], m3.OpType.Subtract)
+    else:
+        cut = render.solid
+    every_part = cut.decompose()
+    parts = [part for part in every_part if part.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+    stats["dust_parts"] = len(every_part) - len(parts)
+    owner = _assign_parts(parts, model, labels, spacing)
+    parts, owner = _carve_missing_pieces(parts, owner, model, fragment_tets)
+    stats["parts"] = len(parts)
+    stats["carved_pieces"] = int(sum(1 for o in owner if o < -1))
+    owner = [-(o + 2) if o < -1 else o for o in owner]
+    pieces = []
+    for k, origin in enumerate(np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)):
+        mine = [p for p, o in zip(parts, owner) if o == k]
+        if not mine:
+            pieces.append(None)
+            stats["empty_pieces"] += 1
+            continue
+        solid = mine[0] if len(mine) == 1 else m3.Manifold.compose(mine)
+        pieces.append(RenderSolid(solid, tuple(new_cracks), spacing).moved(origin))
+    stats["unassigned_parts"] = int(sum(1 for o in owner if o == -1))
+    return pieces, stats
+
+
+def _winding_inside(points: np.ndarray, solid: m3.Manifold) -> np.ndarray:
+    """(N,) bool: ``points`` (N,3) inside the closed ``solid``."""
+    from .piece_checks import inside
+
+    mesh = solid.to_mesh64()
+    return inside(points, np.asarray(mesh.vert_properties)[:, :3][np.asarray(mesh.tri_verts, dtype=np.int64)])
+
+
+def _carve_missing_pieces(parts, owner, model, fragment_tets):
+    """A piece no part went to (a few tets where cracks meet, smaller than the planes can
+    resolve) is carved out of the part holding its tets: the part's intersection with the
+    convex hull of its tets becomes the piece (owner -(k + 2)), the rest stays. Its faces
+    inside the part are then the hull's planes, not a crack's: counted in the stats."""
+    parts, owner = list(parts), list(owner)
+    for k, tets in enumerate(fragment_tets):
+        if k in owner or -(k + 2) in owner:
+            continue
+        tets = np.asarray(tets, dtype=np.int64)
+        probe = model.particle_position[tets[:: max(1, len(tets) // 16)]]
+        best, best_count = None, 0
+        for j, part in enumerate(parts):
+            lo, hi = (np.asarray(v) for v in (part.bounding_box()[:3], part.bounding_box()[3:]))
+            near = np.all((probe >= lo) & (probe <= hi), axis=1)
+            if not near.any():
+                continue
+            count = int(_winding_inside(probe[near], part).sum())
+            if count > best_count:
+                best, best_count = j, count
+        if best is None:
+            continue
+        hull = _with_crack_index(
+            m3.Manifold.hull_points(np.ascontiguousarray(model.vertices[model.tets[tets]].reshape(-1, 3))), HULL_FACE)
+        carved = parts[best] ^ hull
+        if carved.is_empty():
+            continue
+        parts[best] = parts[best] - hull
+        parts.append(carved)
+        owner.append(-(k + 2))
+    return parts, owner
+
+
+def _assign_parts(parts, model, labels, spacing) -> list[int]:
+    """The piece (label) each connected part belongs to: an area-weighted vote of its faces,
+    each probed a quarter spacing inside the part, for the piece of the nearest tet centroid
+    (-1: dropped tets)."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(model.particle_position)
+    owners = []
+    for part in parts:
+        mesh = part.to_mesh64()
+        vp = np.asarray(mesh.vert_properties)[:, :3]
+        tri_verts = np.asarray(mesh.tri_verts, dtype=np.int64)
+        tri = vp[tri_verts[:: max(1, len(tri_verts) // MAX_VOTING_FACES)]]
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        area = 0.5 * np.linalg.norm(normal, axis=1)
+        normal /= np.maximum(2.0 * area[:, None], 1e-300)
+        probe = tri.mean(axis=1) - 0.25 * spacing * normal
+        _, nearest = tree.query(probe)
+        votes = np.bincount(labels[nearest] + 1, weights=area)
+        if votes.max() < DECISIVE_VOTE * votes.sum() and part.volume() >= spacing**3:
+            # A thin part (three tets across a glass pane) can sit nearer a neighbour's tets
+            # than its own: ask which tets' centroids it holds, by their volume. (Not for
+            # chips under a spacing cubed: a refracture through a piece's hairline shells
+            # leaves dozens, and which side owns one is invisible.)
+            tets = _tets_inside(part, model, vp.min(axis=0), vp.max(axis=0), tri)
+            if len(tets):
+                votes = np.bincount(labels[tets] + 1, weights=model.tet_volume[tets])
+        owners.append(int(np.argmax(votes)) - 1)
+    return owners
+
+
+def _tets_inside(part, model, low, high, triangles) -> np.ndarray:
+    """Up to MAX_PROBED_TETS tets (evenly spread over those in the part's box) whose
+    centroids lie inside ``part``; ``triangles`` its faces."""
+    from .piece_checks import inside
+
+    in_box = np.nonzero(np.all((model.particle_position >= low) & (model.particle_position <= high), axis=1))[0]
+    in_box = in_box[:: max(1, len(in_box) // MAX_PROBED_TETS)]
+    mesh = part.to_mesh64()
+    every = np.asarray(mesh.vert_properties)[:, :3][np.asarray(mesh.tri_verts, dtype=np.int64)]
+    return in_box[inside(model.particle_position[in_box], every)]
+
+
+def piece_mesh(render: RenderSolid) -> PieceMesh:
+    """The render solid as a triangle mesh with per-corner shading (see PieceMesh)."""
+    mesh = render.solid.to_mesh64()
+    props = np.asarray(mesh.vert_properties, dtype=np.float64)
+    tri_verts = np.asarray(mesh.tri_verts, dtype=np.int64)
+    # One vertex per topological vertex: property vertices repeat one across UV and normal
+    # seams (the merge vectors say which), while two vertices the solid pinches together at
+    # one position stay two, so the mesh stays manifold.
+    topological = np.arange(len(props))
+    topological[np.asarray(mesh.merge_from_vert, dtype=np.int64)] = np.asarray(mesh.merge_to_vert, dtype=np.int64)
+    used, vertex_of = np.unique(topological, return_inverse=True)
+    positions = props[used, :3]
+    faces = vertex_of.reshape(-1)[tri_verts]
+    corner = props[tri_verts]  # (F,3,P)
+    crack = np.rint(corner[:, :, _CRACK].max(axis=1)).astype(np.int64)
+    inner = crack != -1
+    tri = positions[faces]
+    flat = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    flat /= np.maximum(np.linalg.norm(flat, axis=1, keepdims=True), 1e-300)
+    normals = corner[:, :, _NORMAL].copy()
+    normals[inner] = flat[inner][:, None, :]
+    length = np.linalg.norm(normals, axis=2, keepdims=True)
+    normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300), flat[:, None, :])
+    uvs = corner[:, :, _UV].copy()
+    uvs[crack == HULL_FACE] = np.nan  # (the cache writer projects them on a box)
+    for index in np.unique(crack[crack >= 0]):
+        rows = np.nonzero(crack == index)[0]
+        surface = render.cracks[index]
+        rel = tri[rows] - surface.point
+        if surface.radius is None:
+            e1, e2 = tangent_frame(surface.normal)
+            uvs[rows] = np.stack([rel @ e1, rel @ e2], axis=2)
+        else:  # a sphere: longitude and latitude scaled to metres on the sphere
+            r = np.linalg.norm(rel, axis=2)
+            uvs[rows] = np.stack([np.arctan2(rel[..., 1], rel[..., 0]) * surface.radius,
+                                  np.arcsin(np.clip(rel[..., 2] / np.maximum(r, 1e-300), -1, 1)) * surface.radius],
+                                 axis=2)
+    return PieceMesh(positions, faces, inner, normals, uvs, crack, render.cracks)
