@@ -58,13 +58,23 @@ def _one_line(exc: BaseException) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    interrupts.install()  # before the slow imports: a Ctrl-C during start-up is never lost
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:  # (while the parser's modules load)
+        print("\ntaichi-frac: interrupted", file=sys.stderr)
+        return 130
+    finally:
+        interrupts.restore()
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
     prefix = f"taichi-frac {args.command}"
-    interrupts.install()  # before the slow imports: a Ctrl-C during start-up is never lost
     try:
         os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")  # (Taichi's version banner)
         from . import runtime  # noqa: F401 - imports Taichi with its messages on stderr (stdout is the result)
@@ -85,8 +95,6 @@ def main(argv: list[str] | None = None) -> int:
               + ("" if args.debug else " (run again with --debug for the traceback, and report it)"),
               file=sys.stderr)
         return 1
-    finally:
-        interrupts.restore()
 
 
 if __name__ == "__main__":

@@ -85,10 +85,13 @@ def init(arch: str | None = None, *, debug: bool = False) -> str:
             offline_cache=True,
             offline_cache_file_path=str(cache_dir() / "ticache"),
             debug=debug,
-            # (Taichi's "falling back to CPU" warning is replaced by the ArchError below)
-            log_level=ti.WARN if arch == "cpu" else ti.ERROR,
+            # (Taichi's "falling back to CPU" warning is replaced by the ArchError below;
+            # a TI_LOG_LEVEL set in the environment is the user's, and Taichi warns when
+            # ti.init overrides it)
+            **({} if "TI_LOG_LEVEL" in os.environ else {"log_level": ti.WARN if arch == "cpu" else ti.ERROR}),
         )
-    ti.set_logging_level(ti.WARN)
+    if "TI_LOG_LEVEL" not in os.environ:
+        ti.set_logging_level(ti.WARN)
     got = ti.lang.impl.current_cfg().arch
     if got not in _arches_of(arch):
         # Taichi fell back to the CPU; an explicit arch that cannot be had is an error.

@@ -26,6 +26,7 @@ def _command(*args: str) -> list[str]:
 
 def _env() -> dict:
     env = dict(os.environ)
+    env.pop("TI_LOG_LEVEL", None)  # (the test session's; a user's would be reported by Taichi)
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     return env
 
@@ -62,7 +63,9 @@ def test_ctrl_c_during_start_up_stops_the_run(tmp_path):
     twice.send_signal(signal.SIGINT)
     _, err_twice = twice.communicate(timeout=60)
     _, err_once = once.communicate(timeout=300)
-    assert twice.returncode == 130, err_twice
+    # 130, or killed by the signal itself when it came as the interpreter exited (what a
+    # shell also reports as 130)
+    assert twice.returncode in (130, -signal.SIGINT), err_twice
     assert once.returncode == 130, err_once
     assert "interrupted" in err_once and "Traceback" not in err_once, err_once
     assert not (tmp_path / ".a.usdc.lock").exists()
