@@ -76,8 +76,10 @@ def _main(argv: list[str] | None) -> int:
         return 2
     prefix = f"taichi-frac {args.command}"
     try:
-        os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")  # (Taichi's version banner)
-        from . import runtime  # noqa: F401 - imports Taichi with its messages on stderr (stdout is the result)
+        # stdout is the command's result (a --json object): Taichi's version banner, printed
+        # there by whichever module imports Taichi first, is turned off (its other messages
+        # go to stderr: see runtime).
+        os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print(f"\n{prefix}: interrupted", file=sys.stderr)

@@ -16,8 +16,11 @@ class OptionError(ValueError):
 
 
 #: The largest finite 32-bit float: the simulation's fields are float32, so no option may
-#: exceed it (a velocity of 1e39 m/s would be inf on the device).
+#: exceed it (a velocity of 1e39 m/s would be inf on the device) ...
 FLOAT32_MAX = 3.4028234663852886e38
+#: ... and the smallest normal one: a quantity that must be above 0 (a density) would
+#: become 0 or lose its precision below it.
+FLOAT32_TINY = 1.1754943508222875e-38
 
 
 def _short(value) -> str:
@@ -36,6 +39,9 @@ def check_range(owner: str, name: str, value, low=None, high=None, *, low_open=F
     if abs(value) > FLOAT32_MAX:  # (compared exactly: an int of 400 digits has no float)
         raise OptionError(f"{owner}.{name} = {_short(value)} is beyond the largest 32-bit float (3.4e38) the "
                           "simulation computes with")
+    if low_open and low == 0 and 0 < value < FLOAT32_TINY:
+        raise OptionError(f"{owner}.{name} = {value!r} is below the smallest 32-bit float (1.2e-38) the simulation "
+                          "computes with")
     bad_low = low is not None and (value <= low if low_open else value < low)
     bad_high = high is not None and (value >= high if high_open else value > high)
     if bad_low or bad_high:

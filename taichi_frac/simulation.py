@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import gc
 import json
+import numbers
 import time
 from dataclasses import dataclass, field
 
@@ -188,11 +189,9 @@ class Simulation:
     def __init__(self, scene, *, output=None, arch: str | None = None, progress=None,
                  single_scale: bool | None = None, fracture: bool = True, frames: int | None = None,
                  world=None, overwrite: bool = False):
-        from .dynamics import DynamicsOptions, World, WorldCapacity
-
         self.scene = scene
         sim = scene.simulation
-        if frames is not None and (isinstance(frames, bool) or not isinstance(frames, int) or frames < 1):
+        if frames is not None and (not isinstance(frames, numbers.Integral) or frames < 1):
             raise OptionError(f"frames = {frames!r}: simulate at least 1 frame")
         self.frame_count = int(frames if frames is not None else sim.frame_count)
         self.frame_dt = sim.frame_dt
@@ -355,10 +354,12 @@ class Simulation:
         ok = np.all(np.isfinite(state["position"]), axis=1) & np.all(np.isfinite(state["orientation"]), axis=1)
         if not np.all(ok):
             k = int(np.argmin(ok))
+            kept = (f"the cache keeps frames 0-{frame - 1}, marked incomplete" if self.writer is not None
+                    else "no cache was written")
             raise NonFinitePoseError(
                 f"frame {frame}: body {self.records[ids[k]].name!r} has a non-finite pose (position "
-                f"{state['position'][k].tolist()}); the simulation stopped and the cache keeps frames 0-{frame - 1}, "
-                "marked incomplete. Look for extreme speeds, sizes or material values in the scene")
+                f"{state['position'][k].tolist()}); the simulation stopped and {kept}. Look for extreme speeds, "
+                "sizes or material values in the scene")
 
     def _checkpoint_if_due(self, frame: int) -> None:
         """Besides the writer's every-N-frames rule: right after the first simulated frame,

@@ -334,10 +334,13 @@ def test_a_swallowed_ctrl_c_still_stops_the_start_up(tmp_path, monkeypatch):
         with pytest.raises(KeyboardInterrupt):
             Simulation(_small_scene(tmp_path), output=tmp_path / "never.usdc", frames=2)
         assert not (tmp_path / ".never.usdc.lock").exists()
-        exits = []
-        monkeypatch.setattr(os, "_exit", lambda code: exits.append(code))
-        interrupts._handler(signal.SIGINT, None)  # a second Ctrl-C exits at once
-        assert exits == [130]
+        def _exit(code):
+            raise SystemExit(code)
+
+        monkeypatch.setattr(os, "_exit", _exit)  # (what os._exit would do, without ending the tests)
+        with pytest.raises(SystemExit) as exited:
+            interrupts._handler(signal.SIGINT, None)  # a second Ctrl-C exits at once
+        assert exited.value.code == 130
     finally:
         interrupts.restore()
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

@@ -180,6 +180,20 @@ def test_hostile_overrides_load_or_raise_option_errors():
     assert outcomes["refused"] > 100 and outcomes["loaded"] > 0, outcomes
 
 
+def test_overrides_on_mutated_scenes_raise_only_option_errors(tmp_path):
+    """Overrides applied to mutated structures (an object named by a list, a table that is
+    a number, ...)."""
+    rng = random.Random(SEED + 3)
+    scenes = _scene_dicts()
+    for k in range(80):
+        name, base = rng.choice(scenes)
+        data = _mutate(rng, base)
+        overrides = [f"{rng.choice(NASTY_KEYS)}={rng.choice(NASTY_TEXTS)}" for _ in range(rng.randint(1, 2))]
+        _accepts_only_option_errors(
+            lambda: scene_from_dict(apply_overrides(data, overrides, where=name), where=name, base_dir=tmp_path),
+            (k, overrides, data))
+
+
 def test_overrides_on_scenes_without_the_table_or_with_wrong_shapes(tmp_path):
     """Repros: --set on a scene with no [simulation] table sets it; ``objects = 5`` with an
     override and an index written with a superscript digit are OptionErrors."""
@@ -193,3 +207,6 @@ def test_overrides_on_scenes_without_the_table_or_with_wrong_shapes(tmp_path):
         apply_overrides(bare, ["objects.².friction=1"])
     with pytest.raises(OptionError, match="the scene has no colliders"):
         apply_overrides(bare, ["colliders.0.friction=1"])
+    listed = {"objects": [{"name": [1], "primitive": "torus"}]}
+    with pytest.raises(OptionError, match="name"):
+        scene_from_dict(apply_overrides(listed, ["simulation.fps=30"]), where="listed.toml")

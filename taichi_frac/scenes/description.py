@@ -266,11 +266,12 @@ class OutputSettings:
 
     Attributes:
         path: the .usdc (or .usda) file; relative paths are relative to the scene file.
-        checkpoint_every: also write the file every this many frames (0: only at the end),
-            so a crash loses at most those frames (Ctrl-C loses nothing) ...
-        checkpoint_seconds: ... but at most once in this many seconds of wall time [s]: a
-            checkpoint rewrites the whole file (~30 ms for the glass walls), which a fast
-            run would otherwise pay every half second.
+        checkpoint_every: 0 writes the file only at the end (and on Ctrl-C); otherwise it is
+            also written while the run goes on, so a crash or a kill loses little:
+        checkpoint_seconds: right after the first frame, then whenever this many seconds of
+            wall time have passed since the last write, however slow the frames [s]. A
+            checkpoint rewrites the whole file (~30 ms for the glass walls), which a fast run
+            would otherwise pay every few frames. 0: every ``checkpoint_every`` frames.
     """
 
     path: str = "out.usdc"

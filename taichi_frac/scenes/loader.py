@@ -196,7 +196,8 @@ def apply_overrides(data: dict, overrides, *, where: str = "scene") -> dict:
 
     data = copy.deepcopy(data)
     objects = data.get("objects", [])
-    object_names = {o.get("name") for o in objects if isinstance(o, dict)} if isinstance(objects, list) else set()
+    object_names = ({o.get("name") for o in objects if isinstance(o, dict) and isinstance(o.get("name"), str)}
+                    if isinstance(objects, list) else set())
     for item in overrides:
         if "=" not in item:
             raise OptionError(f"{where}: override {item!r} must look like KEY=VALUE, e.g. ring.fracture.crack_count=3")
