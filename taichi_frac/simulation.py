@@ -308,6 +308,7 @@ class Simulation:
             boundary_particles=sum(r.model.boundary_particle_count for r in self.records.values() if r.breakable),
         )
         self.writer = None
+        interrupts.check()  # (a Ctrl-C swallowed while the World compiled)
 
     # ------------------------------------------------------------------ output
 

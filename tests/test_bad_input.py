@@ -200,6 +200,8 @@ def test_the_writer_never_writes_nan(tmp_path):
             writer.write_frame(1, [fid], [position], [quat])
     with pytest.raises(NonFiniteError):
         writer.add_fragment("bad", np.where(vertices == 0.1, np.nan, vertices), faces, np.zeros(4, bool), 1)
+    with pytest.raises(NonFiniteError, match="32-bit"):  # (points are float32: 1e39 would be inf)
+        writer.add_fragment("huge", vertices * 1e40, faces, np.zeros(4, bool), 1)
     writer.close(complete=False)
     text = path.read_text().lower()
     assert not re.search(r"\b-?(nan|inf)\b", text)

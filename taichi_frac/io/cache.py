@@ -263,13 +263,14 @@ class CacheWriter:
             raise ValueError("faces index vertices out of range")
         if inner.shape != (len(faces),):
             raise ValueError(f"face_is_inner must be ({len(faces)},), got {inner.shape}")
-        _check_finite(f"fragment {name!r}: vertices", vertices)
+        _check_finite(f"fragment {name!r}: vertices", vertices / self.meters_per_unit, float32=True)
         if parent is not None and not 0 <= int(parent) < len(self._fragments):
             raise ValueError(f"unknown parent fragment id {parent}")
         face_stress = np.zeros(len(faces)) if face_peak_stress is None else np.asarray(face_peak_stress, np.float64)
         if face_stress.shape != (len(faces),):
             raise ValueError(f"face_peak_stress must be ({len(faces)},), got {face_stress.shape}")
-        _check_finite(f"fragment {name!r}: peak stress", np.append(face_stress, float(peak_principal_stress)))
+        _check_finite(f"fragment {name!r}: peak stress", face_stress, float32=True)
+        _check_finite(f"fragment {name!r}: peak stress", float(peak_principal_stress))
         corner_normals = _per_corner(normals, faces, len(vertices), 3, "normals")
         corner_uvs = _per_corner(uvs, faces, len(vertices), 2, "uvs")
 
@@ -501,10 +502,13 @@ class NonFiniteError(ValueError):
     """A NaN or infinite value was given to the writer (and not written)."""
 
 
-def _check_finite(what: str, values) -> None:
+def _check_finite(what: str, values, float32: bool = False) -> None:
+    """``float32``: the values are written as 32-bit floats, where beyond 3.4e38 is inf."""
     values = np.asarray(values, dtype=np.float64)
     if not np.all(np.isfinite(values)):
         raise NonFiniteError(f"{what} has NaN or infinite values; nothing of it was written")
+    if float32 and values.size and np.abs(values).max() > np.finfo(np.float32).max:
+        raise NonFiniteError(f"{what} has values beyond a 32-bit float (3.4e38); nothing of it was written")
 
 
 def _box_projection(corners: np.ndarray, normals: np.ndarray) -> np.ndarray:
