@@ -1,6 +1,8 @@
 # Sourced by scripts/demo.sh and scripts/test.sh: idempotent environment set-up.
 # Re-installs only when pyproject.toml (or the Blender requirements) changed since last time.
 set -euo pipefail
+# pip warns on every install run as root (containers, CI): the environments here are venvs.
+export PIP_ROOT_USER_ACTION=ignore
 
 find_python() {
   for c in "${PYTHON:-}" python3.11 python3; do

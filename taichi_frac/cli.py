@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+import traceback
 
-from . import __version__
+from . import __version__, interrupts
 
 # Order is the order shown in --help.
 COMMANDS = ("run", "info", "bench", "render")
@@ -26,6 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Run 'taichi-frac COMMAND --help' for a command's options.",
     )
     parser.add_argument("--version", action="version", version=f"taichi-frac {__version__}")
+    debug_help = "show the Python traceback of an error (for reporting a bug)"
+    parser.add_argument("--debug", action="store_true", help=debug_help)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         try:
@@ -35,20 +39,64 @@ def build_parser() -> argparse.ArgumentParser:
                 raise
             continue
         module.register(sub)
+    for command in sub.choices.values():  # (also after the command: taichi-frac run S --debug)
+        command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=debug_help)
     return parser
 
 
+def _user_errors() -> tuple:
+    """The package's errors about its input: printed as one line, exit status 2."""
+    from .geometry.validate import MeshError
+    from .options import OptionError
+    from .runtime import ArchError
+
+    return OptionError, MeshError, ArchError
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())
+
+
 def main(argv: list[str] | None = None) -> int:
+    interrupts.install()  # before the slow imports: a Ctrl-C during start-up is never lost
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:  # (while the parser's modules load)
+        print("\ntaichi-frac: interrupted", file=sys.stderr)
+        return 130
+    finally:
+        interrupts.restore()
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    prefix = f"taichi-frac {args.command}"
     try:
+        # stdout is the command's result (a --json object): Taichi's version banner, printed
+        # there by whichever module imports Taichi first, is turned off (its other messages
+        # go to stderr: see runtime).
+        os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
-        print("\ninterrupted", file=sys.stderr)
+        print(f"\n{prefix}: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # noqa: BLE001 - the one place that turns errors into exit codes
+        if args.debug:
+            traceback.print_exc()
+        user = isinstance(exc, _user_errors())
+        from .simulation import NonFinitePoseError
+
+        if user or isinstance(exc, NonFinitePoseError):
+            print(f"{prefix}: error: {_one_line(exc)}", file=sys.stderr)
+            return 2 if user else 1
+        print(f"{prefix}: internal error: {type(exc).__name__}: {_one_line(exc)}"
+              + ("" if args.debug else " (run again with --debug for the traceback, and report it)"),
+              file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

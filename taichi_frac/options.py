@@ -15,19 +15,40 @@ class OptionError(ValueError):
     """A value out of range or of the wrong type. The message names the key and the range."""
 
 
+#: The largest finite 32-bit float: the simulation's fields are float32, so no option may
+#: exceed it (a velocity of 1e39 m/s would be inf on the device) ...
+FLOAT32_MAX = 3.4028234663852886e38
+#: ... and the smallest normal one: a quantity that must be above 0 (a density) would
+#: become 0 or lose its precision below it.
+FLOAT32_TINY = 1.1754943508222875e-38
+
+
+def _short(value) -> str:
+    """``repr(value)``, shortened for a 400-digit integer."""
+    text = repr(value)
+    return text if len(text) <= 40 else f"{text[:12]}...({len(text)} digits)"
+
+
 def check_range(owner: str, name: str, value, low=None, high=None, *, low_open=False, high_open=False):
-    """Raise OptionError unless ``low <= value <= high`` (open ends where asked)."""
+    """Raise OptionError unless ``low <= value <= high`` (open ends where asked) and the
+    value is a finite number a 32-bit float can hold."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise OptionError(f"{owner}.{name} must be a number, got {value!r}")
-    if not math.isfinite(value):
+        raise OptionError(f"{owner}.{name} must be a number, got {_short(value)}")
+    if isinstance(value, float) and not math.isfinite(value):
         raise OptionError(f"{owner}.{name} must be finite, got {value!r}")
+    if abs(value) > FLOAT32_MAX:  # (compared exactly: an int of 400 digits has no float)
+        raise OptionError(f"{owner}.{name} = {_short(value)} is beyond the largest 32-bit float (3.4e38) the "
+                          "simulation computes with")
+    if low_open and low == 0 and 0 < value < FLOAT32_TINY:
+        raise OptionError(f"{owner}.{name} = {value!r} is below the smallest 32-bit float (1.2e-38) the simulation "
+                          "computes with")
     bad_low = low is not None and (value <= low if low_open else value < low)
     bad_high = high is not None and (value >= high if high_open else value > high)
     if bad_low or bad_high:
         lo = "-inf" if low is None else f"{low:g}"
         hi = "inf" if high is None else f"{high:g}"
         rng = ("(" if low_open else "[") + f"{lo}, {hi}" + (")" if high_open else "]")
-        raise OptionError(f"{owner}.{name} = {value!r} is out of range: allowed {rng}")
+        raise OptionError(f"{owner}.{name} = {_short(value)} is out of range: allowed {rng}")
     return value
 
 
@@ -266,7 +287,7 @@ class SimulationOptions:
                     low_open=True)
         check_range("simulation", "max_substeps", self.max_substeps, self.substeps, 100_000)
         check_range("simulation", "solver_iterations", self.solver_iterations, 1, 1000)
-        if len(self.gravity) != 3:
+        if isinstance(self.gravity, (str, bytes)) or not hasattr(self.gravity, "__len__") or len(self.gravity) != 3:
             raise OptionError(f"simulation.gravity must have 3 components, got {self.gravity!r}")
         for g in self.gravity:
             check_range("simulation", "gravity", g, -1000.0, 1000.0)
@@ -276,6 +297,10 @@ class SimulationOptions:
         check_range("simulation", "rolling_resistance", self.rolling_resistance, 0.0, 10.0)
         if self.arch not in ("cpu", "cuda", "vulkan", "metal", "gpu"):
             raise OptionError(f"simulation.arch = {self.arch!r}: use cpu, cuda, vulkan, metal or gpu")
+        if self.frame_count < 1:
+            raise OptionError(f"simulation.duration = {self.duration!r} s at fps = {self.fps!r} is "
+                              f"{self.duration * self.fps:.3g} frames, which rounds to none: make the duration at "
+                              f"least one frame ({1.0 / self.fps:.3g} s)")
 
     @property
     def frame_dt(self) -> float:

@@ -7,12 +7,21 @@ a second ``ti.init`` throws away every field and compiled kernel.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
 from pathlib import Path
 
-import taichi as ti
+# Taichi prints its banner on stdout at import and at ti.init; stdout carries a command's
+# result (``info --json``), so the banner goes to stderr. Taichi takes a replaced stdout
+# for a notebook's and then wraps every kernel call to flush in-kernel prints to it (and
+# says so): none of our kernels prints, so that buffer is turned off.
+os.environ.setdefault("TI_ENABLE_PYBUF", "0")
+with contextlib.redirect_stdout(sys.stderr):
+    import taichi as ti
 
 _ARCHES = {"cpu": "cpu", "cuda": "cuda", "vulkan": "vulkan", "gpu": "gpu", "metal": "metal"}
+_DEVICE_NAMES = {"cuda": "CUDA", "vulkan": "Vulkan", "metal": "Metal", "gpu": "GPU"}
 _initialised_arch: str | None = None
 
 
@@ -27,7 +36,23 @@ def cache_dir() -> Path:
 
 
 class ArchError(RuntimeError):
-    """Another Taichi arch was asked for than the one this process already runs on."""
+    """An arch that cannot be had: not on this machine, or another than the one this
+    process already runs on."""
+
+
+def _arches_of(name: str) -> set:
+    """Taichi's arch values that satisfy ``name`` (cpu: x64 or arm64; gpu: any GPU)."""
+    if name == "cpu":
+        return {ti.x64, ti.arm64}
+    if name == "gpu":
+        return set(_gpu_arches())
+    return {getattr(ti, _ARCHES[name])}
+
+
+def _gpu_arches() -> list:
+    """What "gpu" tries, in order. Not Taichi's own ``ti.gpu`` list: probing OpenGL crashes
+    the process (a segmentation fault) on a machine without a display or GPU driver."""
+    return [ti.cuda, ti.vulkan, ti.metal]
 
 
 def init(arch: str | None = None, *, debug: bool = False) -> str:
@@ -52,15 +77,28 @@ def init(arch: str | None = None, *, debug: bool = False) -> str:
     arch = "cpu" if arch is None else arch
     if arch not in _ARCHES:
         raise ValueError(f"unknown Taichi arch {arch!r}: use one of {', '.join(sorted(_ARCHES))}")
-    ti.init(
-        arch=getattr(ti, _ARCHES[arch]),
-        default_fp=ti.f32,
-        default_ip=ti.i32,
-        offline_cache=True,
-        offline_cache_file_path=str(cache_dir() / "ticache"),
-        debug=debug,
-        log_level=ti.WARN,
-    )
+    with contextlib.redirect_stdout(sys.stderr):
+        ti.init(
+            arch=_gpu_arches() if arch == "gpu" else getattr(ti, _ARCHES[arch]),
+            default_fp=ti.f32,
+            default_ip=ti.i32,
+            offline_cache=True,
+            offline_cache_file_path=str(cache_dir() / "ticache"),
+            debug=debug,
+            # (Taichi's "falling back to CPU" warning is replaced by the ArchError below;
+            # a TI_LOG_LEVEL set in the environment is the user's, and Taichi warns when
+            # ti.init overrides it)
+            **({} if "TI_LOG_LEVEL" in os.environ else {"log_level": ti.WARN if arch == "cpu" else ti.ERROR}),
+        )
+    if "TI_LOG_LEVEL" not in os.environ:
+        ti.set_logging_level(ti.WARN)
+    got = ti.lang.impl.current_cfg().arch
+    if got not in _arches_of(arch):
+        # Taichi fell back to the CPU; an explicit arch that cannot be had is an error.
+        _initialised_arch = "cpu"
+        raise ArchError(f"arch {arch!r} is not available on this machine (Taichi found no usable "
+                        f"{_DEVICE_NAMES.get(arch, arch)} device or driver): use --arch cpu, "
+                        "or simulation.arch = \"cpu\" in the scene")
     _initialised_arch = arch
     global SERIAL_SMALL_LOOPS
     SERIAL_SMALL_LOOPS = arch == "cpu"

@@ -12,15 +12,21 @@ from __future__ import annotations
 import dataclasses
 import gc
 import json
+import numbers
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import runtime
+from . import interrupts, runtime
 from .geometry.rotation import quaternion_matrix
 from .model import BodyModel
-from .options import FractureOptions, Material, ParticleOptions
+from .options import FractureOptions, Material, OptionError, ParticleOptions
+
+
+class NonFinitePoseError(RuntimeError):
+    """The simulation produced a NaN or infinite pose; the run stops (the cache keeps the
+    frames before it, marked incomplete)."""
 
 
 @dataclass
@@ -178,15 +184,18 @@ class Simulation:
         frames: simulate this many frames instead of duration x fps.
         world: an existing World to reuse (cleared first; its capacities must suffice):
             its kernels are already compiled, so a second scene in one process starts at once.
+        overwrite: write the output even while another run holds its lock file.
+
+    The output path is checked and locked (``io.output``) before any object is meshed.
     """
 
     def __init__(self, scene, *, output=None, arch: str | None = None, progress=None,
                  single_scale: bool | None = None, fracture: bool = True, frames: int | None = None,
-                 world=None):
-        from .dynamics import DynamicsOptions, World, WorldCapacity
-
+                 world=None, overwrite: bool = False):
         self.scene = scene
         sim = scene.simulation
+        if frames is not None and (not isinstance(frames, numbers.Integral) or frames < 1):
+            raise OptionError(f"frames = {frames!r}: simulate at least 1 frame")
         self.frame_count = int(frames if frames is not None else sim.frame_count)
         self.frame_dt = sim.frame_dt
         self.progress = progress
@@ -203,6 +212,24 @@ class Simulation:
         if output is None:
             output = scene.output_path
         self.output_path = None if output is False else output
+        self._lock = None
+        if self.output_path is not None:
+            from .io.output import OutputLock, check_output_path
+
+            check_output_path(self.output_path)
+            self._lock = OutputLock(self.output_path)
+            self._lock.acquire(overwrite=overwrite)
+        try:
+            self._build(scene, arch, single_scale, world)
+        except BaseException:
+            if self._lock is not None:
+                self._lock.release()
+            raise
+
+    def _build(self, scene, arch, single_scale, world):
+        from .dynamics import DynamicsOptions, World, WorldCapacity
+
+        sim = scene.simulation
         # The arch first: preparing a breakable body runs kernels (its SPH neighbour lists),
         # and the first kernel fixes the process's arch. A World given brings its own.
         if world is None or arch is not None:
@@ -211,6 +238,7 @@ class Simulation:
         t0 = time.perf_counter()
         prepared = []
         for obj in scene.objects:
+            interrupts.check()
             model, report = obj.prepare()
             prepared.append((obj, model))
             self.prepare_reports.append(report)
@@ -291,6 +319,7 @@ class Simulation:
             boundary_particles=sum(r.model.boundary_particle_count for r in self.records.values() if r.breakable),
         )
         self.writer = None
+        interrupts.check()  # (a Ctrl-C swallowed while the World compiled)
 
     # ------------------------------------------------------------------ output
 
@@ -301,7 +330,7 @@ class Simulation:
         # (checkpoint_every 0: only the final write, and Ctrl-C's)
         self.writer = CacheWriter(self.output_path, fps=self.scene.simulation.fps, start_frame=0,
                                   checkpoint_every=out.checkpoint_every or 2**31 - 1,
-                                  checkpoint_seconds=out.checkpoint_seconds)
+                                  checkpoint_seconds=out.checkpoint_seconds, lock=self._lock)
         for rec in self.records.values():
             self._add_to_cache(rec, birth_frame=0)
         self._write_frame(0)
@@ -336,9 +365,34 @@ class Simulation:
         t = time.perf_counter()
         ids = self.world.body_ids
         state = self.world.body_state(ids)
+        self._check_finite_poses(frame, ids, state)
         cache_ids = [self.records[b].cache_id for b in ids]
         self.writer.write_frame(frame, cache_ids, state["position"], state["orientation"])
+        self._checkpoint_if_due(frame)
         self.times.output += time.perf_counter() - t
+
+    def _check_finite_poses(self, frame: int, ids, state) -> None:
+        """Raise NonFinitePoseError naming the first body whose pose is NaN or infinite."""
+        ok = np.all(np.isfinite(state["position"]), axis=1) & np.all(np.isfinite(state["orientation"]), axis=1)
+        if not np.all(ok):
+            k = int(np.argmin(ok))
+            kept = (f"the cache keeps frames 0-{frame - 1}, marked incomplete" if self.writer is not None
+                    else "no cache was written")
+            raise NonFinitePoseError(
+                f"frame {frame}: body {self.records[ids[k]].name!r} has a non-finite pose (position "
+                f"{state['position'][k].tolist()}); the simulation stopped and {kept}. Look for extreme speeds, "
+                "sizes or material values in the scene")
+
+    def _checkpoint_if_due(self, frame: int) -> None:
+        """Besides the writer's every-N-frames rule: right after the first simulated frame,
+        then whenever ``checkpoint_seconds`` of wall time have passed, however slow the frames
+        (the first frame compiles kernels: minutes on a cold cache). A kill then loses at most
+        that much work."""
+        out = self.scene.output
+        if out.checkpoint_every == 0 or self.writer.frames_since_write == 0:
+            return
+        if frame == 1 or (out.checkpoint_seconds > 0 and self.writer.seconds_since_write >= out.checkpoint_seconds):
+            self.writer.checkpoint()
 
     # ------------------------------------------------------------------ fracture
 
@@ -501,6 +555,7 @@ class Simulation:
         ms inside one frame of the 13 rings, and ~0.4 ms/frame on average."""
         start = time.perf_counter()
         interrupted = False
+        failed = True  # until the loop ends: an exception leaves the cache incomplete
         sim = self.scene.simulation
         frame_ms: list[float] = []
         done = 0  # frames simulated and written (a Ctrl-C may land anywhere in a frame)
@@ -526,14 +581,25 @@ class Simulation:
                     elapsed = time.perf_counter() - start
                     self.progress(frame, self.frame_count, frame * self.frame_dt, self.fragment_count,
                                   frame / max(elapsed, 1e-9))
+                interrupts.check()  # (a Ctrl-C that a library swallowed)
+            if self.writer is None:  # (with a cache every frame was checked as it was written)
+                ids = self.world.body_ids
+                self._check_finite_poses(done, ids, self.world.body_state(ids))
+            failed = False
         except KeyboardInterrupt:
             interrupted = True
+            failed = False
         finally:
             gc.unfreeze()
-            if self.writer is not None:
-                t = time.perf_counter()
-                self.writer.close(complete=not interrupted)
-                self.times.output += time.perf_counter() - t
+            try:
+                if self.writer is not None:
+                    t = time.perf_counter()
+                    # complete only when every requested frame was written
+                    self.writer.close(complete=not failed and not interrupted and done == self.frame_count)
+                    self.times.output += time.perf_counter() - t
+            finally:
+                if self._lock is not None:
+                    self._lock.release()
         return self._summary(done, frame_ms, time.perf_counter() - start, interrupted)
 
     def _summary(self, frames: int, frame_ms: list[float], wall: float, interrupted: bool) -> RunSummary:

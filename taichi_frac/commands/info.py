@@ -79,12 +79,29 @@ def _table(report) -> str:
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
 
+def _check_arguments(args) -> None:
+    """What the mesher cannot take, refused before any work (OptionError)."""
+    import math
+
+    from ..geometry.meshio_in import unit_scale
+    from ..geometry.primitives import parse_primitive_spec
+    from ..options import OptionError
+    from ..scenes.description import check_primitive_size
+
+    if args.max_volume is not None and not (math.isfinite(args.max_volume) and args.max_volume > 0):
+        raise OptionError(f"--max-volume {args.max_volume!r}: give a tet volume above 0 m^3, e.g. 1e-7")
+    factor = unit_scale(args.scale, args.units)
+    if parse_primitive_spec(args.source) is not None:
+        check_primitive_size(args.source, factor)
+
+
 def run(args) -> int:
     from ..geometry.prepare import prepare_body
     from ..geometry.validate import MeshError
     from ..options import OptionError, ParticleOptions
 
     try:
+        _check_arguments(args)
         particles = ParticleOptions(target_particles=args.particles, boundary_group_size=args.group_size,
                                     keep_leftovers=not args.drop_leftovers)
         _, report = prepare_body(args.source, scale=args.scale, units=args.units, material=args.material,

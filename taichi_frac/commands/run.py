@@ -26,6 +26,8 @@ def register(subparsers) -> None:
                    help="collide with every surface particle instead of the boundary layer (for comparison)")
     p.add_argument("--stats-json", metavar="FILE", help="also write the run summary as JSON")
     p.add_argument("--no-output", action="store_true", help="write no cache (benchmarking)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="write the cache even while another run holds its lock (that run then stops)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=main)
 
@@ -106,32 +108,38 @@ def print_summary(summary, file=None) -> None:
 
 
 def main(args) -> int:
+    """Every check of the command line, the scene, the output paths and the meshes comes
+    before the first frame; problems raise the package's errors (``cli`` prints them, and
+    has taken Ctrl-C over: see ``interrupts``)."""
+    from ..io.output import OutputError, check_output_path, check_stats_path
     from ..options import OptionError
-    from ..runtime import ArchError
     from ..scenes import load_scene
     from ..simulation import Simulation
 
+    if args.frames is not None and args.frames < 1:
+        raise OptionError(f"--frames {args.frames}: simulate at least 1 frame")
+    if args.stats_json:
+        check_stats_path(args.stats_json)
+    if args.output and not args.no_output:
+        check_output_path(args.output)
     try:
         scene = load_scene(args.scene, args.overrides)
-    except (OptionError, FileNotFoundError) as exc:
-        print(f"taichi-frac run: {exc}", file=sys.stderr)
-        return 2
+    except FileNotFoundError as exc:
+        raise OptionError(str(exc)) from None
     output = False if args.no_output else (Path(args.output) if args.output else None)
     cb, bar = _progress_printer(args.quiet)
     try:
         sim = Simulation(scene, output=output, arch=args.arch, progress=cb, frames=args.frames,
-                         single_scale=True if args.single_scale else None, fracture=not args.no_fracture)
-    except ArchError as exc:
-        if bar is not None:
-            bar.stop()
-        print(f"taichi-frac run: {exc}", file=sys.stderr)
-        return 2
-    try:
+                         single_scale=True if args.single_scale else None, fracture=not args.no_fracture,
+                         overwrite=args.overwrite)
         summary = sim.run()
     finally:
         if bar is not None:
             bar.stop()
     print_summary(summary)
     if args.stats_json:
-        Path(args.stats_json).write_text(summary.to_json())
+        try:
+            Path(args.stats_json).write_text(summary.to_json())
+        except OSError as exc:
+            raise OutputError(f"--stats-json {args.stats_json!r}: {exc.strerror or exc}") from None
     return 130 if summary.interrupted else 0

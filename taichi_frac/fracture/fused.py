@@ -48,12 +48,12 @@ def _stress_kernel(
         for c in ti.static(range(3)):
             displacement[i, c] = u[c]
     for q in range(query_count):
-        grad, _ = gradient_at(points, volumes, query[q], offsets[q], offsets[q + 1], indices, smoothing_length,
+        grad, _neighbours = gradient_at(points, volumes, query[q], offsets[q], offsets[q + 1], indices, smoothing_length,
                               corrected, min_eigen_ratio, displacement)
         s = stress_of(grad, lame_lambda, shear_modulus)
         for a, b in ti.static(ti.ndrange(3, 3)):
             stress_out[q, a, b] = s[a, b]
-        _, largest_out[q] = sym_eig3_extremes_f64(s)
+        _smallest, largest_out[q] = sym_eig3_extremes_f64(s)
         if decompose == 1:
             values, directions = principal_of(s)
             for e in ti.static(range(3)):

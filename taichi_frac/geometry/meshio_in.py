@@ -24,6 +24,27 @@ UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 
 SURFACE_SUFFIXES = (".obj", ".stl", ".ply", ".off", ".gltf", ".glb")
 TET_SUFFIXES = (".msh", ".vtk", ".vtu", ".mesh")
+# Formats that are always text (and need no neighbouring files, as a glTF's buffers do):
+# bytes that are not text mean a wrong or damaged file.
+_TEXT_SUFFIXES = (".obj", ".off")
+
+#: Sizes [m] a solid may have: below 0.1 mm its particles' distances are lost against the
+#: float32 positions of a scene of metres; above 10 km float32 resolves only centimetres.
+SIZE_RANGE = (1.0e-4, 1.0e4)
+
+
+def check_size(size: float, what: str, scale: float = 1.0, units: str = "m") -> None:
+    """Raise MeshError unless ``size`` [m] (a solid's largest extent, after ``units`` and
+    ``scale``) lies in :data:`SIZE_RANGE`; the message says how to rescale."""
+    low, high = SIZE_RANGE
+    if low <= size <= high:
+        return
+    side = "small" if size < low else "large"
+    hint = ("give the unit its coordinates really are in (units = \"m\", \"cm\" or \"mm\") or a scale that "
+            "makes it its real size" if side == "small" else
+            "if its coordinates are millimetres or centimetres give units = \"mm\" or \"cm\", or a scale below 1")
+    raise MeshError(f"{what} is {size:.3g} m across (units {units!r}, scale {scale:g}): too {side} to simulate, "
+                    f"sizes from {low:g} to {high:g} m work; {hint}")
 
 
 def unit_scale(scale: float = 1.0, units: str = "m") -> float:
@@ -47,9 +68,18 @@ def read_surface(path: str | os.PathLike) -> trimesh.Trimesh:
     """Read a surface file into one trimesh (file units, no checks)."""
     path = Path(path)
     _check_file(path, SURFACE_SUFFIXES)
-    kwargs = {"skip_materials": True} if path.suffix.lower() == ".obj" else {}
+    suffix = path.suffix.lower()
+    kwargs = {"skip_materials": True} if suffix == ".obj" else {}
+    source = str(path)
+    if path.is_dir():
+        raise MeshError(f"{path.name!r} is a folder, not a mesh file")
+    if suffix in _TEXT_SUFFIXES:
+        # Decoded here: trimesh's guess at an unknown encoding needs a package it does not
+        # require, and fails with that package's name instead of the file's problem.
+        source = trimesh.util.wrap_as_stream(_text_of(path).encode("utf-8"))
+        kwargs["file_type"] = suffix[1:]
     try:
-        loaded = trimesh.load(str(path), process=False, **kwargs)
+        loaded = trimesh.load(source, process=False, **kwargs)
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise MeshError(f"{path.name!r} could not be read as a surface mesh: {exc}") from exc
     if isinstance(loaded, trimesh.Scene):
@@ -57,8 +87,44 @@ def read_surface(path: str | os.PathLike) -> trimesh.Trimesh:
         loaded = trimesh.util.concatenate(geometry) if geometry else trimesh.Trimesh()
     if not isinstance(loaded, trimesh.Trimesh):
         loaded = trimesh.Trimesh()  # a point cloud or a path: no faces
-    # Merge duplicate vertices (STL stores each triangle's corners separately).
-    return trimesh.Trimesh(loaded.vertices, loaded.faces, process=True)
+    vertices = np.asarray(loaded.vertices)
+    _check_finite(vertices, path.name)
+    # Merge duplicate vertices (STL stores each triangle's corners separately). trimesh
+    # merges within an absolute 1e-8, which collapses a mesh of 1e-9 units to a point: the
+    # merge runs on the mesh scaled to about unit size by a power of two (exact, so a mesh
+    # near unit size merges bit for bit as before).
+    extent = float(np.max(np.ptp(vertices, axis=0))) if len(vertices) else 0.0
+    unit = 2.0 ** -round(np.log2(extent)) if extent > 0 else 1.0
+    mesh = trimesh.Trimesh(vertices * unit, loaded.faces, process=True)
+    mesh.apply_scale(1.0 / unit)
+    mesh.metadata["file_extent"] = extent
+    return mesh
+
+
+def _text_of(path: Path) -> str:
+    """The text of a text-format mesh file: UTF-8, or Latin-1 (old exporters); raises
+    MeshError for bytes that are no text at all (a binary or damaged file)."""
+    raw = path.read_bytes()
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        start = exc.start
+    codes = np.frombuffer(raw, dtype=np.uint8)
+    control = np.nonzero((codes < 32) & ~np.isin(codes, (9, 10, 12, 13)))[0]
+    if len(control) == 0:
+        return raw.decode("latin-1")
+    at = int(control[0])
+    line = raw[:at].count(b"\n") + 1
+    raise MeshError(f"{path.name!r} is not a text {path.suffix.lower()[1:].upper()} file: byte 0x{raw[at]:02x} at "
+                    f"offset {at} (line {line}) is not text (first non-UTF-8 byte at "
+                    f"offset {start}); export the mesh again, or check the file is the mesh you meant")
+
+
+def _check_finite(vertices: np.ndarray, name: str) -> None:
+    bad = np.nonzero(~np.all(np.isfinite(vertices), axis=1))[0] if len(vertices) else []
+    if len(bad):
+        raise MeshError(f"{name!r}: {len(bad)} vertices with a NaN or infinite coordinate, e.g. vertex {int(bad[0])} "
+                        f"= {vertices[bad[0]].tolist()}; fix them in the modelling program and export again")
 
 
 def load_surface(path: str | os.PathLike, *, scale: float = 1.0, units: str = "m", repair: bool = False,
@@ -79,6 +145,8 @@ def load_surface(path: str | os.PathLike, *, scale: float = 1.0, units: str = "m
     factor = unit_scale(scale, units)
     mesh = read_surface(path)
     mesh.apply_scale(factor)
+    if len(mesh.faces):
+        check_size(mesh.metadata["file_extent"] * factor, repr(path.name), scale, units)
     steps: list[str] = []
     if repair:
         from .repair import repair_surface
@@ -111,6 +179,9 @@ def load_tet_mesh(path: str | os.PathLike, *, scale: float = 1.0, units: str = "
                         "(OBJ/STL/PLY/OFF/glTF) to be tetrahedralised, or a tet mesh")
     tets = np.concatenate(blocks).astype(np.int64)
     vertices = np.asarray(data.points, dtype=np.float64)[:, :3] * factor
+    _check_finite(vertices, path.name)
+    if len(vertices):
+        check_size(float(np.max(np.ptp(vertices, axis=0))), repr(path.name), scale, units)
     if tets.min() < 0 or tets.max() >= len(vertices):
         raise MeshError(f"{path.name!r}: tet vertex indices out of range 0..{len(vertices) - 1}")
     return vertices, tets

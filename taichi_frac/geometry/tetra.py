@@ -17,6 +17,7 @@ Backends are plain functions ``(vertices, faces, max_volume, min_dihedral_deg) -
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import math
 import os
 import sys
@@ -94,6 +95,9 @@ def _native_stdout_silenced_in_scratch_dir():
         try:
             yield
         finally:
+            # Its log lines still in the C library's stdout buffer would reach the real
+            # stdout once fd 1 is back: flushed into /dev/null first.
+            ctypes.CDLL(None).fflush(None)
             os.dup2(saved_stdout, 1)
             os.close(saved_stdout)
             os.chdir(cwd)

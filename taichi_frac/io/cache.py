@@ -125,6 +125,11 @@ class CacheWriter:
             since the last write (0: every ``checkpoint_every`` frames). A checkpoint
             rewrites the whole file (~30 ms for the glass walls' 2.7 MB): a fast run need
             not pay it every few frames to lose at most a few seconds to a crash.
+        lock: an ``output.OutputLock`` held on ``path``, checked before every write: a run
+            whose output another run took over stops instead of overwriting it.
+
+    No NaN or infinite value is ever written: a pose, vertex or stress that is not finite
+    raises ``NonFiniteError`` and leaves the file as the last checkpoint wrote it.
 
     Positions, vertices and impact points given to the writer are always in the simulation's
     units and frame: metres, Z up, quaternions (w, x, y, z) body -> world.
@@ -139,6 +144,7 @@ class CacheWriter:
         meters_per_unit: float = 1.0,
         checkpoint_every: int = 10,
         checkpoint_seconds: float = 0.0,
+        lock=None,
     ):
         self.path = Path(path)
         if self.path.suffix not in (".usd", ".usdc", ".usda"):
@@ -159,6 +165,7 @@ class CacheWriter:
         self.meters_per_unit = float(meters_per_unit)
         self.checkpoint_every = int(checkpoint_every)
         self.checkpoint_seconds = float(checkpoint_seconds)
+        self.lock = lock
         self._last_write_time = _time.monotonic()
         self._fragments: list[_Fragment] = []
         self._names: set[str] = set()
@@ -259,11 +266,14 @@ class CacheWriter:
             raise ValueError("faces index vertices out of range")
         if inner.shape != (len(faces),):
             raise ValueError(f"face_is_inner must be ({len(faces)},), got {inner.shape}")
+        _check_finite(f"fragment {name!r}: vertices", vertices / self.meters_per_unit, float32=True)
         if parent is not None and not 0 <= int(parent) < len(self._fragments):
             raise ValueError(f"unknown parent fragment id {parent}")
         face_stress = np.zeros(len(faces)) if face_peak_stress is None else np.asarray(face_peak_stress, np.float64)
         if face_stress.shape != (len(faces),):
             raise ValueError(f"face_peak_stress must be ({len(faces)},), got {face_stress.shape}")
+        _check_finite(f"fragment {name!r}: peak stress", face_stress, float32=True)
+        _check_finite(f"fragment {name!r}: peak stress", float(peak_principal_stress))
         corner_normals = _per_corner(normals, faces, len(vertices), 3, "normals")
         corner_uvs = _per_corner(uvs, faces, len(vertices), 2, "uvs")
 
@@ -295,6 +305,7 @@ class CacheWriter:
         impact_fields = None
         if impact is not None:
             point, force = _impact_fields(impact)
+            _check_finite(f"fragment {name!r}: impact", np.concatenate([point, force]))
             point, force = self._to_stage_vectors(point[None], force[None])
             impact_fields = (Gf.Vec3d(*point[0]), Gf.Vec3d(*force[0]))
         parent_path = None if parent is None else self._fragments[int(parent)].prim_path
@@ -379,6 +390,11 @@ class CacheWriter:
             raise ValueError(f"{len(ids)} ids, {len(positions)} positions, {len(quats)} orientations")
         if len(ids) and (ids.min() < 0 or ids.max() >= len(self._fragments)):
             raise ValueError("unknown fragment id in write_frame")
+        bad = ~(np.all(np.isfinite(positions), axis=1) & np.all(np.isfinite(quats), axis=1))
+        if np.any(bad):
+            k = int(np.argmax(bad))
+            raise NonFiniteError(f"frame {int(frame)}: fragment {self._fragments[int(ids[k])].prim_path} has a non-finite "
+                                 f"pose (position {positions[k].tolist()}, orientation {quats[k].tolist()})")
         norms = np.linalg.norm(quats, axis=1)
         if np.any(np.abs(norms - 1.0) > 1e-3):
             raise ValueError("orientations must be unit quaternions (w, x, y, z)")
@@ -429,7 +445,19 @@ class CacheWriter:
         self._check_open()
         self._write(complete=False)
 
+    @property
+    def frames_since_write(self) -> int:
+        """Frames given to ``write_frame`` since the file was last written."""
+        return self._frames_since_checkpoint
+
+    @property
+    def seconds_since_write(self) -> float:
+        """Wall time since the file was last written (or the writer made) [s]."""
+        return _time.monotonic() - self._last_write_time
+
     def _write(self, complete: bool) -> None:
+        if self.lock is not None:
+            self.lock.check()
         last = self._last_frame if self._last_frame is not None else self.start_frame
         deaths = [f.death for f in self._fragments if f.death is not None]
         self._layer.endTimeCode = max([last, self.start_frame] + deaths)
@@ -471,6 +499,19 @@ class CacheWriter:
     def stage(self) -> Usd.Stage:
         """A stage on the in-memory layer (read-only use: inspection in tests)."""
         return Usd.Stage.Open(self._layer)
+
+
+class NonFiniteError(ValueError):
+    """A NaN or infinite value was given to the writer (and not written)."""
+
+
+def _check_finite(what: str, values, float32: bool = False) -> None:
+    """``float32``: the values are written as 32-bit floats, where beyond 3.4e38 is inf."""
+    values = np.asarray(values, dtype=np.float64)
+    if not np.all(np.isfinite(values)):
+        raise NonFiniteError(f"{what} has NaN or infinite values; nothing of it was written")
+    if float32 and values.size and np.abs(values).max() > np.finfo(np.float32).max:
+        raise NonFiniteError(f"{what} has values beyond a 32-bit float (3.4e38); nothing of it was written")
 
 
 def _box_projection(corners: np.ndarray, normals: np.ndarray) -> np.ndarray:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry.meshio_in import UNITS
+from ..geometry.meshio_in import SIZE_RANGE, UNITS
 from ..geometry.primitives import parse_primitive_spec
 from ..options import (
     FractureOptions,
@@ -61,12 +61,25 @@ def _qmul(p, q):
     ])
 
 
-def _vec3(owner, name, value) -> tuple[float, float, float]:
+#: Largest coordinate [m] of a position, ground height or box: float32 positions are
+#: spaced 8 mm apart there, already coarser than the particles of a small object.
+MAX_COORDINATE = 1.0e5
+#: Largest initial speed [m/s] and spin [rad/s]: far beyond any projectile; beyond them a
+#: substep moves a body kilometres and the contact stage cannot follow.
+MAX_SPEED = 1.0e4
+MAX_SPIN = 1.0e5
+
+
+def _vec3(owner, name, value, limit: float | None = None, unit: str = "") -> tuple[float, float, float]:
     if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 3:
         raise OptionError(f"{owner}.{name} must be a list of 3 numbers, got {value!r}")
     for v in value:
         check_range(owner, name, v)
-    return tuple(float(v) for v in value)
+    vec = tuple(float(v) for v in value)
+    if limit is not None and float(np.linalg.norm(vec)) > limit:
+        raise OptionError(f"{owner}.{name} = {list(vec)!r} is {float(np.linalg.norm(vec)):.3g} {unit} long: beyond "
+                          f"the {limit:g} {unit} the simulation represents well")
+    return vec
 
 
 def _unit_quaternion(owner, value) -> tuple[float, float, float, float]:
@@ -75,10 +88,24 @@ def _unit_quaternion(owner, value) -> tuple[float, float, float, float]:
     for v in value:
         check_range(owner, "orientation", v)
     q = np.asarray(value, dtype=np.float64)
-    norm = float(np.linalg.norm(q))
-    if norm < 1e-9:
+    largest = float(np.abs(q).max())
+    if largest < 1e-30:
         raise OptionError(f"{owner}.orientation = {list(value)!r} has zero length: use [1, 0, 0, 0] for no rotation")
-    return tuple(float(v) for v in q / norm)
+    q = q / largest  # (first: the norm of [1e200, 1e200, 0, 0] overflows)
+    return tuple(float(v) for v in q / np.linalg.norm(q))
+
+
+def check_primitive_size(spec: str, factor: float, owner: str | None = None) -> None:
+    """Raise OptionError unless each length of primitive ``spec`` [m], times ``factor``
+    (the object's scale and units), is a size a solid may have (``meshio_in.SIZE_RANGE``)."""
+    name, params = parse_primitive_spec(spec)
+    low, high = SIZE_RANGE
+    for key, value in params.items():
+        size = value * factor
+        if not (math.isfinite(size) and low <= size <= high):
+            where = f"{owner}.primitive = {spec!r}" if owner else f"primitive {spec!r}"
+            raise OptionError(f"{where}: {key} = {value:g} m (x scale {factor:g}) is outside the sizes a solid may "
+                              f"have, {low:g} to {high:g} m")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -138,13 +165,17 @@ class SceneObject:
         check_range(owner, "scale", self.scale, 0.0, None, low_open=True)
         if self.units not in UNITS:
             raise OptionError(f"{owner}.units = {self.units!r}: use one of {', '.join(UNITS)}")
+        if self.primitive is not None:
+            check_primitive_size(self.primitive, float(self.scale) * UNITS[self.units], owner)
         if isinstance(self.material, str):
             object.__setattr__(self, "material", material_preset(self.material))
         elif not isinstance(self.material, Material):
             raise OptionError(f"{owner}.material must be a preset name or a Material, got {self.material!r}")
-        object.__setattr__(self, "position", _vec3(owner, "position", self.position))
-        object.__setattr__(self, "linear_velocity", _vec3(owner, "linear_velocity", self.linear_velocity))
-        object.__setattr__(self, "angular_velocity", _vec3(owner, "angular_velocity", self.angular_velocity))
+        object.__setattr__(self, "position", _vec3(owner, "position", self.position, MAX_COORDINATE, "m"))
+        object.__setattr__(self, "linear_velocity",
+                           _vec3(owner, "linear_velocity", self.linear_velocity, MAX_SPEED, "m/s"))
+        object.__setattr__(self, "angular_velocity",
+                           _vec3(owner, "angular_velocity", self.angular_velocity, MAX_SPIN, "rad/s"))
         if self.orientation is not None and self.euler_deg is not None:
             # dataclasses.replace() passes both back: accept them when they agree.
             from_euler = np.array(euler_deg_to_quaternion(_vec3(owner, "euler_deg", self.euler_deg)))
@@ -205,9 +236,9 @@ class Collider:
         owner = f"colliders[{self.type!r}]"
         if self.type not in COLLIDER_TYPES:
             raise OptionError(f"collider type = {self.type!r}: use one of {', '.join(COLLIDER_TYPES)}")
-        check_range(owner, "height", self.height)
-        object.__setattr__(self, "center", _vec3(owner, "center", self.center))
-        half = _vec3(owner, "half_extents", self.half_extents)
+        check_range(owner, "height", self.height, -MAX_COORDINATE, MAX_COORDINATE)
+        object.__setattr__(self, "center", _vec3(owner, "center", self.center, MAX_COORDINATE, "m"))
+        half = _vec3(owner, "half_extents", self.half_extents, MAX_COORDINATE, "m")
         for h in half:
             check_range(owner, "half_extents", h, 0.0, None, low_open=True)
         object.__setattr__(self, "half_extents", half)
@@ -235,11 +266,12 @@ class OutputSettings:
 
     Attributes:
         path: the .usdc (or .usda) file; relative paths are relative to the scene file.
-        checkpoint_every: also write the file every this many frames (0: only at the end),
-            so a crash loses at most those frames (Ctrl-C loses nothing) ...
-        checkpoint_seconds: ... but at most once in this many seconds of wall time [s]: a
-            checkpoint rewrites the whole file (~30 ms for the glass walls), which a fast
-            run would otherwise pay every half second.
+        checkpoint_every: 0 writes the file only at the end (and on Ctrl-C); otherwise it is
+            also written while the run goes on, so a crash or a kill loses little:
+        checkpoint_seconds: right after the first frame, then whenever this many seconds of
+            wall time have passed since the last write, however slow the frames [s]. A
+            checkpoint rewrites the whole file (~30 ms for the glass walls), which a fast run
+            would otherwise pay every few frames. 0: every ``checkpoint_every`` frames.
     """
 
     path: str = "out.usdc"
@@ -273,6 +305,13 @@ class Scene:
         dupes = sorted({n for n in names if names.count(n) > 1})
         if dupes:
             raise OptionError(f"scene {self.name!r}: object names must be unique, repeated: {', '.join(dupes)}")
+        grounds = [(i, c.height) for i, c in enumerate(self.colliders) if c.type == "ground"]
+        for obj in self.objects:
+            for i, height in grounds:
+                if obj.position[2] < height:
+                    raise OptionError(f"objects[{obj.name!r}].position z = {obj.position[2]:g} m is below the ground "
+                                      f"colliders[{i}] at height {height:g} m, which would throw it out: raise the "
+                                      "object or lower the ground")
 
     @property
     def output_path(self) -> Path:

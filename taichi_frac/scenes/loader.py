@@ -109,6 +109,8 @@ def _object(table, index: int, base_dir: Path | None, where_file: str) -> SceneO
     if "fracture" in table:
         extra["fracture"] = _build(FractureOptions, table["fracture"], f"{where}.fracture")
     mesh = table.get("mesh")
+    if mesh is not None and not isinstance(mesh, str):
+        raise OptionError(f"{where}.mesh = {mesh!r} has the wrong type: expected a file name (string)")
     if isinstance(mesh, str):
         path = Path(mesh).expanduser()
         if not path.is_absolute() and base_dir is not None:
@@ -157,9 +159,20 @@ def load_scene(path: str | os.PathLike, overrides=()) -> Scene:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"scene file {str(path)!r} does not exist")
+    if path.is_dir():
+        raise OptionError(f"{str(path)!r} is a folder: give a scene file (.toml), e.g. scenes/single_ring.toml")
     try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise OptionError(f"{path.name}: cannot be read: {exc.strerror or exc}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise OptionError(f"{path.name}: line {line}: byte 0x{raw[exc.start]:02x} is not UTF-8 text (a TOML file "
+                          "must be UTF-8): save the file as UTF-8, or check it is a scene file") from None
+    try:
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise OptionError(f"{path.name}: not valid TOML: {exc}") from None
     if overrides:
@@ -182,7 +195,9 @@ def apply_overrides(data: dict, overrides, *, where: str = "scene") -> dict:
     import copy
 
     data = copy.deepcopy(data)
-    object_names = {o.get("name") for o in data.get("objects", []) if isinstance(o, dict)}
+    objects = data.get("objects", [])
+    object_names = ({o.get("name") for o in objects if isinstance(o, dict) and isinstance(o.get("name"), str)}
+                    if isinstance(objects, list) else set())
     for item in overrides:
         if "=" not in item:
             raise OptionError(f"{where}: override {item!r} must look like KEY=VALUE, e.g. ring.fracture.crack_count=3")
@@ -201,16 +216,21 @@ def apply_overrides(data: dict, overrides, *, where: str = "scene") -> dict:
                 match = [t for t in node if isinstance(t, dict) and t.get("name") == part]
                 if match:
                     node = match[0]
-                elif part.isdigit() and int(part) < len(node):
+                elif part.isascii() and part.isdigit() and int(part) < len(node):
                     node = node[int(part)]
                 else:
                     raise OptionError(f"{where}: override {key!r}: no entry named {part!r} in {here}")
                 continue
             child = node.get(part)
             if child is None:
-                child = node[part] = {} if depth > 0 else None
+                # A table the scene leaves out takes its defaults; set one of its keys.
+                child = node[part] = {} if depth > 0 or part in ("simulation", "output") else None
+                if child is None and part in ("objects", "colliders"):
+                    raise OptionError(f"{where}: override {key!r}: the scene has no {part}")
                 if child is None:
-                    raise OptionError(f"{where}: override {key!r}: unknown key {part!r}")
+                    names = ", ".join(sorted(str(n) for n in object_names)) or "none"
+                    raise OptionError(f"{where}: override {key!r}: unknown key {part!r}; a key starts with "
+                                      f"simulation, output, objects, colliders or an object's name ({names})")
             elif isinstance(child, str) and part == "material":
                 child = node[part] = {"preset": child}
             elif not isinstance(child, (dict, list)):
