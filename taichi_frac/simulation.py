@@ -20,7 +20,7 @@ import numpy as np
 from . import runtime
 from .geometry.rotation import quaternion_matrix
 from .model import BodyModel
-from .options import FractureOptions, Material, ParticleOptions
+from .options import LOOKS, FractureOptions, Material, ParticleOptions
 
 
 @dataclass
@@ -307,6 +307,7 @@ class Simulation:
         rec.cache_id = self.writer.add_fragment(
             rec.name, vertices, faces, inner, birth_frame, parent=parent_cache, impact=impact,
             peak_principal_stress=float(peak), face_peak_stress=face_peak, normals=normals, uvs=uvs,
+            look=None if parent_cache is not None else LOOKS[rec.material.look],  # (pieces share the body's)
         )
 
     def _write_frame(self, frame: int):
