@@ -1,7 +1,7 @@
 """``taichi-frac bench TARGET``: timed measurements (never part of the test suite).
 
 ``report`` runs every part and writes docs/benchmarks.md, its plots in docs/benchmarks/ and
-the README part docs/readme/benchmarks.md (``--quick``: a smoke version under
+a headline summary out/benchmarks_summary.md (``--quick``: a smoke version under
 out/bench_quick/). Each part runs alone too (``tables``, ``grouping``, ``sph``, ``scaling``,
 ``stability``: prints its markdown, plots under ``--out``). ``dynamics`` prints issue 3's
 rigid-body table. The code lives in ``taichi_frac.bench``.
@@ -51,7 +51,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("bench", help="benchmark report and timed measurements (report, dynamics, ...)",
                               description=__doc__.split("\n\n")[0].replace("``", "'"))
     targets = p.add_subparsers(dest="target", metavar="TARGET")
-    r = targets.add_parser("report", help="run every part; write docs/benchmarks.md, plots and the README part")
+    r = targets.add_parser("report", help="run every part; write docs/benchmarks.md, its plots and out/benchmarks_summary.md")
     r.add_argument("--quick", action="store_true", help="fast smoke version, written under out/bench_quick/")
     r.add_argument("--out", type=Path, help="folder for benchmarks.md and benchmarks/*.png (default: docs/, "
                                              "or out/bench_quick/ with --quick)")
