@@ -13,18 +13,23 @@ DOCS=docs/gallery
 mkdir -p "$OUT" "$DOCS"
 frac=.venv/bin/taichi-frac
 
-# scene cache  frames-to-simulate  extra --set arguments
-$frac run scenes/single_ring.toml -q --frames 60 -o "$OUT/ring_n1.usdc"
-$frac run scenes/single_ring.toml -q --frames 60 -o "$OUT/ring_n5.usdc" --set ring.fracture.crack_count=5
-$frac run scenes/glass_walls.toml -q --frames 50 -o "$OUT/glass_walls.usdc"
-$frac run scenes/thirteen_rings.toml -q -o "$OUT/thirteen_rings.usdc"
+# Each scene's cache; REUSE_CACHES=1 keeps caches already under out/gallery/ (render only).
+run() {
+  local cache=$1; shift
+  if [ "${REUSE_CACHES:-0}" = 1 ] && [ -f "$cache" ]; then echo "reusing $cache"; return; fi
+  $frac run "$@" -q -o "$cache"
+}
+run "$OUT/ring_n1.usdc" scenes/single_ring.toml --frames 60
+run "$OUT/ring_n5.usdc" scenes/single_ring.toml --frames 60 --set ring.fracture.crack_count=5
+run "$OUT/glass_walls.usdc" scenes/glass_walls.toml --frames 50
+run "$OUT/thirteen_rings.usdc" scenes/thirteen_rings.toml
 
 $frac render "$OUT/ring_n1.usdc" --frames 60 -o "$OUT/ring_n1"
 $frac render "$OUT/ring_n5.usdc" --frames 60 -o "$OUT/ring_n5"
 $frac render "$OUT/glass_walls.usdc" --frames 0,8,50 -o "$OUT/glass_walls"
 $frac render "$OUT/thirteen_rings.usdc" --frames 20,150 -o "$OUT/thirteen_rings"
 # A short slow-motion loop of the ball going through the walls (small: it is a GIF).
-$frac render "$OUT/glass_walls.usdc" --frames 0-24 --resolution 480x270 --samples 8 \
+$frac render "$OUT/glass_walls.usdc" --frames 0-24 --resolution 320x180 --samples 6 \
     -o "$OUT/glass_walls_movie" --movie "$DOCS/glass_walls.gif" --movie-fps 12.5
 
 # PNG -> JPEG (quality 85: ~100 KB at 960x540) under docs/gallery/.
