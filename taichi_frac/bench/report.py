@@ -20,7 +20,7 @@ PARTS = {
     "grouping": (grouping, "two- vs single-scale: boundary grouping n = 1, 2, 4, 8, time and error"),
     "sph": (sph, "SPH stress error against particle count and time (plain, corrected)"),
     "scaling": (scaling, "ms per frame and peak memory from 1e3 to 1e6 physics particles"),
-    "stability": (stability, "the hard cases of the dynamics and fracture issues"),
+    "stability": (stability, "the hard cases of the dynamics and the fracture"),
 }
 #: Parts that need the report's World (and its warm-up).
 NEEDS_WORLD = ("tables", "grouping", "stability")

@@ -3,7 +3,7 @@
 ``report`` runs every part and writes docs/benchmarks.md, its plots in docs/benchmarks/ and
 a headline summary out/benchmarks_summary.md (``--quick``: a smoke version under
 out/bench_quick/). Each part runs alone too (``tables``, ``grouping``, ``sph``, ``scaling``,
-``stability``: prints its markdown, plots under ``--out``). ``dynamics`` prints issue 3's
+``stability``: prints its markdown, plots under ``--out``). ``dynamics`` prints the
 rigid-body table. The code lives in ``taichi_frac.bench``.
 """
 
@@ -66,7 +66,7 @@ def register(subparsers) -> None:
         t.add_argument("--out", type=Path, help="folder for the plots (default out/bench/)")
         t.add_argument("--arch", default="cpu")
         t.set_defaults(func=_part_runner(key))
-    d = targets.add_parser("dynamics", help="issue 3's table: 13 rings two- vs single-scale, a fragment pile")
+    d = targets.add_parser("dynamics", help="the rigid-body table: 13 rings two- vs single-scale, a fragment pile")
     add_dynamics_arguments(d)
     d.set_defaults(func=_run_dynamics)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])

@@ -178,8 +178,8 @@ class CacheWriter:
         UsdGeom.Scope.Define(stage, schema.FRAGMENTS_SCOPE)
         self._material_paths: list[dict[str, Sdf.Path]] = []  # per fragment: subset name -> material
         # From here on the writer edits the layer's specs directly, with no stage open on it:
-        # a stage recomposes every prim added under it, for no reader (a fragment mesh
-        # 1.7 -> 1.2 ms in the glass walls). ``stage`` opens one on demand.
+        # a stage recomposes every prim added under it, for no reader. ``stage`` opens one
+        # on demand.
         self._layer = layer
         del stage
         self._set_layer_data(complete=False)
