@@ -53,6 +53,75 @@ def check_range(owner: str, name: str, value, low=None, high=None, *, low_open=F
 
 
 @dataclass(frozen=True, kw_only=True)
+class SurfaceLook:
+    """How one kind of face renders, as UsdPreviewSurface inputs (any USD renderer reads them).
+
+    Attributes:
+        diffuse_color: (3,) linear RGB in [0, 1]: the base colour (the tint of a transparent one).
+        roughness: [0, 1]; 0 is a mirror-like polish, 1 fully matte.
+        metallic: [0, 1]; 1 for metals.
+        opacity: [0, 1]; below 1 the surface is transmissive (glass), written with
+            ``opacityThreshold`` 0 so renderers refract through it instead of cutting it out.
+        ior: index of refraction [-], in [1, 3].
+    """
+
+    diffuse_color: tuple[float, float, float] = (0.8, 0.8, 0.8)
+    roughness: float = 0.5
+    metallic: float = 0.0
+    opacity: float = 1.0
+    ior: float = 1.5
+
+    def __post_init__(self):
+        if len(self.diffuse_color) != 3:
+            raise OptionError(f"look.diffuse_color must have 3 components, got {self.diffuse_color!r}")
+        for c in self.diffuse_color:
+            check_range("look", "diffuse_color", c, 0.0, 1.0)
+        check_range("look", "roughness", self.roughness, 0.0, 1.0)
+        check_range("look", "metallic", self.metallic, 0.0, 1.0)
+        check_range("look", "opacity", self.opacity, 0.0, 1.0)
+        check_range("look", "ior", self.ior, 1.0, 3.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MaterialLook:
+    """A body's two looks: its original surface (``outer``) and its crack faces (``inner``)."""
+
+    outer: SurfaceLook
+    inner: SurfaceLook
+
+
+# Looks written into the cache per body (render only: no effect on the physics). Artists
+# replace them in their DCC; these make a first render read as the material it is.
+LOOKS: dict[str, MaterialLook] = {
+    # Clear glass: transmissive, smooth outside; crack faces slightly frosted.
+    "glass": MaterialLook(
+        outer=SurfaceLook(diffuse_color=(0.92, 0.97, 0.95), roughness=0.02, opacity=0.1, ior=1.5),
+        inner=SurfaceLook(diffuse_color=(0.90, 0.96, 0.94), roughness=0.25, opacity=0.15, ior=1.5),
+    ),
+    # Glazed porcelain: glossy white glaze outside, matte unglazed biscuit in the cracks.
+    "porcelain": MaterialLook(
+        outer=SurfaceLook(diffuse_color=(0.90, 0.89, 0.85), roughness=0.08),
+        inner=SurfaceLook(diffuse_color=(0.80, 0.76, 0.68), roughness=0.9),
+    ),
+    # Concrete: rough grey cast surface, slightly lighter and coarser fractured aggregate.
+    "concrete": MaterialLook(
+        outer=SurfaceLook(diffuse_color=(0.42, 0.41, 0.39), roughness=0.85),
+        inner=SurfaceLook(diffuse_color=(0.55, 0.53, 0.49), roughness=0.95),
+    ),
+    # Brushed steel (projectiles, which do not break).
+    "steel": MaterialLook(
+        outer=SurfaceLook(diffuse_color=(0.60, 0.61, 0.62), roughness=0.3, metallic=1.0),
+        inner=SurfaceLook(diffuse_color=(0.60, 0.61, 0.62), roughness=0.5, metallic=1.0),
+    ),
+    # Neutral plaster: light outside, warm brown cracks that stand out.
+    "plaster": MaterialLook(
+        outer=SurfaceLook(diffuse_color=(0.80, 0.78, 0.72), roughness=0.3),
+        inner=SurfaceLook(diffuse_color=(0.62, 0.47, 0.35), roughness=0.85),
+    ),
+}
+
+
+@dataclass(frozen=True, kw_only=True)
 class Material:
     """An isotropic, linear-elastic brittle material.
 
@@ -62,6 +131,8 @@ class Material:
         young_modulus: Young's modulus E [Pa].
         poisson_ratio: Poisson's ratio nu [-], in [0, 0.5).
         tensile_strength: Rankine threshold on the largest principal stress [Pa].
+        look: how it renders, a name in ``LOOKS`` (glass, porcelain, concrete, steel,
+            plaster); written into the cache, no effect on the physics.
     """
 
     name: str = "custom"
@@ -69,8 +140,11 @@ class Material:
     young_modulus: float = 70.0e9
     poisson_ratio: float = 0.2
     tensile_strength: float = 35.0e6
+    look: str = "plaster"
 
     def __post_init__(self):
+        if self.look not in LOOKS:
+            raise OptionError(f"material.look = {self.look!r}: use one of {', '.join(LOOKS)}")
         check_range("material", "density", self.density, 0.0, None, low_open=True)
         check_range("material", "young_modulus", self.young_modulus, 0.0, None, low_open=True)
         check_range("material", "poisson_ratio", self.poisson_ratio, 0.0, 0.5, high_open=True)
@@ -96,19 +170,19 @@ MATERIAL_PRESETS: dict[str, Material] = {
     # of annealed float glass about 40-50 MPa (EN 572-1 gives 45 MPa characteristic bending).
     "soda_lime_glass": Material(
         name="soda_lime_glass", density=2500.0, young_modulus=72.0e9, poisson_ratio=0.23,
-        tensile_strength=45.0e6,
+        tensile_strength=45.0e6, look="glass",
     ),
     # Porcelain (triaxial whiteware): E 60-100 GPa, nu about 0.2, 2300-2500 kg/m^3, flexural
     # strength 40-100 MPa, tensile lower (Carty & Senapati, J. Am. Ceram. Soc. 81(1), 1998).
     "porcelain": Material(
         name="porcelain", density=2400.0, young_modulus=70.0e9, poisson_ratio=0.2,
-        tensile_strength=35.0e6,
+        tensile_strength=35.0e6, look="porcelain",
     ),
     # Normal-strength concrete C30/37: Ecm 33 GPa, fctm 2.9 MPa (EN 1992-1-1, Table 3.1),
     # nu 0.2, about 2400 kg/m^3.
     "concrete": Material(
         name="concrete", density=2400.0, young_modulus=33.0e9, poisson_ratio=0.2,
-        tensile_strength=2.9e6,
+        tensile_strength=2.9e6, look="concrete",
     ),
 }
 

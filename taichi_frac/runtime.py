@@ -60,8 +60,8 @@ def init(arch: str | None = None, *, debug: bool = False) -> str:
 
     ``arch`` is one of cpu, cuda, vulkan, metal, gpu; None takes the arch already in use,
     or cpu. Taichi runs on one arch per process, so asking for another once a kernel has
-    run is an error (it used to return the first arch silently: a run asked for cuda
-    got the CPU when its models were prepared first). Fields use float32 by default
+    run is an error (rather than silently keeping the first arch: a run asked for cuda
+    would get the CPU when its models were prepared first). Fields use float32 by default
     (``default_fp``); accuracy-critical fracture kernels declare float64 explicitly.
     Compiled kernels are kept in Taichi's offline cache under :func:`cache_dir`, so a second
     process does not recompile them.

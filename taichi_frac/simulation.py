@@ -21,7 +21,7 @@ import numpy as np
 from . import interrupts, runtime
 from .geometry.rotation import quaternion_matrix
 from .model import BodyModel
-from .options import FractureOptions, Material, OptionError, ParticleOptions
+from .options import LOOKS, FractureOptions, Material, OptionError, ParticleOptions
 
 
 class NonFinitePoseError(RuntimeError):
@@ -137,7 +137,7 @@ class _FractureWatch:
         self.seconds = 0.0  # spent in fracture stages [s]
 
     def before(self, k: int) -> None:
-        # On the device: a host snapshot before every substep cost the glass walls ~2 ms a
+        # On the device: a host snapshot before every substep would cost milliseconds a
         # frame. The impact count is the one ``after`` read (advance resets it to 0 before
         # the first substep), not a second read of the same number.
         self.start = self.sim.world.checkpoint()
@@ -339,12 +339,13 @@ class Simulation:
                       tet_peak=None):
         from .io.fragment_mesh import fragment_surface, render_surface, root_faces_of, surface_corner_attributes
 
+        look = None if parent_cache is not None else LOOKS[rec.material.look]  # (pieces share the body's)
         if rec.render is not None:
             vertices, faces, inner, normals, uvs, face_peak = render_surface(rec.render, rec.model, tet_peak)
             rec.cache_id = self.writer.add_fragment(
                 rec.name, vertices, faces, inner, birth_frame, parent=parent_cache, impact=impact,
                 peak_principal_stress=float(peak), face_peak_stress=face_peak, normals=normals, uvs=uvs,
-                shade_inner=True,
+                shade_inner=True, look=look,
             )
             return
         # A piece the render solid gave no part to: its tets' boundary.
@@ -357,6 +358,7 @@ class Simulation:
         rec.cache_id = self.writer.add_fragment(
             rec.name, vertices, faces, inner, birth_frame, parent=parent_cache, impact=impact,
             peak_principal_stress=float(peak), face_peak_stress=face_peak, normals=normals, uvs=uvs,
+            look=look,
         )
 
     def _write_frame(self, frame: int):
@@ -452,8 +454,7 @@ class Simulation:
                 # pieces' peak stress (the cache's per-face stress) reads the whole field,
                 # computed only now that the cracks do split the body (in the 13 rings, 20
                 # of 33 cracking impacts split nothing and skip it), and only when a cache
-                # is written: nothing else reads it (31 analyses of ~4.6 ms a run of the
-                # 13 rings). The cracks, hence the split, are the same.
+                # is written: nothing else reads it. The cracks, hence the split, are the same.
                 self.times.fragment_split += time.perf_counter() - t
                 t = time.perf_counter()
                 analysis = analyze_impact(rec.model, points_b, normals_b, force_b, rec.material, rec.fracture,
@@ -551,8 +552,8 @@ class Simulation:
 
         The objects alive when the run starts (Taichi's, the models', the scene's: ~10^5)
         are frozen out of Python's cyclic garbage collector for the run (``gc.freeze``,
-        undone at the end): otherwise each full collection walks them all, a pause of ~50
-        ms inside one frame of the 13 rings, and ~0.4 ms/frame on average."""
+        undone at the end): otherwise each full collection walks them all, a pause of tens
+        of milliseconds inside a frame."""
         start = time.perf_counter()
         interrupted = False
         failed = True  # until the loop ends: an exception leaves the cache incomplete

@@ -7,7 +7,7 @@ import numpy as np
 
 from taichi_frac.model import build_body_model
 
-# The documented controllability settings (docs/readme/fracture.md): impact on the outer
+# The documented controllability settings (docs/guide/fracture-controls.md): impact on the outer
 # equator, pushing toward the ring's centre.
 RING_CONTACT = np.array([0.125, 0.0, 0.0])
 RING_NORMAL = np.array([-1.0, 0.0, 0.0])

@@ -68,3 +68,30 @@ def test_render_look_at_frames_only_matching_objects(tmp_path, capfd):
     wide, same, near = render("all"), render("star", "--look-at", "*"), render("one", "--look-at", "shard_a")
     noise = np.abs(wide - same).mean()
     assert np.abs(wide - near).mean() > 3 * noise + 1e-3
+
+
+def test_default_framing_leaves_out_a_far_shard(tmp_path):
+    """Nine 10 cm cubes within half a metre and one shard 30 m away: the framed box holds the
+    cluster's centre and stays within a few metres of it (the union of every shard would
+    reach 30 m); a hidden (unborn) piece is not framed."""
+    import json
+
+    from taichi_frac.io import CacheWriter
+    from test_blender_import import run_in_blender
+
+    blender_python()
+    cache = tmp_path / "scatter.usdc"
+    vertices, faces = write_synthetic.synthetic.box_mesh((0.05, 0.05, 0.05))
+    inner = np.zeros(len(faces), bool)
+    centres = [(0.4 * i, 0.4 * j, 0.05) for i in (-1, 0, 1) for j in (-1, 0, 1)] + [(30.0, 0.0, 0.05)]
+    with CacheWriter(cache, fps=24) as writer:
+        ids = [writer.add_fragment(f"piece_{k}", vertices, faces, inner, 0) for k in range(len(centres))]
+        unborn = writer.add_fragment("unborn", vertices, faces, inner, 5)
+        writer.write_frame(0, ids + [unborn], np.array(centres + [(-50.0, 0.0, 0.05)]),
+                           np.tile([1.0, 0, 0, 0], (len(ids) + 1, 1)))
+    result = run_in_blender(ROOT / "tests" / "blender" / "check_framing.py", cache, "0", tmp_path=tmp_path)
+    assert result.returncode == 0, result.stderr[-3000:]
+    box = json.loads(next(line for line in result.stdout.splitlines() if line.startswith("BOX "))[4:])
+    low, high = np.array(box["low"]), np.array(box["high"])
+    assert np.all(low <= [-0.3, -0.3, 0.0]) and np.all(high >= [0.3, 0.3, 0.1])  # the cluster
+    assert high[0] < 2.0 and low[0] > -2.0  # neither the far shard nor the unborn piece

@@ -12,7 +12,7 @@ from taichi_frac.fracture.sph import displacement_gradient
 from taichi_frac.model import build_body_model
 from taichi_frac.options import FractureOptions, Material
 
-# The documented controllability material (docs/readme/fracture.md): porcelain-like
+# The documented controllability material (docs/guide/fracture-controls.md): porcelain-like
 # stiffness, a tensile strength the 10 kN impact exceeds at the analysis point.
 RING_MATERIAL = Material(name="ring", density=2400.0, young_modulus=70e9, poisson_ratio=0.2, tensile_strength=1.0e6)
 
@@ -116,7 +116,7 @@ def test_ring_cracks_cut_the_wedges_into_rings():
         split = split_body(model, a, opts)
         assert sum(len(t) for t in split.fragment_tets) == model.tet_count
         counts[rings] = split.fragment_count
-    assert counts[0] == 5  # the documented crack_count 3 (docs/readme/fracture.md)
+    assert counts[0] == 5  # the documented crack_count 3 (docs/guide/fracture-controls.md)
     assert counts[2] > counts[0], counts
 
 

@@ -134,7 +134,7 @@ crack_length = 0.05
         objects=[SceneObject(
             name="ring", primitive="torus:major=0.1,minor=0.025",
             material=Material(name=porcelain.name, density=porcelain.density, young_modulus=porcelain.young_modulus,
-                              poisson_ratio=porcelain.poisson_ratio, tensile_strength=20.0e6),
+                              poisson_ratio=porcelain.poisson_ratio, tensile_strength=20.0e6, look=porcelain.look),
             position=(0, 0, 1.0), orientation=(0, 1, 0, 0), linear_velocity=(1, 0, 0), friction=0.4, restitution=0.3,
             particles=ParticleOptions(target_particles=3000, boundary_group_size=3, keep_leftovers=False),
             fracture=FractureOptions(crack_count=3, crack_length=0.05))],

@@ -17,6 +17,7 @@ from addon_loader import addon_module  # noqa: E402
 
 from taichi_frac.io import CacheWriter, schema  # noqa: E402
 from taichi_frac.io.cache import check_cache  # noqa: E402
+from taichi_frac.options import LOOKS  # noqa: E402
 
 FRAMES = range(synthetic.START_FRAME, synthetic.END_FRAME + 1)
 # Y-up stage -> Z-up world: (x, y, z) -> (x, -z, y).
@@ -102,7 +103,8 @@ def test_subsets_materials_and_custom_attributes(caches):
         assert sorted(inner + outer) == list(range(12))
         for subset_name, subset in subsets.items():
             material = UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial()[0]
-            assert material.GetPath() == f"{schema.MATERIALS_SCOPE}/{subset_name}"
+            # Every piece shares its root body's materials.
+            assert material.GetPath() == f"{schema.MATERIALS_SCOPE}/slab/{subset_name}"
             shader = material.ComputeSurfaceSource()[0]
             assert shader.GetIdAttr().Get() == "UsdPreviewSurface"
         assert prim.GetAttribute(schema.ATTR_BIRTH_FRAME).Get() == birth
@@ -284,7 +286,7 @@ def test_fragment_specs_match_the_schema_api(tmp_path):
     inner = np.zeros(len(faces), bool)
     inner[[0, 5, 7]] = True
     writer = CacheWriter(tmp_path / "direct.usda", fps=24)
-    first = writer.add_fragment("first", vertices, faces, inner, 0)
+    first = writer.add_fragment("first", vertices, faces, inner, 0, look=LOOKS["glass"])
     writer.add_fragment("second", vertices, faces, inner, 4, parent=first, peak_principal_stress=3e6,
                         impact=dict(point=[0.1, 0.2, 0.3], force=[1.0, -2.0, 3.0]),
                         face_peak_stress=np.arange(len(faces), dtype=float))
@@ -293,8 +295,17 @@ def test_fragment_specs_match_the_schema_api(tmp_path):
     reference = Usd.Stage.CreateInMemory("reference.usda")
     for path in (schema.ROOT_PRIM, schema.MATERIALS_SCOPE, schema.FRAGMENTS_SCOPE):
         reference.DefinePrim(path, direct.GetPrimAtPath(path).GetTypeName())
-    materials = {name: UsdShade.Material.Define(reference, f"{schema.MATERIALS_SCOPE}/{name}")
-                 for name in (schema.OUTER_SUBSET, schema.INNER_SUBSET)}
+    reference.DefinePrim(f"{schema.MATERIALS_SCOPE}/first", "Scope")
+    materials = {}
+    for name, surface in ((schema.OUTER_SUBSET, LOOKS["glass"].outer), (schema.INNER_SUBSET, LOOKS["glass"].inner)):
+        materials[name] = UsdShade.Material.Define(reference, f"{schema.MATERIALS_SCOPE}/first/{name}")
+        shader = UsdShade.Shader.Define(reference, materials[name].GetPath().AppendChild("PreviewSurface"))
+        shader.CreateIdAttr("UsdPreviewSurface")
+        shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*surface.diffuse_color))
+        for key in ("roughness", "metallic", "opacity", "ior"):
+            shader.CreateInput(key, Sdf.ValueTypeNames.Float).Set(getattr(surface, key))
+        shader.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(0.0)
+        materials[name].CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
     for name in ("first", "second"):
         source = direct.GetPrimAtPath(f"{schema.FRAGMENTS_SCOPE}/{name}")
         value = lambda attr: source.GetAttribute(attr).Get()  # noqa: E731
@@ -335,7 +346,58 @@ def test_fragment_specs_match_the_schema_api(tmp_path):
         text = stage.GetRootLayer().ExportToString()
         return text[text.index('def Scope "Fragments"'):]
 
+    def materials_text(stage):
+        text = stage.GetRootLayer().ExportToString()
+        return text[text.index('def Scope "Materials"'):text.index('def Scope "Fragments"')]
+
     assert fragments_text(direct) == fragments_text(reference)
+    assert materials_text(direct) == materials_text(reference)
     assert isinstance(direct.GetPrimAtPath(f"{schema.FRAGMENTS_SCOPE}/second").GetAttribute(
         schema.ATTR_IMPACT_POINT).Get(), Gf.Vec3d)
     writer.close()
+
+
+def test_each_body_gets_its_material_look(tmp_path):
+    """A glass body and a porcelain one: each gets two UsdPreviewSurface materials with its
+    look's inputs (glass transmissive: opacity < 1 with opacityThreshold 0), its pieces bind
+    the same two, and the cache stays compliant."""
+    vertices, faces = synthetic.box_mesh((0.1, 0.2, 0.3))
+    inner = np.zeros(len(faces), bool)
+    inner[:4] = True
+    path = tmp_path / "looks.usda"
+    writer = CacheWriter(path, fps=24)
+    pane = writer.add_fragment("pane", vertices, faces, inner, 0, look=LOOKS["glass"])
+    writer.add_fragment("pane_0", vertices, faces, inner, 3, parent=pane)
+    writer.add_fragment("cup", vertices, faces, inner, 0, look=LOOKS["porcelain"])
+    writer.add_fragment("plain", vertices, faces, inner, 0)
+    writer.close()
+    assert check_cache(path) == []
+    stage = Usd.Stage.Open(str(path))
+
+    def bound_inputs(fragment, subset_name):
+        subset = stage.GetPrimAtPath(f"{schema.FRAGMENTS_SCOPE}/{fragment}/{subset_name}")
+        material = UsdShade.MaterialBindingAPI(subset).ComputeBoundMaterial()[0]
+        shader = material.ComputeSurfaceSource()[0]
+        return material.GetPath(), {i.GetBaseName(): i.Get() for i in shader.GetInputs()}
+
+    for fragment, body, look in (("pane", "pane", "glass"), ("pane_0", "pane", "glass"),
+                                 ("cup", "cup", "porcelain"), ("plain", "plain", "plaster")):
+        for subset_name in (schema.OUTER_SUBSET, schema.INNER_SUBSET):
+            path_bound, inputs = bound_inputs(fragment, subset_name)
+            assert path_bound == f"{schema.MATERIALS_SCOPE}/{body}/{subset_name}"
+            surface = getattr(LOOKS[look], subset_name)
+            np.testing.assert_allclose(inputs["diffuseColor"], surface.diffuse_color, atol=1e-6)
+            for key in ("roughness", "metallic", "opacity", "ior"):
+                assert inputs[key] == pytest.approx(getattr(surface, key), abs=1e-6), (fragment, key)
+            assert inputs["opacityThreshold"] == 0.0
+    assert bound_inputs("pane", "outer")[1]["opacity"] < 0.5  # glass lets light through
+    assert bound_inputs("pane", "inner")[1]["roughness"] > bound_inputs("pane", "outer")[1]["roughness"]  # frosted
+    assert bound_inputs("cup", "outer")[1]["opacity"] == 1.0
+
+
+def test_material_presets_carry_their_look():
+    from taichi_frac.options import MATERIAL_PRESETS, Material, OptionError
+    assert {name: m.look for name, m in MATERIAL_PRESETS.items()} == {
+        "soda_lime_glass": "glass", "porcelain": "porcelain", "concrete": "concrete"}
+    with pytest.raises(OptionError, match="material.look = 'marble'"):
+        Material(look="marble")

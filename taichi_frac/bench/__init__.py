@@ -1,14 +1,14 @@
-"""The benchmark report of issue 6 (``taichi-frac bench report``), one module per part.
+"""The benchmark report (``taichi-frac bench report``), one module per part.
 
 - ``tables``: the paper's Table 1 (scene sizes, fragments) and Table 2 (ms per frame);
 - ``grouping``: two-scale vs single-scale dynamics, boundary grouping n = 1, 2, 4, 8,
   time against the error each n costs;
 - ``sph``: SPH stress error against particle count and time (plain, corrected gradient);
 - ``scaling``: ms per frame and peak memory against physics particle count (1e3 .. 1e6);
-- ``stability``: the hard cases of issues 3 and 4 as a table;
-- ``dynamics``: issue 3's ``bench dynamics`` table (the 13-ring scene two- vs single-scale,
+- ``stability``: the hard cases of the dynamics and the fracture as a table;
+- ``dynamics``: the ``bench dynamics`` table (the 13-ring scene two- vs single-scale,
   the drop error at n = 4 against n = 1, a fragment pile);
-- ``report``: runs the parts and writes ``docs/benchmarks.md``, its plots and the README part.
+- ``report``: runs the parts and writes ``docs/benchmarks.md``, its plots and a summary.
 
 Each part's ``run(ctx) -> Section`` measures, prints progress through ``ctx.progress`` and
 returns its markdown (every number in it comes from the run) and the plots it wrote.

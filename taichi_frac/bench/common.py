@@ -67,7 +67,7 @@ class Progress:
 @dataclass
 class Section:
     """One part of the report: its markdown body (numbers from the run), the plots it wrote
-    and a few headline values for the README part."""
+    and a few headline values for the summary."""
 
     key: str
     title: str

@@ -1,4 +1,4 @@
-"""``taichi-frac bench dynamics``: issue 3's rigid-body table, in one run.
+"""``taichi-frac bench dynamics``: the rigid-body table, in one run.
 
 - ``scenes/thirteen_rings.toml`` with the rings unbreakable, two-scale (the boundary layer)
   and single-scale (every physics surface particle collides), the paper's Table 2 columns:
@@ -111,7 +111,7 @@ def _fragment_pile(ctx: BenchContext, scene, count: int, seconds: float) -> dict
 
 
 def run_dynamics(args) -> int:
-    """Print issue 3's tables (see the module docstring)."""
+    """Print the rigid-body tables (see the module docstring)."""
     from ..scenes import load_scene
     from . import grouping
     from .common import Progress, warm_up

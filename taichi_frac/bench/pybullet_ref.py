@@ -1,8 +1,8 @@
-"""The pybullet reference of ``taichi-frac bench dynamics`` (issue 3): the same scenes in
+"""The pybullet reference of ``taichi-frac bench dynamics``: the same scenes in
 pybullet 3.2.7 (``pip install pybullet==3.2.7``, the ``bench`` extra), timed per frame.
 
 - the 13-ring scene (rings unbreakable), the rings as
-  - ``"vhacd"``: a compound of V-HACD convex parts of our ring surface (the issue's
+  - ``"vhacd"``: a compound of V-HACD convex parts of our ring surface (the usual
     reference; a single convex hull would fill the ring's hole), or
   - ``"spheres"``: a compound of our boundary-layer spheres (the collision geometry of our
     two-scale model), given by the caller from the body models;
@@ -56,7 +56,7 @@ REST_SPEED = 0.01
 #: Collision geometries :func:`simulate` builds (see the module docstring).
 COLLISION_MODES = ("vhacd", "spheres", "hull")
 
-#: pybullet.vhacd is called with its defaults (what the issue's reference used); its log
+#: pybullet.vhacd is called with its defaults (as in the reference measurements); its log
 #: prints them for 3.2.7: concavity 0.001, depth 20, 64 vertices a part, plane and hull
 #: down-sampling 4, voxel grid 2.7 M voxels whatever ``resolution`` says. ~15 s for our ring,
 #: whatever those knobs (measured: resolution 1e4-1e6, depth 4-20, down-sampling 4-16 all

@@ -1,5 +1,6 @@
 """Part runner and writer of the benchmark report: ``docs/benchmarks.md``, its plots under
-``docs/benchmarks/`` and the README part ``docs/readme/benchmarks.md``.
+``docs/benchmarks/`` and a headline summary ``out/benchmarks_summary.md`` (the numbers the
+README's cost table quotes).
 
 Every number in the files comes from the run that writes them (the paper's values are the
 constants of ``tables.py``, quoted from ../shared/paper/BRIEF.md).
@@ -19,7 +20,7 @@ PARTS = {
     "grouping": (grouping, "two- vs single-scale: boundary grouping n = 1, 2, 4, 8, time and error"),
     "sph": (sph, "SPH stress error against particle count and time (plain, corrected)"),
     "scaling": (scaling, "ms per frame and peak memory from 1e3 to 1e6 physics particles"),
-    "stability": (stability, "the hard cases of the dynamics and fracture issues"),
+    "stability": (stability, "the hard cases of the dynamics and the fracture"),
     "pieces": (pieces, "broken pieces' render surfaces: closed, on their cracks, what a split costs"),
 }
 #: Parts that need the report's World (and its warm-up).
@@ -137,21 +138,10 @@ def readme_text(sections: list[Section], markdown_path: Path, readme_part: Path)
     return "\n".join(lines).rstrip() + "\n"
 
 
-def _build_readme(ctx: BenchContext) -> None:
-    """Regenerate README.md from docs/readme/*.md (scripts/build_readme.py) so the new
-    benchmark part appears in it."""
-    import runpy
-
-    script = REPO / "scripts" / "build_readme.py"
-    if script.exists():
-        runpy.run_path(str(script), run_name="build_readme")["main"]()
-        ctx.progress("regenerated README.md")
-
-
 def run_report(quick: bool = False, out_dir: Path | None = None, parts=None, arch: str = "cpu",
                readme: bool | None = None) -> list[Section]:
     """Run the parts and write the report. Full run: ``docs/benchmarks.md``,
-    ``docs/benchmarks/*.png`` and ``docs/readme/benchmarks.md``; quick run: under
+    ``docs/benchmarks/*.png`` and ``out/benchmarks_summary.md``; quick run: under
     ``out/bench_quick/`` (never over the real report)."""
     out_dir = Path(out_dir) if out_dir else (REPO / "out" / "bench_quick" if quick else REPO / "docs")
     markdown = out_dir / "benchmarks.md"
@@ -162,10 +152,9 @@ def run_report(quick: bool = False, out_dir: Path | None = None, parts=None, arc
     keys = list(parts or PARTS)
     sections = run_parts(ctx, keys)
     readme = (not quick and out_dir == REPO / "docs") if readme is None else readme
-    readme_part = (REPO / "docs" / "readme" / "benchmarks.md") if readme else (out_dir / "readme_benchmarks.md")
+    readme_part = (REPO / "out" / "benchmarks_summary.md") if readme else (out_dir / "readme_benchmarks.md")
+    readme_part.parent.mkdir(parents=True, exist_ok=True)
     write(ctx, sections, markdown, header(ctx, started, time.perf_counter() - t0, load_start), readme_part)
-    if readme:
-        _build_readme(ctx)
     for s in sections:
         print(f"\n## {s.title}\n\n{s.markdown}")
     return sections

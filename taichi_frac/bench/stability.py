@@ -1,4 +1,4 @@
-"""Part 4: stability, the hard cases of the dynamics issue (3) and the fracture issue (4).
+"""Part 4: stability, the hard cases of the dynamics and of the fracture.
 
 Each case is set up as the tests set it up (the bodies come from the tests' shared set-up
 modules, ``tests/test_dynamics_support.py``, ``tests/_fracture_ring.py`` and the one-tet
@@ -142,7 +142,7 @@ def _bound(world, speeds_heights):
     return max(math.sqrt(v * v + 2 * G * max(h, 0.0)) for v, h in speeds_heights) + world.options.max_correction_speed
 
 
-# ------------------------------------------------------------------ issue 3: dynamics
+# ------------------------------------------------------------------ dynamics
 
 def case_deep_overlap(ctx, frames=100):
     s = tests_module("test_dynamics_support")
@@ -240,7 +240,7 @@ def case_fast_sphere(ctx):
                    f"{world.stats.total_substeps} substeps")
 
 
-# ------------------------------------------------------------------ issue 4: fracture
+# ------------------------------------------------------------------ fracture
 
 def _ring_material(poisson_ratio=0.2):
     from ..options import Material
@@ -289,7 +289,7 @@ def _fracture_case(ctx, name, model, points, normals, forces, material, options,
 
 
 def fracture_cases(ctx, frames=50, model=None):
-    """The issue-4 hard cases on ``model`` (default: the fracture tests' ~5,000-tet ring)."""
+    """The fracture's hard cases on ``model`` (default: the fracture tests' ~5,000-tet ring)."""
     from ..fracture.cracks import analyze_impact
     from ..fracture.fragments import split_body
     from ..options import FractureOptions
@@ -372,12 +372,12 @@ def run(ctx: BenchContext, quick_frames: int = 15) -> Section:
 
 
 def section(cases: list[CaseResult], seconds: float, frames: int) -> Section:
-    rows = [[f"{c.case} (issue {c.issue})", ("pass" if c.passed else "**FAIL**") + f": {c.criterion}",
+    rows = [[f"{c.case} ({'dynamics' if c.issue == 3 else 'fracture'})", ("pass" if c.passed else "**FAIL**") + f": {c.criterion}",
              f"{c.max_speed:.2f}", f"{1e3 * c.max_penetration:.2f} ({c.penetration_ratio:.2f} r)",
              "found" if c.nan else "none", c.notes] for c in cases]
     passed = sum(c.passed for c in cases)
     text = "\n".join([
-        "The hard cases of issues 3 (dynamics) and 4 (fracture), set up as the tests set them up, simulated and "
+        "The hard cases of the dynamics and the fracture, set up as the tests set them up, simulated and "
         f"sampled at every frame end ({frames} frames of 20 ms unless the case says otherwise; fracture cases: "
         "the impact is analysed, the ring split and every piece dropped from 0.3 m onto the ground). Max "
         "penetration: the deepest collision sphere inside the ground or a static box, in mm and in units of "

@@ -48,10 +48,10 @@ class SceneCase:
     timed: bool = False
     note: str = ""
     variants: tuple = ()
-    target_ms: float | None = None  # issue 6's target [ms/frame], fracture on
+    target_ms: float | None = None  # the scene's target [ms/frame], fracture on
 
 
-#: The glass walls at fewer cracks per impact (the seventh session's controls): cheaper,
+#: The glass walls at fewer cracks per impact: cheaper,
 #: further from the paper's 217 fragments.
 GLASS_FEWER_CRACKS = ["wall0.fracture.crack_count=4", "wall1.fracture.crack_count=3", "wall2.fracture.crack_count=2",
                       *[f"wall{k}.fracture.ring_crack_count=2" for k in range(3)]]
@@ -68,10 +68,9 @@ RINGS_SHORT_CRACKS = ["ring00.fracture.crack_length=none", "ring05.fracture.crac
 SCENE_ROW = "the scene's"
 
 #: Crack-seed shifts the report runs besides each scene's own seeds. A run of these chaotic
-#: scenes is one draw: a change of ~1e-16 in the stresses moved the 13 rings' own seeds
-#: from 95 fragments at 5.0-5.6 ms/frame to 116 at 5.5, while 13 seed sets gave 95-163
-#: fragments at 5.1-7.5 ms/frame with either code (ninth session). The targets are judged
-#: on the mean over these sets.
+#: scenes is one draw: a change of ~1e-16 in the stresses moves the fragment count by tens
+#: of percent, as much as another seed does. The targets are judged on the mean over these
+#: sets.
 RINGS_SEED_SHIFTS = (13, 26, 39, 52, 65, 78, 91)
 GLASS_SEED_SHIFTS = (3, 6, 9, 12)
 

@@ -14,9 +14,7 @@ cell size of the whole pile (44 mm cells where the typical reach was 30 mm on th
 rings), every query read other bodies' and its own body's entries, and a sphere larger than
 the cells needed a box of cells and a rule to make each pair in one of them only. Here a
 query reads only the partner's spheres, within the reach of that one pair of bodies, and
-nothing is rebuilt. On the 13-ring pile (frames 25, 40, 60, collide per substep): a first
-version run on the world grid's own states made the same contacts, pair for pair, in
-0.9-1.1 ms against 2.3-3.0; this code in its own runs 0.54-0.61 ms against 1.4-2.6.
+nothing is rebuilt; it makes the same contacts as a world grid, pair for pair.
 
 Layout of one body's grid (N spheres, particle slots [start, start + N)):
 - the cell edge ``CELL_FACTOR`` x its median sphere radius x (1 + margin / 2), grown when
@@ -35,9 +33,8 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Cell edge in median sphere radii (times 1 + margin / 2). On the 13-ring pile (frames
-#: 25, 40, 60, collide per substep): 2.0 -> 0.93, 0.89, 0.79-0.90 ms; 3.0 -> 0.93, 0.88,
-#: 0.72-0.80 ms (fewer, larger cells: a query reads 8-27 of them either way).
+#: Cell edge in median sphere radii (times 1 + margin / 2): 3 was a little faster than 2 on
+#: the 13-ring pile (fewer, larger cells: a query reads 8-27 of them either way).
 CELL_FACTOR = 3.0
 
 #: Cell starts per collision sphere a body may use (its grid has at most this many
@@ -79,7 +76,7 @@ def body_grid(offsets: np.ndarray, radii: np.ndarray, margin: float):
 
 def _median(values: np.ndarray) -> float:
     """The median (the mean of the two middle values for an even count): np.percentile's
-    argument handling took ~0.15 ms a body added."""
+    argument handling costs more than the sort."""
     ordered = np.sort(values)
     n = len(ordered)
     return float(0.5 * (ordered[(n - 1) // 2] + ordered[n // 2]))

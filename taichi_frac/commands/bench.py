@@ -1,9 +1,9 @@
 """``taichi-frac bench TARGET``: timed measurements (never part of the test suite).
 
 ``report`` runs every part and writes docs/benchmarks.md, its plots in docs/benchmarks/ and
-the README part docs/readme/benchmarks.md (``--quick``: a smoke version under
+a headline summary out/benchmarks_summary.md (``--quick``: a smoke version under
 out/bench_quick/). Each part runs alone too (``tables``, ``grouping``, ``sph``, ``scaling``,
-``stability``: prints its markdown, plots under ``--out``). ``dynamics`` prints issue 3's
+``stability``: prints its markdown, plots under ``--out``). ``dynamics`` prints the
 rigid-body table. The code lives in ``taichi_frac.bench``.
 """
 
@@ -51,7 +51,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("bench", help="benchmark report and timed measurements (report, dynamics, ...)",
                               description=__doc__.split("\n\n")[0].replace("``", "'"))
     targets = p.add_subparsers(dest="target", metavar="TARGET")
-    r = targets.add_parser("report", help="run every part; write docs/benchmarks.md, plots and the README part")
+    r = targets.add_parser("report", help="run every part; write docs/benchmarks.md, its plots and out/benchmarks_summary.md")
     r.add_argument("--quick", action="store_true", help="fast smoke version, written under out/bench_quick/")
     r.add_argument("--out", type=Path, help="folder for benchmarks.md and benchmarks/*.png (default: docs/, "
                                              "or out/bench_quick/ with --quick)")
@@ -66,7 +66,7 @@ def register(subparsers) -> None:
         t.add_argument("--out", type=Path, help="folder for the plots (default out/bench/)")
         t.add_argument("--arch", default="cpu")
         t.set_defaults(func=_part_runner(key))
-    d = targets.add_parser("dynamics", help="issue 3's table: 13 rings two- vs single-scale, a fragment pile")
+    d = targets.add_parser("dynamics", help="the rigid-body table: 13 rings two- vs single-scale, a fragment pile")
     add_dynamics_arguments(d)
     d.set_defaults(func=_run_dynamics)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])

@@ -1,4 +1,4 @@
-"""Rigid-body dynamics of the two-scale bodies in Taichi kernels (issue 3)."""
+"""Rigid-body dynamics of the two-scale bodies in Taichi kernels."""
 
 from .options import CapacityError, DynamicsOptions, WorldCapacity
 from .world import World, WorldStats

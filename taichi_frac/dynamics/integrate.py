@@ -154,7 +154,7 @@ def sleep_together(bodies: ti.template(), contacts: ti.template(), sleep_time):
 
 
 #: After integration no collision sphere of an awake body is left deeper in a ground plane
-#: than this fraction of its radius (issue 3's resting bound, 10 %): the body is lifted by
+#: than this fraction of its radius (the resting bound, 10 %): the body is lifted by
 #: the excess. A backstop for what the solver cannot see coming: a 17 g chip struck by a
 #: 2.6 kg ring piece spun from 7 to 105 rad/s in one substep and turned spheres that had
 #: no contact yet 1.28 physics-particle radii into the floor.

@@ -318,8 +318,8 @@ def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
         # Contacts between bodies first, then those with static colliders, which so have
         # the last word in every sweep: a small piece pressed into the floor by a heavy one
         # (mass ratio ~500 in the 13-ring pile) is held by the floor rather than by the
-        # converging pair, and sinks less. The sweep order is built once per substep (each
-        # sweep used to scan the contacts twice, skipping the other kind).
+        # converging pair, and sinks less. The sweep order is built once per substep, so a
+        # sweep scans the contacts once.
         filled = 0
         for k in range(2 * count):
             c = contacts.order[k % count]

@@ -17,9 +17,8 @@ mat3 = ti.math.mat3
 CACHE_SLOTS = 4  # contacts remembered per particle for warm starting
 # Cluster spheres per body for the narrowphase's pre-test (a sphere near one of them reads
 # the body's grid; narrowphase._pair_contacts): one per 16 collision spheres, at most this
-# many. On the 13 rings' first impacts (with the world grid before): 8 -> 1,403, 16 ->
-# 1,010, 32 -> 928 spheres passed (the box alone: 1,990). A small fragment gets one (its
-# bounding sphere): with a sphere each, the 216-fragment pile ran 9.5 -> 11.9 ms/frame.
+# many (16 passes about half as many spheres as the box alone, 8 noticeably more, 32 few
+# fewer). A small fragment gets one (its bounding sphere): a sphere each costs more.
 MAX_CLUSTERS = 16
 
 
@@ -173,7 +172,7 @@ class Particles:
 @ti.data_oriented
 class StepParams:
     """The solver options ``respond`` reads, as scalar fields (each scalar kernel argument
-    costs ~2.3 us per launch on the CPU backend: 14 of them were ~35 us of every substep).
+    costs ~2.3 us per launch on the CPU backend: 14 of them would be ~35 us a substep).
     Writer: World (``_write_params``) whenever its options object changes. Names and units
     as in ``DynamicsOptions``."""
 

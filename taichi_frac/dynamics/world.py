@@ -333,9 +333,9 @@ def _unpack_body(bodies: ti.template(), b, rows: ti.template(), k):
 @ti.kernel
 def _keep_bodies(f: ti.template(), kept: ti.template()):
     """Every body slot's motion state and the contact cache's parity and epoch into
-    ``kept`` (a KeptMotion). One serial task: a parallel one over ~100 bodies cost more to
-    dispatch than the copy, and copying to the host took ~0.2-0.5 ms with its array
-    arguments, paid before every substep of a scene that re-runs broken substeps."""
+    ``kept`` (a KeptMotion). One serial task: a parallel one over ~100 bodies costs more to
+    dispatch than the copy, and a copy to the host, with its array arguments, would be paid
+    before every substep of a scene that re-runs broken substeps."""
     ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for b in range(f.bodies.slot_end[None]):
         _pack_body(f.bodies, b, kept.rows, b)
@@ -703,7 +703,7 @@ class World:
         ids = np.asarray(self.body_ids if ids is None else ids, dtype=np.int64)
         if len(ids) and (ids.min() < 0 or ids.max() >= self.capacity.max_bodies):
             raise IndexError(f"body ids must lie in [0, {self.capacity.max_bodies}), got {ids.min()}..{ids.max()}")
-        # One launch for the K rows: six whole-field reads cost ~1.4 ms a call, paid per
+        # One launch for the K rows: six whole-field reads would cost more, paid per
         # analysed impact and per written frame.
         rows = np.zeros((len(ids), 17), dtype=np.float64)
         if len(ids):
@@ -766,8 +766,8 @@ class World:
         substeps since :meth:`impact_count` returned it)."""
         n = self.impact_count()
         first = min(max(int(first), 0), n)
-        # The rows in one launch: reading each field whole (16k rows x 10 fields) took
-        # 2.5 ms a frame in the glass scene.
+        # The rows in one launch: reading each field whole (16k rows x 10 fields) costs
+        # milliseconds a frame.
         rows = np.zeros((n - first, 27), dtype=np.float64)
         if n > first:
             _pack_impacts(self.impact_buffer, first, rows)

@@ -1,4 +1,4 @@
-"""Fracture: contact stress analysis (issue 4) and, beside it, cracks and fragments.
+"""Fracture: contact stress analysis and, beside it, cracks and fragments.
 
 Stress analysis of one impact (BRIEF.md §1 steps 5-8), all f64, body frame, SI units:
 

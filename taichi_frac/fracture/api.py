@@ -1,4 +1,4 @@
-"""One impact's stress field in a body: ``contact_field`` (issue 4's API).
+"""One impact's stress field in a body: ``contact_field``.
 
 Chains the stages of BRIEF.md §1 steps 5-8: Boussinesq-Cerruti displacement at every
 physics particle (``field.py``), SPH displacement gradient (``sph.py``), Green-Saint-Venant

@@ -3,7 +3,7 @@
 Everything here is in the body frame of the struck body (``BodyModel``): the stress field
 of a contact never needs the body's world pose.
 
-Decisions (the paper leaves them open; docs/readme/fracture.md explains them for artists):
+Decisions (the paper leaves them open; docs/method.md explains them for artists):
 
 - **Analysis point**: for each contact, the physics particle of largest principal stress
   within 2 smoothing lengths (kernel support radii) of the contact point (the "maximum

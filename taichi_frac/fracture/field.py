@@ -181,8 +181,8 @@ def point_loads_displacement(points, contact_points, normals_in, forces, shear_m
                              contact_radii) -> np.ndarray:
     """The displacement of K contact forces superposed (linear elasticity): the sum of
     :func:`point_load_displacement` over the rows of ``contact_points``, ``normals_in``,
-    ``forces`` (K,3) and ``contact_radii`` (K,) [m], in one launch (an impact's analysis
-    paid ~0.2 ms of Python argument handling per contact and launch). (N,3) float64 [m]."""
+    ``forces`` (K,3) and ``contact_radii`` (K,) [m], in one launch (a launch per contact
+    would pay Python's argument handling each time). (N,3) float64 [m]."""
     runtime.init()
     pts = _as_points(points)
     loads = load_rows(contact_points, normals_in, forces, contact_radii)

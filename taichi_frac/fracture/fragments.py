@@ -7,7 +7,7 @@ surface and boundary particles come from ``build_fragment_models`` on that tet s
 parent's face adjacency restricted to it): faces whose neighbour is in another fragment
 become boundary faces, so crack faces are new surface automatically.
 
-Decisions (docs/readme/fracture.md):
+Decisions (docs/method.md):
 
 - **Small fragments** (fewer than ``min_fragment_particles`` tets), per
   ``small_fragment_policy``: "merge" joins the smallest small piece to the neighbouring piece

@@ -3,7 +3,7 @@ half-space displacement (``field.py``), the SPH gradient (``sph.py``) and the st
 (``stress.py``), each through the same ``ti.func`` their own kernels use: the same
 arithmetic (to ~1e-16 relative, not bit for bit: LLVM's fast math may contract it
 differently in another kernel). A local analysis evaluates a few hundred particles, where
-three launches' Python argument handling (~0.55 ms) was most of its cost."""
+three launches' Python argument handling would be most of its cost."""
 
 import numpy as np
 import taichi as ti

@@ -1,9 +1,9 @@
 """The collision centres of boundary groups (``model.contact_sphere_centres``: the formula
 and why) in one Taichi kernel launch, f64.
 
-In numpy the computation took ~20 calls (normals, their sums per group, heights, spans)
-plus the inward rays' own preparation and launch, ~1.5 ms a split of the 13 rings, most
-of it per-call overhead on a few hundred groups. Here each group is one iteration: its
+In numpy the computation takes ~20 calls (normals, their sums per group, heights, spans)
+plus the inward rays' own preparation and launch, mostly per-call overhead on a few
+hundred groups. Here each group is one iteration: its
 members' boundary faces give its normal and height, its members' centroids its span,
 and its inward ray scans the faces of its own piece near it: the piece's faces lie in
 cells along one axis and sorted along another in each, so the ray reads the runs of the

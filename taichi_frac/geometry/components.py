@@ -1,6 +1,6 @@
 """Connected components of a tet set whose face bonds a crack has cut (``fragments.split_body``),
-by union-find in one serial Taichi kernel: scipy's connected_components cost ~0.9 ms a
-split with its matrix conversions, most of it overhead, on a ring's 5,450 tets."""
+by union-find in one serial Taichi kernel: scipy's connected_components spends most of
+its time on matrix conversions at this size (a ring's 5,450 tets)."""
 
 import numpy as np
 import taichi as ti

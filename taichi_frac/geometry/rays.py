@@ -2,11 +2,9 @@
 ray-triangle test (``ray_triangle``) that ``collision_centres``' kernel shares.
 
 ``first_hits`` answers how far each of a few hundred short rays runs through a body's
-boundary faces (``model.ray_exit_distance``; the model build once asked it for each
-boundary sphere it moved inward, and now does that inside ``collision_centres``). The
-numpy version it replaced (a KD-tree ball query over the face centres, then the
-Moller-Trumbore test on the candidates, vectorised) took 3.1 ms a call on a ring piece
-of over 1,000 faces; 1.3 here. The faces are sorted along the axis their centres spread
+boundary faces (``model.ray_exit_distance``; ``collision_centres`` does the same for the
+boundary spheres it moves inward). It is faster than a vectorised numpy KD-tree query
+with a Moller-Trumbore test on the candidates. The faces are sorted along the axis their centres spread
 most on, each ray scans the slab of them within its reach with a bounding-sphere test
 first (a face whose centre lies beyond the ray's reach plus the face's own radius cannot
 be hit within the reach), and runs the Moller-Trumbore test on the rest.
@@ -112,8 +110,8 @@ def first_hits(vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, dire
     return result
 
 
-#: Up to this many ray-face pairs, every pair in numpy: a fragment's chip (a few rays, a few
-#: dozen faces) took ~0.6 ms through the kernel's launch and arguments, ~0.1 ms here.
+#: Up to this many ray-face pairs, every pair in numpy: for a fragment's chip (a few rays, a
+#: few dozen faces) the kernel's launch and arguments cost more than the work.
 SMALL_PAIRS = 4096
 
 

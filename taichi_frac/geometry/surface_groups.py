@@ -2,9 +2,8 @@
 step 3: the coarse boundary layer), by a greedy walk in one serial Taichi kernel.
 
 The walk is sequential (each group takes the nearest particles still free), so numpy
-cannot vectorise it. In Python it cost ~5-10 us a particle: a ring's 2,562 surface
-particles ~25 ms, and the crack side of a split's pieces ~2.6 ms a split in the 13 rings
-(a third of their model builds). The adjacency it walks is built in numpy beforehand.
+cannot vectorise it, and in Python it costs ~5-10 us a particle (tens of milliseconds
+for a ring). The adjacency it walks is built in numpy beforehand.
 """
 
 

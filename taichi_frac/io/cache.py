@@ -21,6 +21,7 @@ import numpy as np
 from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, Vt
 
 from .. import __version__
+from ..options import LOOKS, MaterialLook, SurfaceLook
 from . import schema
 
 # Body-frame data is Z-up; a Y-up stage turns the world by -90 degrees about X:
@@ -28,11 +29,8 @@ from . import schema
 _Z_TO_Y_UP = np.array([np.sqrt(0.5), -np.sqrt(0.5), 0.0, 0.0])
 _Z_TO_Y_UP_MATRIX = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
-# Preview colours (linear sRGB) and roughness of the two materials; artists replace them.
-_MATERIALS = {
-    schema.OUTER_SUBSET: ((0.80, 0.78, 0.72), 0.30),
-    schema.INNER_SUBSET: ((0.62, 0.47, 0.35), 0.85),
-}
+# The look of a body given none.
+_DEFAULT_LOOK = LOOKS["plaster"]
 
 
 def _quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -185,25 +183,35 @@ class CacheWriter:
         stage.SetDefaultPrim(root.GetPrim())
         UsdGeom.Scope.Define(stage, schema.MATERIALS_SCOPE)
         UsdGeom.Scope.Define(stage, schema.FRAGMENTS_SCOPE)
-        self._materials = {name: self._define_material(stage, name, *look).GetPath() for name, look in _MATERIALS.items()}
+        self._material_paths: list[dict[str, Sdf.Path]] = []  # per fragment: subset name -> material
         # From here on the writer edits the layer's specs directly, with no stage open on it:
-        # a stage recomposes every prim added under it, for no reader (a fragment mesh
-        # 1.7 -> 1.2 ms in the glass walls). ``stage`` opens one on demand.
+        # a stage recomposes every prim added under it, for no reader. ``stage`` opens one
+        # on demand.
         self._layer = layer
         del stage
         self._set_layer_data(complete=False)
 
     # ----------------------------------------------------------------- set-up
-    @staticmethod
-    def _define_material(stage, name, color, roughness):
-        material = UsdShade.Material.Define(stage, f"{schema.MATERIALS_SCOPE}/{name}")
-        shader = UsdShade.Shader.Define(stage, f"{schema.MATERIALS_SCOPE}/{name}/PreviewSurface")
-        shader.CreateIdAttr("UsdPreviewSurface")
-        shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*color))
-        shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(float(roughness))
-        shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
-        material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
-        return material
+    def _define_materials(self, body: str, look: MaterialLook) -> dict[str, Sdf.Path]:
+        """A body's two UsdPreviewSurface materials, ``Materials/<body>/outer`` and ``inner``:
+        the specs UsdShade.Material / Shader author (tests/test_usd_cache.py compares them),
+        written on the layer with no stage recomposing it."""
+        scope = Sdf.Path(schema.MATERIALS_SCOPE).AppendChild(body)
+        paths = {}
+        with Sdf.ChangeBlock():
+            _prim_spec(self._layer, scope, "Scope")
+            for subset_name, surface in ((schema.OUTER_SUBSET, look.outer), (schema.INNER_SUBSET, look.inner)):
+                material_path = scope.AppendChild(subset_name)
+                material = _prim_spec(self._layer, material_path, "Material")
+                shader = _prim_spec(self._layer, material_path.AppendChild("PreviewSurface"), "Shader")
+                _attribute(shader, "info:id", Sdf.ValueTypeNames.Token, "UsdPreviewSurface", uniform=True)
+                for name, type_name, value in _preview_inputs(surface):
+                    _attribute(shader, f"inputs:{name}", type_name, value)
+                shader_output = _attribute(shader, "outputs:surface", Sdf.ValueTypeNames.Token, None)
+                output = _attribute(material, "outputs:surface", Sdf.ValueTypeNames.Token, None)
+                output.connectionPathList.explicitItems = [shader_output.path]
+                paths[subset_name] = material_path
+        return paths
 
     def _unique_prim_name(self, name: str) -> str:
         base = Tf.MakeValidIdentifier(str(name) or "fragment")
@@ -240,6 +248,7 @@ class CacheWriter:
         normals=None,
         uvs=None,
         shade_inner: bool = False,
+        look: MaterialLook | None = None,
     ) -> int:
         """Add a fragment (or a whole unbroken body) and return its id for ``write_frame``.
 
@@ -253,6 +262,8 @@ class CacheWriter:
         without input UVs get a box projection of the body-frame position [m].
         shade_inner: the normals and UVs given are the crack faces' too (a cut render solid's,
         geometry/piece_surface.py, which projects UVs along each crack).
+        look: the body's two materials (``options.LOOKS``); a fragment with a parent and no
+        look shares its parent's materials, one without either gets the plaster look.
         """
         self._check_open()
         vertices = np.asarray(vertices, dtype=np.float64)
@@ -309,6 +320,10 @@ class CacheWriter:
             point, force = self._to_stage_vectors(point[None], force[None])
             impact_fields = (Gf.Vec3d(*point[0]), Gf.Vec3d(*force[0]))
         parent_path = None if parent is None else self._fragments[int(parent)].prim_path
+        if look is None and parent is not None:
+            materials = self._material_paths[int(parent)]
+        else:
+            materials = self._define_materials(prim_path.name, look or _DEFAULT_LOOK)
         # The layer's specs written directly: what UsdGeom.Mesh, PrimvarsAPI and
         # MaterialBindingAPI author (tests/test_usd_cache.py compares the two), with no
         # stage recomposing each edit.
@@ -338,7 +353,7 @@ class CacheWriter:
                 _attribute(subset, "familyName", Sdf.ValueTypeNames.Token, "materialBind", uniform=True)
                 _apply_binding_api(subset)
                 binding = Sdf.RelationshipSpec(subset, "material:binding", custom=False)
-                binding.targetPathList.explicitItems = [self._materials[subset_name]]
+                binding.targetPathList.explicitItems = [materials[subset_name]]
             _attribute(mesh, "subsetFamily:materialBind:familyType", Sdf.ValueTypeNames.Token,
                        UsdGeom.Tokens.partition, uniform=True)
             birth_frame = int(birth_frame)
@@ -363,6 +378,7 @@ class CacheWriter:
                 layer.SetTimeSample(visibility.path, self.start_frame, UsdGeom.Tokens.invisible)
             layer.SetTimeSample(visibility.path, birth_frame, UsdGeom.Tokens.inherited)
         self._fragments.append(_Fragment(str(prim_path), translate.path, orient.path, visibility.path, birth_frame))
+        self._material_paths.append(materials)
         return len(self._fragments) - 1
 
     def _to_stage_vectors(self, points: np.ndarray, vectors: np.ndarray | None = None):
@@ -512,6 +528,20 @@ def _check_finite(what: str, values, float32: bool = False) -> None:
         raise NonFiniteError(f"{what} has NaN or infinite values; nothing of it was written")
     if float32 and values.size and np.abs(values).max() > np.finfo(np.float32).max:
         raise NonFiniteError(f"{what} has values beyond a 32-bit float (3.4e38); nothing of it was written")
+
+
+def _preview_inputs(surface: SurfaceLook):
+    """(name, type, value) of the UsdPreviewSurface inputs of one look. opacityThreshold 0
+    makes opacity < 1 mean transmission (glass), not a cut-out mask."""
+    float_type = Sdf.ValueTypeNames.Float
+    return [
+        ("diffuseColor", Sdf.ValueTypeNames.Color3f, Gf.Vec3f(*surface.diffuse_color)),
+        ("roughness", float_type, float(surface.roughness)),
+        ("metallic", float_type, float(surface.metallic)),
+        ("opacity", float_type, float(surface.opacity)),
+        ("opacityThreshold", float_type, 0.0),
+        ("ior", float_type, float(surface.ior)),
+    ]
 
 
 def _box_projection(corners: np.ndarray, normals: np.ndarray) -> np.ndarray:

@@ -1,6 +1,6 @@
 """Scenes: what to simulate, from a TOML file (:func:`load_scene`) or built in Python.
 
-See ``description.py`` for the fields and ``docs/readme/foundation.md`` for the format.
+See ``description.py`` for the fields and ``docs/reference/scene-file.md`` for the format.
 """
 
 from .description import (

@@ -10,7 +10,7 @@ directly in Python:
         colliders=[Collider.ground()],
     )
 
-Every field maps one to one onto a TOML key of the same name (see docs/readme/foundation.md).
+Every field maps one to one onto a TOML key of the same name (docs/reference/scene-file.md).
 World frame: Z up, metres, seconds; quaternions (w, x, y, z).
 """
 
@@ -219,8 +219,10 @@ class Collider:
         height: ground plane height [m] (ground only).
         center: (3,) [m] box centre (box only).
         half_extents: (3,) [m] box half side lengths, > 0 (box only).
-        orientation: (w,x,y,z) box rotation (box only); or euler_deg (3,) [degrees].
-        friction: [-] >= 0.  restitution: [-] in [0, 1].
+        orientation: (w,x,y,z) unit quaternion, the box's rotation (box only).
+        euler_deg: alternative to orientation: (3,) extrinsic XYZ angles [degrees].
+        friction: Coulomb friction coefficient [-] of contacts with it.
+        restitution: coefficient of restitution [-] of contacts with it.
     """
 
     type: str = "ground"
