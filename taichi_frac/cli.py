@@ -13,7 +13,7 @@ import sys
 from . import __version__
 
 # Order is the order shown in --help.
-COMMANDS = ("run", "info", "bench", "render")
+COMMANDS = ("run", "info", "bench", "render", "sweep")
 
 
 def build_parser() -> argparse.ArgumentParser:

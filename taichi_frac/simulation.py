@@ -175,11 +175,15 @@ class Simulation:
         frames: simulate this many frames instead of duration x fps.
         world: an existing World to reuse (cleared first; its capacities must suffice):
             its kernels are already compiled, so a second scene in one process starts at once.
+        prepare: callable(SceneObject) -> (BodyModel, PrepareReport) used instead of
+            ``obj.prepare()``: a memo kept by a process that runs many variants of one scene
+            (a sweep's worker), so those that change no geometry reuse the model and its SPH
+            neighbour lists. The model must not be changed by the caller between runs.
     """
 
     def __init__(self, scene, *, output=None, arch: str | None = None, progress=None,
                  single_scale: bool | None = None, fracture: bool = True, frames: int | None = None,
-                 world=None):
+                 world=None, prepare=None):
         from .dynamics import DynamicsOptions, World, WorldCapacity
 
         self.scene = scene
@@ -206,7 +210,7 @@ class Simulation:
         t0 = time.perf_counter()
         prepared = []
         for obj in scene.objects:
-            model, report = obj.prepare()
+            model, report = obj.prepare() if prepare is None else prepare(obj)
             prepared.append((obj, model))
             self.prepare_reports.append(report)
             if obj.breakable and self.fracture_enabled:
