@@ -129,3 +129,18 @@ def test_killed_midway_then_resumed_gives_the_same_csv(finished, tmp_path):
     again = sweep(SCENE, VARY, resumed, overrides=FIXED, frames=FRAMES, workers=2, sheet=False, progress=False)
     assert again.skipped == finished_before and again.ran == 4 - finished_before and again.failed == 0
     assert _rows(again.csv_path) == _rows(result.csv_path)
+
+
+def test_a_failing_variant_is_reported_and_the_others_go_on(tmp_path):
+    """A torus whose tube is wider than its ring loads (the scene's keys and types are fine)
+    but fails on the worker when it is meshed."""
+    good, bad = '"torus:major=0.1,minor=0.025"', '"torus:major=0.1,minor=0.2"'
+    result = sweep(SCENE, [f"ring.primitive={bad},{good}"], tmp_path, overrides=FIXED, frames=FRAMES, workers=1,
+                   sheet=False, progress=False)
+    assert (result.ran, result.failed) == (2, 1)
+    failed, done = result.records
+    assert failed["status"] == "failed" and "minor_radius" in failed["error"]
+    assert "minor_radius" in (tmp_path / failed["id"] / results.ERROR_NAME).read_text()
+    assert done["status"] == "done" and done["fragments"] >= 2
+    rows = _rows(result.csv_path)
+    assert [r["status"] for r in rows] == ["failed", "done"] and "minor_radius" in rows[0]["error"]

@@ -22,10 +22,12 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from .. import __version__
 from ..options import OptionError
 from . import results
-from .variants import make_variants
+from .variants import format_value, make_variants
 from .worker import VariantTask, flush_kernel_cache, run_variant
 
 
@@ -105,7 +107,6 @@ def sweep(scene, vary, output, *, samples: int | None = None, seed: int = 0, ove
         tasks.append(VariantTask(
             id=v.id, index=v.index, settings=v.settings, scene=str(scene_path), scene_sha256=scene_sha256,
             overrides=fixed + tuple(v.overrides()), frames=frames, directory=str(folder.resolve()), arch=arch,
-            taichi_threads=None if scheduler else max(1, (os.cpu_count() or 1) // _local_workers(workers)),
         ))
     result = SweepResult(directory, records, keys, skipped=len(variants) - len(tasks), meta=meta)
     log(f"sweep: {len(variants)} variants, {result.skipped} already done, {len(tasks)} to run"
@@ -140,15 +141,27 @@ def _local_workers(workers: int | None) -> int:
 
 
 def _check_variants(scene_path: Path, fixed: tuple, variants) -> None:
-    """Load the scene with every variant's overrides here, before any worker starts: a
-    bad key or value fails at once, naming the variant."""
+    """Load the scene here before any worker starts, so a bad key or value fails at once and
+    names it: with the first variant's settings, then with each varied value alone (all of
+    a short list; the ends and 48 values between of a long one). Loading costs ~10 ms, so
+    not every one of thousands of combinations is loaded; a combination that only fails
+    together is reported by its worker."""
     from ..scenes import load_scene
+    from .variants import Variant
 
-    for v in variants:
+    def check(variant):
         try:
-            load_scene(scene_path, list(fixed) + v.overrides())
+            load_scene(scene_path, list(fixed) + variant.overrides())
         except OptionError as exc:
-            raise OptionError(f"variant {v.label()}: {exc}") from None
+            raise OptionError(f"variant {variant.label()}: {exc}") from None
+
+    check(variants[0])
+    for key in variants[0].settings:
+        values = list({format_value(v.settings[key]): v.settings[key] for v in variants}.values())
+        if len(values) > 50:
+            values = [values[i] for i in np.unique(np.linspace(0, len(values) - 1, 50).round().astype(int))]
+        for value in values:
+            check(Variant("", 0, dict(variants[0].settings, **{key: value})))
 
 
 def _finish(result: SweepResult) -> None:
@@ -166,6 +179,9 @@ def _client(workers: int | None, scheduler: str | None):
         return Client(scheduler, timeout="30s"), None
     # One thread a worker: a worker runs one variant at a time (Taichi keeps one state per
     # process); no memory limit: the nanny would restart a worker that grows past its share.
+    # Taichi's own thread pool keeps its default size (every core): the offline cache's key
+    # includes it, and with another size each worker would compile every kernel again
+    # instead of loading what `taichi-frac run` and earlier sweeps compiled.
     cluster = LocalCluster(n_workers=_local_workers(workers), threads_per_worker=1, processes=True,
                            dashboard_address=None, memory_limit=0, silence_logs=logging.ERROR)
     return Client(cluster), cluster
@@ -206,9 +222,10 @@ def _run_tasks(tasks, result: SweepResult, directory: Path, workers, scheduler, 
                 client.run(flush_kernel_cache)
             except Exception:  # a worker that is gone: its kernels are compiled again next time
                 pass
-        client.close()
+        # With timeouts: a worker in the middle of a variant (after Ctrl-C) may not answer.
+        client.close(timeout=10)
         if cluster is not None:
-            cluster.close()
+            cluster.close(timeout=20)
 
 
 def _failure(task: VariantTask, exc: BaseException, future) -> dict:

@@ -44,7 +44,6 @@ class VariantTask:
         frames: frames to simulate (None: the scene's duration).
         directory: the variant's folder.
         arch: Taichi backend.
-        taichi_threads: Taichi's CPU threads in the worker (None: Taichi's default, every core).
     """
 
     id: str
@@ -56,7 +55,6 @@ class VariantTask:
     frames: int | None
     directory: str
     arch: str = "cpu"
-    taichi_threads: int | None = None
 
 
 class _WorkerState:
@@ -95,10 +93,6 @@ def run_variant(task: VariantTask) -> dict:
     start = time.perf_counter()
     if _STATE.closed:
         raise RuntimeError("this worker's Taichi runtime was closed (flush_kernel_cache); start a new worker")
-    if task.taichi_threads and "TI_CPU_MAX_NUM_THREADS" not in os.environ:
-        # Read by ti.init (the worker's first variant): one Taichi thread pool per worker
-        # process, sized so the workers of one machine do not oversubscribe its cores.
-        os.environ["TI_CPU_MAX_NUM_THREADS"] = str(task.taichi_threads)
     from ..scenes import load_scene
     from ..simulation import Simulation
 
