@@ -15,6 +15,7 @@ import datetime
 import hashlib
 import logging
 import os
+import signal
 import sys
 import time
 import traceback
@@ -191,10 +192,14 @@ def _run_tasks(tasks, result: SweepResult, directory: Path, workers, scheduler, 
     from dask.distributed import as_completed
 
     by_key = {}
+    local_pids = []
     client, cluster = _client(workers, scheduler)
     bar = _ProgressBar(len(result.records), result.skipped, progress, log)
     finished = False
     try:
+        # The local workers' process ids: after Ctrl-C they are stopped by id (a worker in
+        # the middle of a kernel compile does not answer a polite close for minutes).
+        local_pids = list(client.run(os.getpid).values()) if cluster is not None else []
         token = uuid.uuid4().hex[:8]
         futures = []
         for task in tasks:
@@ -222,10 +227,18 @@ def _run_tasks(tasks, result: SweepResult, directory: Path, workers, scheduler, 
                 client.run(flush_kernel_cache)
             except Exception:  # a worker that is gone: its kernels are compiled again next time
                 pass
-        # With timeouts: a worker in the middle of a variant (after Ctrl-C) may not answer.
-        client.close(timeout=10)
-        if cluster is not None:
-            cluster.close(timeout=20)
+        if cluster is not None and not finished:
+            for pid in local_pids:
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+        try:
+            client.close(timeout=10)
+            if cluster is not None:
+                cluster.close(timeout=20)
+        except Exception as exc:  # (a timeout): the processes are gone or going; nothing is lost
+            log(f"sweep: closing the cluster: {type(exc).__name__}: {exc}")
 
 
 def _failure(task: VariantTask, exc: BaseException, future) -> dict:
