@@ -13,6 +13,7 @@ import dataclasses
 import gc
 import json
 import time
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -107,6 +108,24 @@ def _strongest_per_pair(impacts: dict, bodies: np.ndarray) -> dict[int, np.ndarr
     first[1:] = (body[1:] != body[:-1]) | (other[1:] != other[:-1])
     body, rows = body[first], rows[first]
     return {int(b): np.sort(rows[body == b]) for b in np.unique(body)}
+
+
+# The shading attributes of a prepared model's boundary faces, kept while the model lives:
+# a process that runs many variants of one scene reuses its models (Simulation(prepare=...),
+# a sweep's worker), and finding them (closest points on the source surface) was nearly all
+# of such a Simulation's set-up (1.43 of 1.44 s for the ring, profiled on a loaded machine).
+# Read-only once computed.
+_CORNER_ATTRIBUTES: "weakref.WeakKeyDictionary[BodyModel, tuple]" = weakref.WeakKeyDictionary()
+
+
+def _root_corner_attributes(model: BodyModel, report) -> tuple:
+    """(normals (Fr,3,3), uvs (Fr,3,2) or None) of ``model``'s boundary faces from its source surface."""
+    if model not in _CORNER_ATTRIBUTES:
+        from .geometry.surface_attributes import boundary_corner_attributes
+
+        corners = model.vertices[model.surface_faces] + model.com_in_source
+        _CORNER_ATTRIBUTES[model] = boundary_corner_attributes(report.surface, corners)
+    return _CORNER_ATTRIBUTES[model]
 
 
 class _FractureWatch:
@@ -271,11 +290,8 @@ class Simulation:
                 friction=obj.friction, restitution=obj.restitution,
             )
             if report.surface is not None and self.output_path is not None:
-                from .geometry.surface_attributes import boundary_corner_attributes
-
-                corners = model.vertices[model.surface_faces] + model.com_in_source
                 rec = self.records[body]
-                rec.root_normals, rec.root_uvs = boundary_corner_attributes(report.surface, corners)
+                rec.root_normals, rec.root_uvs = _root_corner_attributes(model, report)
         self.initial_mass = sum(r.model.mass for r in self.records.values())
         self._dynamics_seconds_at_start = dict(self.world.stats.seconds)  # a reused World keeps counting
         self.table1 = dict(

@@ -92,7 +92,9 @@ def test_rerun_does_no_work(finished):
 
 
 def test_a_variant_runs_bit_for_bit_the_same_in_this_process(finished, tmp_path):
-    """The worker ran it on a World that had run other variants; here on a fresh one."""
+    """The worker ran it on a World and a model that had run other variants; here on fresh
+    ones, as `taichi-frac run` would (this fails when the workers' BLAS is pinned to one
+    thread, as Dask's nanny does by default: NumPy's products round differently)."""
     from taichi_frac.scenes import load_scene
     from taichi_frac.simulation import Simulation
 

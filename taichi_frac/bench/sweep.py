@@ -55,7 +55,7 @@ def _sequential(ctx: BenchContext, seeds, out: Path, frames: int) -> float:
 
 
 def throughput(ctx: BenchContext, work: Path) -> tuple[str, dict]:
-    count = 4 if ctx.quick else 8
+    count = 4 if ctx.quick else 6
     frames = 10 if ctx.quick else FRAMES
     seeds = list(range(count))
     vary = ["ring.fracture.crack_count=3", f"ring.fracture.seed=0:{count}"]
@@ -124,23 +124,30 @@ def spread(ctx: BenchContext, work: Path) -> tuple[str, dict, Path]:
     return text, headline, Path(link)
 
 
-def run(ctx: BenchContext, parts=("throughput", "spread")) -> Section:
+def run(ctx: BenchContext, parts=("throughput", "spread"), written=None) -> Section:
+    """The parts in order; ``written(section)``, if given, is called after each part with
+    the section so far (the command writes the file then, so a long spread part that is
+    stopped leaves the throughput part written)."""
     work = REPO / "out" / ("bench_quick" if ctx.quick else "bench") / "sweep"
     started, load_start = time.perf_counter(), load_average()
     body, headline = [], {}
-    if "throughput" in parts:
-        text, h = throughput(ctx, work)
-        body += ["### Throughput", "", text, ""]
+
+    def section():
+        m = machine_info()
+        tail = [f"Machine: {m['cpu']}, {m['cores']} cores; code {m['commit']}; load average (1/5/15 min) "
+                f"{load_start} at the start, {load_average()} at the end (other jobs shared the machine); "
+                f"{(time.perf_counter() - started) / 60:.1f} min in all."]
+        return Section("sweep", "Variant sweeps on Dask", "\n".join(body + tail), headline=dict(headline))
+
+    for part in parts:
+        text, h = throughput(ctx, work) if part == "throughput" else spread(ctx, work)[:2]
+        title = "Throughput" if part == "throughput" else "Fragment counts over seeds"
+        body += [f"### {title}", "", text, ""]
         headline.update(h)
-    if "spread" in parts:
-        text, h, _ = spread(ctx, work)
-        body += ["### Fragment counts over seeds", "", text, ""]
-        headline.update(h)
-    m = machine_info()
-    body += [f"Machine: {m['cpu']}, {m['cores']} cores; code {m['commit']}; load average (1/5/15 min) "
-             f"{load_start} at the start, {load_average()} at the end (other jobs shared the machine); "
-             f"{(time.perf_counter() - started) / 60:.1f} min in all."]
-    return Section("sweep", "Variant sweeps on Dask", "\n".join(body), headline=headline)
+        ctx.progress(f"sweep {part}:\n{text}")
+        if written is not None:
+            written(section())
+    return section()
 
 
 def run_command(args) -> int:
@@ -152,11 +159,13 @@ def run_command(args) -> int:
     if unknown:
         print(f"unknown part(s) {', '.join(unknown)}: use throughput, spread")
         return 2
-    section = run(ctx, parts)
-    out.mkdir(parents=True, exist_ok=True)
-    text = f"# {section.title}\n\nWritten by `taichi-frac bench sweep`{' --quick' if ctx.quick else ''}.\n\n"
-    text += section.markdown + "\n"
-    (out / "sweep.md").write_text(text)
-    print(text)
-    ctx.progress(f"wrote {out / 'sweep.md'}")
+
+    def write(section: Section) -> None:
+        out.mkdir(parents=True, exist_ok=True)
+        text = f"# {section.title}\n\nWritten by `taichi-frac bench sweep{' --quick' if ctx.quick else ''}`.\n\n"
+        (out / "sweep.md").write_text(text + section.markdown + "\n")
+        ctx.progress(f"wrote {out / 'sweep.md'}")
+
+    section = run(ctx, parts, written=write)
+    print(f"# {section.title}\n\n{section.markdown}")
     return 0

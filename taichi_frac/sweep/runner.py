@@ -174,6 +174,7 @@ def _finish(result: SweepResult) -> None:
 
 def _client(workers: int | None, scheduler: str | None):
     """A Dask client on the given scheduler, or on a new LocalCluster of worker processes."""
+    import dask
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
@@ -183,8 +184,13 @@ def _client(workers: int | None, scheduler: str | None):
     # Taichi's own thread pool keeps its default size (every core): the offline cache's key
     # includes it, and with another size each worker would compile every kernel again
     # instead of loading what `taichi-frac run` and earlier sweeps compiled.
-    cluster = LocalCluster(n_workers=_local_workers(workers), threads_per_worker=1, processes=True,
-                           dashboard_address=None, memory_limit=0, silence_logs=logging.ERROR)
+    # The workers' environment is this process's: Dask's nanny would otherwise pin the
+    # BLAS libraries to one thread (OMP/MKL/OPENBLAS_NUM_THREADS=1), and NumPy's products
+    # then round differently from `taichi-frac run`, so a variant's pieces would not be
+    # the ones the same settings give in a run.
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": {"MALLOC_TRIM_THRESHOLD_": 65536}}):
+        cluster = LocalCluster(n_workers=_local_workers(workers), threads_per_worker=1, processes=True,
+                               dashboard_address=None, memory_limit=0, silence_logs=logging.ERROR)
     return Client(cluster), cluster
 
 
