@@ -170,3 +170,21 @@ def test_contact_sheet_shows_every_variant(finished, tmp_path):
             x, y = (k % 2) * 96, (k // 2) * (72 + band)
             with Image.open(tile) as t:
                 assert list(image.crop((x, y, x + 96, y + 72)).getdata()) == list(t.convert("RGB").getdata())
+
+
+def test_sweep_on_an_existing_scheduler(tmp_path):
+    """--scheduler: the variants go to a cluster the sweep did not start (left running).
+    Both variants fail when their ring is meshed, so no kernel is compiled: this checks the
+    path (submission, results, errors), the other tests the physics."""
+    import logging
+
+    from dask.distributed import LocalCluster
+
+    bad = ['"torus:major=0.1,minor=0.2"', '"torus:major=0.1,minor=0.3"']
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                      silence_logs=logging.ERROR) as cluster:
+        result = sweep(SCENE, [f"ring.primitive={','.join(bad)}"], tmp_path, overrides=FIXED, frames=FRAMES,
+                       scheduler=cluster.scheduler_address, sheet=False, progress=False)
+        assert cluster.scheduler.workers  # still running
+    assert (result.ran, result.failed) == (2, 2)
+    assert all("minor_radius" in r["error"] for r in result.records)
