@@ -181,7 +181,7 @@ def test_sweep_on_an_existing_scheduler(tmp_path):
     from dask.distributed import LocalCluster
 
     bad = ['"torus:major=0.1,minor=0.2"', '"torus:major=0.1,minor=0.3"']
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0",
                       silence_logs=logging.ERROR) as cluster:
         result = sweep(SCENE, [f"ring.primitive={','.join(bad)}"], tmp_path, overrides=FIXED, frames=FRAMES,
                        scheduler=cluster.scheduler_address, sheet=False, progress=False)

@@ -190,7 +190,7 @@ def _client(workers: int | None, scheduler: str | None):
     # the ones the same settings give in a run.
     with dask.config.set({"distributed.nanny.pre-spawn-environ": {"MALLOC_TRIM_THRESHOLD_": 65536}}):
         cluster = LocalCluster(n_workers=_local_workers(workers), threads_per_worker=1, processes=True,
-                               dashboard_address=None, memory_limit=0, silence_logs=logging.ERROR)
+                               dashboard_address=":0", memory_limit=0, silence_logs=logging.ERROR)
     return Client(cluster), cluster
 
 
