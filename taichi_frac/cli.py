@@ -15,7 +15,7 @@ import traceback
 from . import __version__, interrupts
 
 # Order is the order shown in --help.
-COMMANDS = ("run", "info", "bench", "render")
+COMMANDS = ("run", "info", "bench", "render", "sweep")
 
 
 def build_parser() -> argparse.ArgumentParser:

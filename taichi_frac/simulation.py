@@ -14,6 +14,7 @@ import gc
 import json
 import numbers
 import time
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -118,6 +119,24 @@ def _strongest_per_pair(impacts: dict, bodies: np.ndarray) -> dict[int, np.ndarr
     return {int(b): np.sort(rows[body == b]) for b in np.unique(body)}
 
 
+# The shading attributes of a prepared model's boundary faces, kept while the model lives:
+# a process that runs many variants of one scene reuses its models (Simulation(prepare=...),
+# a sweep's worker), and finding them (closest points on the source surface) was nearly all
+# of such a Simulation's set-up (1.43 of 1.44 s for the ring, profiled on a loaded machine).
+# Read-only once computed.
+_CORNER_ATTRIBUTES: "weakref.WeakKeyDictionary[BodyModel, tuple]" = weakref.WeakKeyDictionary()
+
+
+def _root_corner_attributes(model: BodyModel, report) -> tuple:
+    """(normals (Fr,3,3), uvs (Fr,3,2) or None) of ``model``'s boundary faces from its source surface."""
+    if model not in _CORNER_ATTRIBUTES:
+        from .geometry.surface_attributes import boundary_corner_attributes
+
+        corners = model.vertices[model.surface_faces] + model.com_in_source
+        _CORNER_ATTRIBUTES[model] = boundary_corner_attributes(report.surface, corners)
+    return _CORNER_ATTRIBUTES[model]
+
+
 class _FractureWatch:
     """Fracture inside the frame (``simulation.resimulate_fractures``), as the World's
     ``advance(watch=...)``: before each substep the bodies' motion state is kept; after
@@ -187,11 +206,15 @@ class Simulation:
         overwrite: write the output even while another run holds its lock file.
 
     The output path is checked and locked (``io.output``) before any object is meshed.
+        prepare: callable(SceneObject) -> (BodyModel, PrepareReport) used instead of
+            ``obj.prepare()``: a memo kept by a process that runs many variants of one scene
+            (a sweep's worker), so those that change no geometry reuse the model and its SPH
+            neighbour lists. The model must not be changed by the caller between runs.
     """
 
     def __init__(self, scene, *, output=None, arch: str | None = None, progress=None,
                  single_scale: bool | None = None, fracture: bool = True, frames: int | None = None,
-                 world=None, overwrite: bool = False):
+                 world=None, overwrite: bool = False, prepare=None):
         self.scene = scene
         sim = scene.simulation
         if frames is not None and (not isinstance(frames, numbers.Integral) or frames < 1):
@@ -213,6 +236,7 @@ class Simulation:
             output = scene.output_path
         self.output_path = None if output is False else output
         self._lock = None
+        self._prepare = prepare
         if self.output_path is not None:
             from .io.output import OutputLock, check_output_path
 
@@ -239,7 +263,7 @@ class Simulation:
         prepared = []
         for obj in scene.objects:
             interrupts.check()
-            model, report = obj.prepare()
+            model, report = obj.prepare() if self._prepare is None else self._prepare(obj)
             prepared.append((obj, model))
             self.prepare_reports.append(report)
             if obj.breakable and self.fracture_enabled:
@@ -300,11 +324,8 @@ class Simulation:
                 friction=obj.friction, restitution=obj.restitution,
             )
             if report.surface is not None and self.output_path is not None:
-                from .geometry.surface_attributes import boundary_corner_attributes
-
-                corners = model.vertices[model.surface_faces] + model.com_in_source
                 rec = self.records[body]
-                rec.root_normals, rec.root_uvs = boundary_corner_attributes(report.surface, corners)
+                rec.root_normals, rec.root_uvs = _root_corner_attributes(model, report)
             if self.output_path is not None:
                 from .geometry.piece_surface import render_solid_from_surface, render_solid_from_tets
 

@@ -45,6 +45,12 @@ def _run_dynamics(args) -> int:
     return run_dynamics(args)
 
 
+def _run_sweep(args) -> int:
+    from ..bench.sweep import run_command
+
+    return run_command(args)
+
+
 def register(subparsers) -> None:
     from ..bench.dynamics import add_arguments as add_dynamics_arguments
 
@@ -66,6 +72,12 @@ def register(subparsers) -> None:
         t.add_argument("--out", type=Path, help="folder for the plots (default out/bench/)")
         t.add_argument("--arch", default="cpu")
         t.set_defaults(func=_part_runner(key))
+    w = targets.add_parser("sweep", help="variant sweeps on Dask: throughput against one run after another, "
+                                         "fragment counts over 64 seeds; writes docs/benchmarks/sweep.md")
+    w.add_argument("--quick", action="store_true", help="fewer variants and frames, written under out/bench_quick/")
+    w.add_argument("--out", type=Path, help="folder for sweep.md and its plot (default docs/benchmarks/)")
+    w.add_argument("--parts", help="comma-separated subset: throughput,spread")
+    w.set_defaults(func=_run_sweep)
     d = targets.add_parser("dynamics", help="the rigid-body table: 13 rings two- vs single-scale, a fragment pile")
     add_dynamics_arguments(d)
     d.set_defaults(func=_run_dynamics)
