@@ -134,6 +134,10 @@ def option_names(cls) -> list[str]:
 
 
 SMALL_FRAGMENT_POLICIES = ("merge", "debris", "drop")
+# How an impact's stress is computed (docs/guide/stress-models.md): the paper's SPH gradient
+# of the half-space displacement, its exact closed-form gradient, or linear elasticity on
+# the body's own tets.
+STRESS_MODELS = ("sph", "halfspace", "fem")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -162,6 +166,10 @@ class FractureOptions:
         contact_radius: radius of the regularised load patch [m]; None = the contact
             particle's radius (a minimum distance of about one particle radius).
         refracture: fragments may break again on later impacts.
+        stress_model: how an impact's stress is computed: "halfspace" (the exact stress of
+            the regularised Boussinesq-Cerruti load, closed form), "sph" (the paper's SPH
+            gradient of that displacement) or "fem" (linear elasticity on the body's tets,
+            the body's shape included; a stiffness factorisation per body).
         max_generations: how many times a piece of a piece may break again (>= 0).
     """
 
@@ -177,6 +185,7 @@ class FractureOptions:
     contact_radius: float | None = None
     refracture: bool = True
     max_generations: int = 3
+    stress_model: str = "halfspace"
 
     def __post_init__(self):
         check_range("fracture", "crack_count", self.crack_count, 1, 64)
@@ -195,6 +204,8 @@ class FractureOptions:
         if self.contact_radius is not None:
             check_range("fracture", "contact_radius", self.contact_radius, 0.0, None, low_open=True)
         check_range("fracture", "max_generations", self.max_generations, 0, 100)
+        if self.stress_model not in STRESS_MODELS:
+            raise OptionError(f"fracture.stress_model = {self.stress_model!r}: use one of " + ", ".join(STRESS_MODELS))
 
 
 @dataclass(frozen=True, kw_only=True)
