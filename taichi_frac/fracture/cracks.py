@@ -361,6 +361,8 @@ def analyze_impact(
     lists = {}  # the neighbour rows in hand: "local" (rows of ``local``) or "all"
     loads = load_rows(contact, normal, force, radius)
     model_kind = options.stress_model
+    if model_kind == "fem" and elastic_body_of(model, material) is None:
+        model_kind = "halfspace"  # a piece whose stiffness cannot be factorised (fem.elastic_body_of)
     solved = {}  # "fem": the whole body's (displacement, stress), solved once
 
     def field(query):
