@@ -8,7 +8,9 @@ Decisions (the paper leaves them open; docs/readme/fracture.md explains them for
 - **Analysis point**: for each contact, the physics particle of largest principal stress
   within 2 smoothing lengths (kernel support radii) of the contact point (the "maximum
   only" choice: under a point load the material right below the load is in compression;
-  the tension that cracks a brittle solid peaks beside it). The full stress field (every
+  the tension that cracks a brittle solid peaks beside it). Under the "fem" stress model,
+  which sees the body bend, the search covers every particle nearer to that contact than
+  to the step's other contacts: a ring's bending peak lies a tube's width from the contact. The full stress field (every
   particle, every neighbour) is also computed: it sets the crack extent when
   ``crack_length`` is None and the per-fragment peak stress.
 - **Several contacts in one step** are analysed together: linear elasticity superposes, so
@@ -363,6 +365,11 @@ def analyze_impact(
     model_kind = options.stress_model
     if model_kind == "fem" and elastic_body_of(model, material) is None:
         model_kind = "halfspace"  # a piece whose stiffness cannot be factorised (fem.elastic_body_of)
+    if model_kind == "fem":
+        # The body's own tension peak can lie far from the contact (a struck ring bends and
+        # is stretched on the far side of its tube): each contact's analysis point is sought
+        # among every particle nearer to it than to the step's other contacts.
+        in_reach = d2 <= d2.min(axis=0, keepdims=True)
     solved = {}  # "fem": the whole body's (displacement, stress), solved once
 
     def field(query):
