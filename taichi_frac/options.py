@@ -229,6 +229,10 @@ def option_names(cls) -> list[str]:
 
 
 SMALL_FRAGMENT_POLICIES = ("merge", "debris", "drop")
+# How an impact's stress is computed (docs/guide/stress-models.md): the paper's SPH gradient
+# of the half-space displacement, its exact closed-form gradient, or linear elasticity on
+# the body's own tets.
+STRESS_MODELS = ("sph", "halfspace", "fem")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -257,6 +261,10 @@ class FractureOptions:
         contact_radius: radius of the regularised load patch [m]; None = the contact
             particle's radius (a minimum distance of about one particle radius).
         refracture: fragments may break again on later impacts.
+        stress_model: how an impact's stress is computed: "halfspace" (the exact stress of
+            the regularised Boussinesq-Cerruti load, closed form), "sph" (the paper's SPH
+            gradient of that displacement) or "fem" (linear elasticity on the body's tets,
+            the body's shape included; a stiffness factorisation per body).
         max_generations: how many times a piece of a piece may break again (>= 0).
         crack_roughness: amplitude [m] of the noise that roughens the rendered crack faces
             (the physics is untouched); 0, the default, leaves them flat, as glass breaks.
@@ -280,6 +288,7 @@ class FractureOptions:
     max_generations: int = 3
     crack_roughness: float = 0.0
     crack_roughness_scale: float | None = None
+    stress_model: str = "halfspace"
 
     def __post_init__(self):
         check_range("fracture", "crack_count", self.crack_count, 1, 64)
@@ -301,6 +310,8 @@ class FractureOptions:
         check_range("fracture", "crack_roughness", self.crack_roughness, 0.0, None)
         if self.crack_roughness_scale is not None:
             check_range("fracture", "crack_roughness_scale", self.crack_roughness_scale, 0.0, None, low_open=True)
+        if self.stress_model not in STRESS_MODELS:
+            raise OptionError(f"fracture.stress_model = {self.stress_model!r}: use one of " + ", ".join(STRESS_MODELS))
 
 
 @dataclass(frozen=True, kw_only=True)

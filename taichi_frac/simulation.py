@@ -272,6 +272,10 @@ class Simulation:
                 from .fracture.cracks import model_neighbor_lists, smoothing_length
 
                 model_neighbor_lists(model, smoothing_length(model, obj.fracture))
+                if obj.fracture.stress_model == "fem":  # its stiffness, factorised once
+                    from .fracture.fem import elastic_body_of
+
+                    elastic_body_of(model, obj.material)
         self.prepare_seconds = time.perf_counter() - t0
 
         breakable = [m for o, m in prepared if o.breakable and self.fracture_enabled]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from . import grouping, pieces, scaling, sph, stability, tables
+from . import grouping, pieces, scaling, sph, stability, stress_models, tables
 from .common import REPO, BenchContext, Section, load_average, machine_info, md_table, warm_up
 
 #: The parts in report order: key -> (module, one-line help).
@@ -19,12 +19,13 @@ PARTS = {
     "tables": (tables, "Table 1 and Table 2 of the paper beside our runs"),
     "grouping": (grouping, "two- vs single-scale: boundary grouping n = 1, 2, 4, 8, time and error"),
     "sph": (sph, "SPH stress error against particle count and time (plain, corrected)"),
+    "stress_models": (stress_models, "the three stress models (sph, halfspace, fem): error against time, scenes"),
     "scaling": (scaling, "ms per frame and peak memory from 1e3 to 1e6 physics particles"),
     "stability": (stability, "the hard cases of the dynamics and the fracture"),
     "pieces": (pieces, "broken pieces' render surfaces: closed, on their cracks, what a split costs"),
 }
 #: Parts that need the report's World (and its warm-up).
-NEEDS_WORLD = ("tables", "grouping", "stability", "pieces")
+NEEDS_WORLD = ("tables", "grouping", "stability", "pieces", "stress_models")
 
 
 def run_parts(ctx: BenchContext, keys) -> list[Section]:

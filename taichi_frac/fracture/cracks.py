@@ -8,7 +8,9 @@ Decisions (the paper leaves them open; docs/method.md explains them for artists)
 - **Analysis point**: for each contact, the physics particle of largest principal stress
   within 2 smoothing lengths (kernel support radii) of the contact point (the "maximum
   only" choice: under a point load the material right below the load is in compression;
-  the tension that cracks a brittle solid peaks beside it). The full stress field (every
+  the tension that cracks a brittle solid peaks beside it). Under the "fem" stress model,
+  which sees the body bend, the search covers every particle nearer to that contact than
+  to the step's other contacts: a ring's bending peak lies a tube's width from the contact. The full stress field (every
   particle, every neighbour) is also computed: it sets the crack extent when
   ``crack_length`` is None and the per-fragment peak stress.
 - **Several contacts in one step** are analysed together: linear elasticity superposes, so
@@ -30,6 +32,13 @@ Decisions (the paper leaves them open; docs/method.md explains them for artists)
   gradient from any non-degenerate subset, so corrected sectors give n noisy copies of one
   direction, while the plain sum over a one-sided sector leans toward that sector and the
   n cracks fan out around the contact -- which is what step 9 asks for.
+- **Stress model** (``options.stress_model``, docs/guide/stress-models.md): "halfspace"
+  evaluates the exact stress of the regularised half-space load at the particles
+  (``halfspace.py``), "sph" the paper's SPH gradient of its displacement (``fused.py``),
+  "fem" linear elasticity on the body's tets (``fem.py``). The analysis point, the Rankine
+  test, the crack extent and a single group's direction read that stress; n > 1 groups take
+  the plain SPH sector sums of the model's displacement (the half-space field, or the FEM
+  nodal displacement averaged to the tet), so the cracks fan out alike under every model.
 - **Rankine (step 8)** decides *whether*: a contact cracks only if the largest principal
   stress of the full field at its analysis point exceeds ``material.tensile_strength``
   (the physical stress, every neighbour). The groups decide *where*: each non-empty group
@@ -58,9 +67,12 @@ import numpy as np
 from ..geometry import rows
 from ..model import BodyModel
 from ..options import FractureOptions, Material
+from .fem import elastic_body_of, fem_response
 from .field import load_rows
 from .fused import stress_at as _stress_at
+from .halfspace import halfspace_stress_rows
 from .sph import neighbor_lists
+from .stress import largest_principal_stress, principal_stresses
 
 # Analysis points are sought within this many smoothing lengths (kernel support radii,
 # fracture/sph.py) of the contact point.
@@ -350,34 +362,59 @@ def analyze_impact(
 
     lists = {}  # the neighbour rows in hand: "local" (rows of ``local``) or "all"
     loads = load_rows(contact, normal, force, radius)
+    model_kind = options.stress_model
+    if model_kind == "fem" and elastic_body_of(model, material) is None:
+        model_kind = "halfspace"  # a piece whose stiffness cannot be factorised (fem.elastic_body_of)
+    if model_kind == "fem":
+        # The body's own tension peak can lie far from the contact (a struck ring bends and
+        # is stretched on the far side of its tube): each contact's analysis point is sought
+        # among every particle nearer to it than to the step's other contacts.
+        in_reach = d2 <= d2.min(axis=0, keepdims=True)
+    solved = {}  # "fem": the whole body's (displacement, stress), solved once
 
     def field(query):
-        """Steps 5-7 at particles ``query`` (None: all): the superposed half-space
-        displacement of every contact where the SPH sums read it, then the gradient
-        (every neighbour), stress and largest principal stress."""
+        """Steps 5-7 at particles ``query`` (None: all): the stress and largest principal
+        stress of ``options.stress_model``, and the displacement (T,3) the SPH sums of the
+        groups read (None where it is not computed yet)."""
+        q_ids = np.arange(t_count) if query is None else query
+        if model_kind == "halfspace":
+            _grad, stress, peak = halfspace_stress_rows(points, loads, q_ids, material.young_modulus,
+                                                        material.poisson_ratio)
+            return None, stress, peak
+        if model_kind == "fem":
+            if not solved:
+                body = elastic_body_of(model, material)
+                nodal, tet_stress = fem_response(body, contact, normal, force, radius)
+                solved["field"] = (nodal[model.tets].mean(axis=1), tet_stress,
+                                   largest_principal_stress(tet_stress))
+            displacement, stress, peak = solved["field"]
+            return displacement, stress[q_ids], peak[q_ids]
         if query is None:
             lists["all"] = model_neighbor_lists(model, h)
             q_off, q_idx = lists["all"]
-            q_ids = where = np.arange(t_count)
+            where = q_ids
         else:
             lists["local"] = q_off, q_idx = neighbor_rows(model, h, query)
-            q_ids = query
             where = np.unique(np.concatenate([query, q_idx]))
         displacement = np.zeros((t_count, 3))
         stress, peak = _stress_at(points, volumes, displacement, loads, where, q_ids, q_off, q_idx, h,
-                            options.corrected_gradient, material)
+                                  options.corrected_gradient, material)
         return displacement, stress, peak
 
     def neighbours_of(i):
-        """Particle i's neighbours (i is a field particle: in ``local`` when local)."""
+        """Particle i's SPH neighbours (from the lists in hand when the field built them)."""
         if "all" in lists:
             offsets, indices = lists["all"]
-        else:
+        elif "local" in lists:
             offsets, indices = lists["local"]
             i = int(np.searchsorted(local, i))
+        else:
+            offsets, indices = neighbor_rows(model, h, np.array([i]))
+            i = 0
         return indices[offsets[i]:offsets[i + 1]]
 
-    local = None if full_field else np.nonzero(in_reach.any(axis=0))[0]
+    # (FEM solves the whole body at once: its field is always the full one.)
+    local = None if full_field or model_kind == "fem" else np.nonzero(in_reach.any(axis=0))[0]
     displacement, stress, peak = field(local)
     if local is None:
         particle_peak = peak
@@ -419,14 +456,24 @@ def analyze_impact(
         group_offsets = np.zeros(len(grouped) * n_groups + 1, dtype=np.int64)
         np.cumsum(counts[grouped].reshape(-1), out=group_offsets[1:])
         group_indices = np.concatenate(group_rows)
-        # n > 1: the plain kernel sum (BRIEF.md eq. 7). The Bonet-Lok correction reproduces a
-        # smooth field's gradient from any non-degenerate subset, so corrected sectors would
-        # give n noisy copies of one direction; the plain sum over a one-sided sector leans
-        # toward the sector, which is what fans the n cracks out (module docstring).
-        group_corrected = options.corrected_gradient if n_groups == 1 else False
-        stress_g, _, values_g, dirs_g = _stress_at(points, volumes, displacement, loads, None,
-                                                   np.asarray(query, dtype=np.int32), group_offsets, group_indices,
-                                                   h, group_corrected, material, decompose=True)
+        query = np.asarray(query, dtype=np.int32)
+        if n_groups == 1 and model_kind != "sph":
+            # One group is the whole neighbourhood: the physical answer, the model's own stress.
+            stress_g = stress[query]
+            values_g, dirs_g = principal_stresses(stress_g)
+        else:
+            # n > 1: the plain kernel sum (BRIEF.md eq. 7) of the model's displacement. The
+            # Bonet-Lok correction reproduces a smooth field's gradient from any
+            # non-degenerate subset, so corrected sectors would give n noisy copies of one
+            # direction; the plain sum over a one-sided sector leans toward the sector, which
+            # is what fans the n cracks out (module docstring).
+            group_corrected = options.corrected_gradient if n_groups == 1 else False
+            where = None if displacement is not None else np.unique(np.concatenate([query, group_indices]))
+            if displacement is None:
+                displacement = np.zeros((t_count, 3))
+            stress_g, _, values_g, dirs_g = _stress_at(points, volumes, displacement, loads, where, query,
+                                                       group_offsets, group_indices, h, group_corrected, material,
+                                                       decompose=True)
         group_stress[grouped] = stress_g.reshape(len(grouped), n_groups, 3, 3)
         g_values[grouped] = np.asarray(values_g).reshape(len(grouped), n_groups, 3)
         g_dirs[grouped] = np.asarray(dirs_g).reshape(len(grouped), n_groups, 3, 3)

@@ -11,7 +11,7 @@ import taichi as ti
 from .. import runtime
 from .field import displacement_at
 from .sph import CORRECTION_MIN_EIGEN_RATIO, gradient_at
-from .stress import lame_parameters, principal_of, stress_of, sym_eig3_extremes_f64
+from .stress import lame_parameters, stress_of, store_principal, sym_eig3_extremes_f64
 
 
 @ti.kernel
@@ -48,18 +48,17 @@ def _stress_kernel(
         for c in ti.static(range(3)):
             displacement[i, c] = u[c]
     for q in range(query_count):
-        grad, _neighbours = gradient_at(points, volumes, query[q], offsets[q], offsets[q + 1], indices, smoothing_length,
-                              corrected, min_eigen_ratio, displacement)
+        grad, _fallback = gradient_at(points, volumes, query[q], offsets[q], offsets[q + 1], indices,
+                                      smoothing_length, corrected, min_eigen_ratio, displacement)
         s = stress_of(grad, lame_lambda, shear_modulus)
         for a, b in ti.static(ti.ndrange(3, 3)):
             stress_out[q, a, b] = s[a, b]
-        _smallest, largest_out[q] = sym_eig3_extremes_f64(s)
+        # Distinct names: one ``_`` bound first to an i32 and then to an f64 makes Taichi
+        # warn that the assignment may lose precision.
+        _smallest, largest = sym_eig3_extremes_f64(s)
+        largest_out[q] = largest
         if decompose == 1:
-            values, directions = principal_of(s)
-            for e in ti.static(range(3)):
-                values_out[q, e] = values[e]
-                for k in ti.static(range(3)):
-                    directions_out[q, k, e] = directions[k, e]
+            store_principal(s, q, values_out, directions_out)
 
 
 def stress_at(points, volumes, displacement, loads, where, query, offsets, indices, h, corrected,

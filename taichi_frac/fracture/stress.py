@@ -213,6 +213,17 @@ def principal_of(raw):
     return sorted_values, directions
 
 
+@ti.func
+def store_principal(s, q, values_out: ti.template(), directions_out: ti.template()):
+    """Write :func:`principal_of` of the stress ``s`` into row ``q`` of ``values_out`` (Q,3)
+    [Pa] and ``directions_out`` (Q,3,3) (unit columns)."""
+    values, directions = principal_of(s)
+    for e in ti.static(range(3)):
+        values_out[q, e] = values[e]
+        for k in ti.static(range(3)):
+            directions_out[q, k, e] = directions[k, e]
+
+
 @ti.kernel
 def _principal_kernel(
     stress: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) [Pa] Data in
@@ -220,11 +231,7 @@ def _principal_kernel(
     directions_out: ti.types.ndarray(dtype=ti.f64, ndim=3),  # (Q,3,3) columns
 ):
     for q in range(stress.shape[0]):
-        values, directions = principal_of(_load3(stress, q))
-        for e in ti.static(range(3)):
-            values_out[q, e] = values[e]
-            for k in ti.static(range(3)):
-                directions_out[q, k, e] = directions[k, e]
+        store_principal(_load3(stress, q), q, values_out, directions_out)
 
 
 def _as_tensors(a, name) -> np.ndarray:

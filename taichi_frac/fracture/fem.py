@@ -1,0 +1,362 @@
+"""Quasi-static linear elasticity on a body's own tets: the ``"fem"`` stress model.
+
+The half-space field (``field.py``, ``halfspace.py``) knows nothing of the body's shape: a
+ring struck on its rim bends, and a half-space cannot bend. Here the body answers with its
+shape (as in Bao, Hong, Teran & Fedkiw, "Fracturing Rigid Materials", IEEE TVCG 13(2),
+2007): linear tetrahedra (constant strain), the contact force spread over the surface nodes
+as the same smooth patch the half-space model loads (normal traction profile
+3 a^3 / (2 pi (r^2 + a^2)^(5/2)), ``field.py``), balanced by **inertia relief**: a free
+body under a contact force F and torque tau accelerates rigidly (a = F / M, alpha =
+I^-1 tau); the d'Alembert body force -rho (a + alpha x r) cancels the load's resultant and
+moment exactly, so K u = f has a solution, unique up to the six rigid modes.
+
+- **Rigid modes** are removed by pinning six degrees of freedom of three far-apart nodes
+  (the "3-2-1" support, chosen so the pinned rows of the rigid modes are well conditioned):
+  with a balanced load the supports carry no reaction, so the stress is the free body's;
+  the rigid part is then projected out of the displacement (mass-orthogonal).
+- **Cost**: the stiffness is assembled and factorised (sparse Cholesky) once per body
+  and material (CHOLMOD: :func:`elastic_body`; ``cracks.elastic_body_of`` keeps it while the body
+  lives); each impact is then one pair of triangular solves and a pass over the tets.
+- **Stress** is constant on each tet (sigma = lambda tr(eps) I + 2 mu eps, eps = sym(grad u),
+  small strain), smoothed by nodal averaging (:func:`recovered_stress`), and reported at
+  the tet's physics particle (the centroid).
+
+Units SI, arrays float64, body frame.
+"""
+
+from __future__ import annotations
+
+import warnings
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model import BodyModel
+from ..geometry.topology import boundary_faces, orient_tets
+from .stress import lame_parameters
+
+
+@dataclass(frozen=True, eq=False)
+class ElasticBody:
+    """A body's factorised linear-elastic model. V nodes, T tets, S surface nodes.
+
+    Attributes:
+        vertices: (V,3) [m]; tets: (T,4) int vertex indices.
+        shape_gradient: (T,4,3) [1/m] gradients of the four linear shape functions.
+        volume: (T,) [m^3].
+        lame_lambda, shear_modulus: [Pa].
+        node_mass: (V,) [kg] lumped (a quarter of each tet's mass to each corner).
+        centre_of_mass: (3,) [m]; inertia: (3,3) [kg m^2] of the lumped masses about it
+            (what makes the inertia relief's moment exactly zero).
+        surface_node: (S,) int; surface_area: (S,) [m^2] a third of the adjacent boundary
+            triangles' area; surface_normal: (S,3) unit outward (area-weighted).
+        pinned: (6,) int degrees of freedom (3 node + component) held to remove rigid modes
+            (a supported body: every degree of freedom of its fixed nodes).
+        free: (3V-6-...) the other degrees of freedom (unused nodes' held too).
+        factor: CHOLMOD factorisation of the stiffness on ``free``.
+        node_average: (V,T) sparse, a node's value as the volume-weighted mean of its tets'.
+        tet_average: (T,V) sparse, a tet's value as the mean of its four nodes'.
+        free_body: True for a free body (its displacement has the rigid modes removed).
+    """
+
+    vertices: np.ndarray
+    tets: np.ndarray
+    shape_gradient: np.ndarray
+    volume: np.ndarray
+    lame_lambda: float
+    shear_modulus: float
+    node_mass: np.ndarray
+    centre_of_mass: np.ndarray
+    inertia: np.ndarray
+    surface_node: np.ndarray
+    surface_area: np.ndarray
+    surface_normal: np.ndarray
+    pinned: np.ndarray
+    free: np.ndarray
+    factor: object
+    node_average: object
+    tet_average: object
+    free_body: bool = True
+
+    @property
+    def node_count(self) -> int:
+        return len(self.vertices)
+
+
+def shape_gradients(vertices, tets):
+    """(T,4,3) [1/m] gradients of the linear shape functions and (T,) [m^3] signed volumes."""
+    x = vertices[tets]  # (T,4,3)
+    edges = (x[:, 1:] - x[:, :1]).transpose(0, 2, 1)  # (T,3,3) columns x_k - x_0
+    det = np.linalg.det(edges)
+    if np.any(np.abs(det) <= 1e-30 * np.max(np.abs(det), initial=1.0)):
+        raise ValueError("degenerate (zero-volume) tet in the mesh: clean the tet mesh first")
+    inv = np.linalg.inv(edges)  # rows: gradients of N_1, N_2, N_3
+    grads = np.empty((len(tets), 4, 3))
+    grads[:, 1:] = inv
+    grads[:, 0] = -inv.sum(axis=1)
+    return grads, det / 6.0
+
+
+def _stiffness(grads, volume, lam, mu):
+    """(T,4,3,4,3) element stiffnesses [N/m]: K_e[i a, j b] = V (lam g_ia g_jb + mu (g_ib g_ja +
+    delta_ab g_i . g_j)), g_i the shape-function gradients (linear tet, Zienkiewicz & Taylor,
+    "The Finite Element Method", vol. 1, ch. 6)."""
+    g = grads * np.sqrt(np.abs(volume))[:, None, None]
+    gi = g[:, :, :, None, None]  # (T,4,3,1,1): g_ia
+    gj = g[:, None, None, :, :]  # (T,1,1,4,3): g_jb
+    ke = lam * gi * gj + mu * g[:, :, None, None, :] * g.transpose(0, 2, 1)[:, None, :, :, None]
+    dots = np.einsum("tik,tjk->tij", g, g)
+    for k in range(3):
+        ke[:, :, k, :, k] += mu * dots
+    return ke
+
+
+def elastic_body(vertices, tets, density, young_modulus, poisson_ratio, *, surface_faces=None,
+                 fixed_nodes=None) -> ElasticBody:
+    """Assemble and factorise the linear-elastic model of a tet mesh (once per body).
+
+    Args:
+        vertices: (V,3) [m]; tets: (T,4) vertex indices (any orientation).
+        density: [kg/m^3] > 0; young_modulus: E [Pa]; poisson_ratio: nu in [0, 0.5).
+        surface_faces: (F,3) boundary triangles, outward winding; None = found from the tets.
+        fixed_nodes: node indices held at zero displacement (a supported structure, e.g. a
+            clamped cantilever); None = a free body (rigid modes removed, loads must be
+            balanced: :func:`inertia_relief`).
+    """
+    verts = np.ascontiguousarray(vertices, dtype=np.float64)
+    tets = np.ascontiguousarray(tets, dtype=np.int64)
+    if verts.ndim != 2 or verts.shape[1] != 3 or tets.ndim != 2 or tets.shape[1] != 4 or len(tets) == 0:
+        raise ValueError(f"vertices {verts.shape} and tets {tets.shape} must be (V,3) and (T,4), T > 0")
+    if tets.min() < 0 or tets.max() >= len(verts):
+        raise ValueError("tet vertex index out of range")
+    if not (np.isfinite(density) and density > 0.0):
+        raise ValueError(f"density must be > 0, got {density!r}")
+    lam, mu = lame_parameters(young_modulus, poisson_ratio)
+    tets = orient_tets(verts, tets).astype(np.int64)  # so the boundary faces wind outward
+    grads, volume = shape_gradients(verts, tets)
+    used = np.unique(tets)
+    n = len(verts)
+
+
+    node_mass = np.zeros(n)
+    np.add.at(node_mass, tets.reshape(-1), np.repeat(density * volume / 4.0, 4))
+    com = node_mass @ verts / node_mass.sum()
+    r = verts - com
+    inertia = np.einsum("v,vk,vk->", node_mass, r, r) * np.eye(3) - np.einsum("v,va,vb->ab", node_mass, r, r)
+
+    faces = boundary_faces(tets)[0] if surface_faces is None else np.asarray(surface_faces, dtype=np.int64)
+    tri = verts[faces]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # 2 x area x outward normal
+    area = np.zeros(n)
+    normal = np.zeros((n, 3))
+    np.add.at(area, faces.reshape(-1), np.repeat(np.linalg.norm(cross, axis=1) / 6.0, 3))
+    np.add.at(normal, faces.reshape(-1), np.repeat(cross, 3, axis=0))
+    surface_node = np.nonzero(area > 0.0)[0]
+    surface_normal = normal[surface_node]
+    surface_normal /= np.maximum(np.linalg.norm(surface_normal, axis=1, keepdims=True), 1e-300)
+
+    if fixed_nodes is None:
+        pinned = _pinned_dofs(verts[used], com)
+        pinned = 3 * used[pinned // 3] + pinned % 3
+    else:
+        pinned = (3 * np.asarray(fixed_nodes, dtype=np.int64)[:, None] + np.arange(3)).reshape(-1)
+    # Nodes no tet uses have no stiffness: hold them too (they carry no load).
+    unused = np.setdiff1d(np.arange(n), used)
+    held = np.union1d(pinned, (3 * unused[:, None] + np.arange(3)).reshape(-1))
+    free = np.setdiff1d(np.arange(3 * n), held)
+    factor = _factorise(_stiffness(grads, volume, lam, mu), tets, free, n)
+    return ElasticBody(vertices=verts, tets=tets, shape_gradient=grads, volume=np.abs(volume), lame_lambda=lam,
+                       shear_modulus=mu, node_mass=node_mass, centre_of_mass=com, inertia=inertia,
+                       surface_node=surface_node, surface_area=area[surface_node], surface_normal=surface_normal,
+                       pinned=pinned, free=free, factor=factor, free_body=fixed_nodes is None,
+                       **_averaging(tets, np.abs(volume), n))
+
+
+def _averaging(tets, volume, node_count):
+    """The sparse maps of :func:`recovered_stress`: tets -> nodes (volume-weighted mean of
+    the tets around a node) and nodes -> tets (mean of the four corners)."""
+    import scipy.sparse as sp
+
+    count = len(tets)
+    owner = np.repeat(np.arange(count), 4)
+    to_nodes = sp.csr_matrix((np.repeat(volume, 4), (tets.reshape(-1), owner)), shape=(node_count, count))
+    weight = np.asarray(to_nodes.sum(axis=1)).reshape(-1)
+    to_nodes = sp.diags(1.0 / np.where(weight > 0.0, weight, 1.0)) @ to_nodes
+    to_tets = sp.csr_matrix((np.full(4 * count, 0.25), (owner, tets.reshape(-1))), shape=(count, node_count))
+    return {"node_average": to_nodes.tocsr(), "tet_average": to_tets}
+
+
+def _factorise(element_stiffness, tets, free, node_count):
+    """Sparse Cholesky (CHOLMOD, supernodal, AMD ordering, through cvxopt) of the stiffness
+    restricted to the ``free`` degrees of freedom, assembled straight from the element
+    matrices (T,4,3,4,3) (lower triangle; duplicates summed). SuperLU (scipy) took ~9x as
+    long on a 20,000-tet body, a solve ~3x."""
+    from cvxopt import cholmod, matrix, spmatrix
+
+    reduced = np.full(3 * node_count, -1, dtype=np.int64)
+    reduced[free] = np.arange(len(free))
+    dof = reduced[(3 * tets[:, :, None] + np.arange(3)).reshape(len(tets), 12)]
+    rows = np.broadcast_to(dof[:, :, None], (len(tets), 12, 12)).reshape(-1)
+    cols = np.broadcast_to(dof[:, None, :], (len(tets), 12, 12)).reshape(-1)
+    keep = (rows >= cols) & (cols >= 0)
+    size = len(free)
+    stiffness = spmatrix(matrix(element_stiffness.reshape(-1)[keep]), matrix(rows[keep]), matrix(cols[keep]),
+                         (size, size))
+    options = {"supernodal": 2, "postorder": True}
+    factor = cholmod.symbolic(stiffness, uplo="L")
+    saved = dict(cholmod.options)
+    try:
+        cholmod.options.update(options)
+        cholmod.numeric(stiffness, factor)
+    except ArithmeticError as error:
+        raise ValueError("the stiffness is not positive definite: the tet mesh has a piece attached to the "
+                         "rest by an edge or a vertex only, or inverted tets") from error
+    finally:
+        cholmod.options.clear()
+        cholmod.options.update(saved)
+    return factor
+
+
+_BODIES: "weakref.WeakKeyDictionary[BodyModel, dict]" = weakref.WeakKeyDictionary()
+
+
+def elastic_body_of(model: BodyModel, material) -> ElasticBody:
+    """The factorised elastic model of a body model and ``material`` (Material: E, nu),
+    built on first use and kept while the model lives: a body is factorised once and every
+    impact on it reuses it (a fragment when it is first analysed). None (with a warning)
+    where the stiffness is singular; the crack analysis then uses the half-space model."""
+    per_model = _BODIES.setdefault(model, {})
+    key = (float(material.young_modulus), float(material.poisson_ratio))
+    if key not in per_model:
+        try:
+            per_model[key] = elastic_body(model.vertices, model.tets, model.density, *key,
+                                          surface_faces=model.surface_faces)
+        except ValueError as error:  # a piece held to the rest by an edge or a vertex only
+            warnings.warn(f"fem stress model: {error}; this body ({model.tet_count} tets) uses the half-space "
+                          "model instead", RuntimeWarning, stacklevel=2)
+            per_model[key] = None
+    return per_model[key]
+
+
+def rigid_modes(points, centre):
+    """(3P,6) the rigid modes of points (P,3) [m]: three translations, three rotations about
+    ``centre``."""
+    r = points - centre
+    modes = np.zeros((len(points), 3, 6))
+    modes[:, :, :3] = np.eye(3)
+    for k in range(3):
+        modes[:, :, 3 + k] = np.cross(np.eye(3)[k], r)
+    return modes.reshape(-1, 6)
+
+
+def _pinned_dofs(points, centre):
+    """Six degrees of freedom (node x 3 + component) of three far-apart nodes whose rows of
+    the rigid modes form the best-conditioned 6x6 block: holding them removes every rigid
+    mode and nothing else."""
+    first = int(np.argmax(np.linalg.norm(points - centre, axis=1)))
+    second = int(np.argmax(np.linalg.norm(points - points[first], axis=1)))
+    axis = points[second] - points[first]
+    axis /= np.linalg.norm(axis)
+    off = points - points[first]
+    off -= np.outer(off @ axis, axis)
+    third = int(np.argmax(np.linalg.norm(off, axis=1)))
+    nodes = np.array([first, second, third])
+    candidates = (3 * nodes[:, None] + np.arange(3)).reshape(-1)
+    modes = rigid_modes(points[nodes], centre)
+    scale = np.linalg.norm(modes, axis=0)
+    best, best_det = None, -1.0
+    from itertools import combinations
+
+    for pick in combinations(range(9), 6):
+        d = abs(np.linalg.det(modes[list(pick)] / scale))
+        if d > best_det:
+            best, best_det = pick, d
+    if best_det < 1e-9:
+        raise ValueError("the body's nodes are (nearly) collinear: no support removes its rigid modes")
+    return candidates[list(best)]
+
+
+def contact_loads(body: ElasticBody, contact_points, normals_in, forces, contact_radii) -> np.ndarray:
+    """(V,3) [N] nodal forces of K contact forces, each spread over the surface nodes that
+    face it (outward normal against the inward contact normal) with the regularised
+    half-space load's traction profile 3 a^3 / (2 pi (r^2 + a^2)^(5/2)) x nodal area,
+    normalised so each contact's nodal forces sum to its force exactly."""
+    points = np.asarray(contact_points, dtype=np.float64).reshape(-1, 3)
+    normals = np.asarray(normals_in, dtype=np.float64).reshape(len(points), 3)
+    forces = np.asarray(forces, dtype=np.float64).reshape(len(points), 3)
+    radii = np.asarray(contact_radii, dtype=np.float64).reshape(len(points))
+    loads = np.zeros((body.node_count, 3))
+    nodes = body.vertices[body.surface_node]
+    for k in range(len(points)):
+        d2 = np.einsum("sx,sx->s", nodes - points[k], nodes - points[k])
+        a = max(float(radii[k]), 1e-12)
+        facing = body.surface_normal @ normals[k] < 0.0
+        weight = np.where(facing, body.surface_area * a**3 / (d2 + a * a) ** 2.5, 0.0)
+        total = weight.sum()
+        if not total > 0.0:  # no facing node: the nearest surface node takes it all
+            weight = np.zeros(len(nodes))
+            weight[int(np.argmin(d2))] = 1.0
+            total = 1.0
+        np.add.at(loads, body.surface_node, np.outer(weight / total, forces[k]))
+    return loads
+
+
+def inertia_relief(body: ElasticBody, loads) -> np.ndarray:
+    """(V,3) [N] the d'Alembert forces -m_i (a + alpha x r_i) of the rigid acceleration that
+    the nodal ``loads`` (V,3) [N] give the free body: loads + relief has zero resultant and
+    zero moment (with the lumped masses and their own inertia, exactly)."""
+    r = body.vertices - body.centre_of_mass
+    force = loads.sum(axis=0)
+    torque = np.cross(r, loads).sum(axis=0)
+    accel = force / body.node_mass.sum()
+    alpha = np.linalg.solve(body.inertia, torque)
+    return -body.node_mass[:, None] * (accel + np.cross(alpha, r))
+
+
+def solve_displacement(body: ElasticBody, loads) -> np.ndarray:
+    """(V,3) [m] displacement under nodal ``loads`` (V,3) [N]: for a free body the loads
+    must be balanced, and the rigid part is removed (mass-orthogonal to the six rigid
+    modes); a supported body's is returned as solved."""
+    f = np.asarray(loads, dtype=np.float64).reshape(-1)
+    u = np.zeros(3 * body.node_count)
+    from cvxopt import cholmod, matrix
+
+    rhs = matrix(np.ascontiguousarray(f[body.free]))
+    cholmod.solve(body.factor, rhs)
+    u[body.free] = np.asarray(rhs).reshape(-1)
+    if not body.free_body:
+        return u.reshape(-1, 3)
+    modes = rigid_modes(body.vertices, body.centre_of_mass)
+    mass = np.repeat(body.node_mass, 3)
+    coeff = np.linalg.solve(modes.T @ (mass[:, None] * modes), modes.T @ (mass * u))
+    return (u - modes @ coeff).reshape(-1, 3)
+
+
+def tet_stress(body: ElasticBody, displacement) -> np.ndarray:
+    """(T,3,3) [Pa] the constant stress of each linear tet under nodal ``displacement`` (V,3)."""
+    grad = np.einsum("tia,tib->tab", displacement[body.tets], body.shape_gradient)  # d u_a / d x_b
+    strain = 0.5 * (grad + grad.transpose(0, 2, 1))
+    trace = np.trace(strain, axis1=1, axis2=2)
+    return 2.0 * body.shear_modulus * strain + body.lame_lambda * trace[:, None, None] * np.eye(3)
+
+
+def recovered_stress(body: ElasticBody, stress) -> np.ndarray:
+    """(T,3,3) [Pa] the tets' constant stresses (T,3,3) smoothed by nodal averaging: each
+    node takes the volume-weighted mean of its tets' stress, each tet the mean of its four
+    nodes' (a simple stress recovery; Zienkiewicz & Zhu 1992 for the idea). Linear tets'
+    own stress jumps from tet to tet around the true field; on the cube of the benchmark
+    this cut the largest principal stress's L1 error from 142 % to 40 % (4,822 tets) and
+    106 % to 34 % (19,137), and it leaves a uniform stress exactly as it is."""
+    flat = np.asarray(stress, dtype=np.float64).reshape(len(stress), 9)
+    return np.asarray(body.tet_average @ (body.node_average @ flat)).reshape(-1, 3, 3)
+
+
+def fem_response(body: ElasticBody, contact_points, normals_in, forces, contact_radii):
+    """One impact on a free body: (nodal displacement (V,3) [m], tet stress (T,3,3) [Pa],
+    recovered: :func:`recovered_stress`) of the contacts' patch loads balanced by inertia
+    relief."""
+    loads = contact_loads(body, contact_points, normals_in, forces, contact_radii)
+    loads = loads + inertia_relief(body, loads)
+    displacement = solve_displacement(body, loads)
+    return displacement, recovered_stress(body, tet_stress(body, displacement))
