@@ -67,13 +67,13 @@ def test_addon_features_in_blender(tmp_path):
 
     spec["glass"] = str(tmp_path / "glass.usda")
     variants.write(spec["glass"], V1[:3], FPS, 20)
-    variants.set_preview_inputs(spec["glass"], "outer", diffuseColor=(0.9, 0.95, 1.0), roughness=0.05,
+    variants.set_preview_inputs(spec["glass"], "slab/outer", diffuseColor=(0.9, 0.95, 1.0), roughness=0.05,
                                 opacity=0.1, opacityThreshold=0.0, ior=1.52)
-    variants.set_preview_inputs(spec["glass"], "inner", opacity=0.3, opacityThreshold=0.5, ior=1.33)
+    variants.set_preview_inputs(spec["glass"], "slab/inner", opacity=0.3, opacityThreshold=0.5, ior=1.33)
     spec["subset"] = str(tmp_path / "subset.usda")
     variants.write(spec["subset"], V1[:3], FPS, 20)
-    variants.set_preview_inputs(spec["subset"], "outer", opacity=0.5)
-    variants.set_preview_inputs(spec["subset"], "inner", opacity=0.8, opacityThreshold=0.5)
+    variants.set_preview_inputs(spec["subset"], "slab/outer", opacity=0.5)
+    variants.set_preview_inputs(spec["subset"], "slab/inner", opacity=0.8, opacityThreshold=0.5)
 
     spec["tile"] = str(tmp_path / "tile.usdc")
     variants.write(spec["tile"], [Piece("tile", 0, None, None, (0.5, 0.5, 0.1), (0, 0, 0))], FPS, 2)

@@ -170,7 +170,8 @@ def test_addon_reader_recovers_closed_form_motion(caches, which):
     """The add-on's reader (pxr + numpy, no bpy) returns Z-up metres whatever the stage says."""
     cache = addon_module("reader").read_cache(caches[which])
     assert (cache.fps, cache.start_frame, cache.end_frame) == (synthetic.FPS, synthetic.START_FRAME, synthetic.END_FRAME)
-    assert [m.name for m in cache.materials] == [schema.OUTER_SUBSET, schema.INNER_SUBSET]
+    roots = [name for name, (_, _, parent, _) in synthetic.FRAGMENTS.items() if parent is None]
+    assert [m.name for m in cache.materials] == [f"{r}_{s}" for r in roots for s in (schema.OUTER_SUBSET, schema.INNER_SUBSET)]
     by_name = {f.name: f for f in cache.fragments}
     assert sorted(by_name) == sorted(synthetic.FRAGMENTS)
     for name, fragment in by_name.items():

@@ -124,7 +124,7 @@ def section_reimport(spec):
     check_stress_view(scene)
 
     # The artist's edits.
-    outer = bpy.data.materials["outer"]
+    outer = bpy.data.materials["slab_outer"]
     outer.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.0, 1.0, 0.0, 1.0)
     hero = objects["shard_a"]
     hero.name = "Hero"
@@ -151,9 +151,9 @@ def section_reimport(spec):
     hero.data.vertices.foreach_get("co", co)
     vertices, _ = synthetic.box_mesh(tuple(spec["v2_pieces"]["shard_a"]["half"]))
     check(np.abs(co - vertices.reshape(-1)).max() < 1e-6, "Hero's mesh not replaced by v2's")
-    check(tuple(bpy.data.materials["outer"].node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value)
+    check(tuple(bpy.data.materials["slab_outer"].node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value)
           == (0.0, 1.0, 0.0, 1.0), "edited material overwritten")
-    check(bpy.data.materials.get("outer.001") is None, "materials duplicated")
+    check(bpy.data.materials.get("slab_outer.001") is None, "materials duplicated")
     check(objects["sliver_1"].data.materials[0] == artist, "artist's material on sliver_1 lost")
     check(objects["sliver_1"] is sliver_1 and list(sliver_1.users_collection) == [heroes],
           f"moved sliver_1 not updated where it is: {[c.name for c in objects['sliver_1'].users_collection]}")

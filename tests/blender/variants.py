@@ -64,7 +64,7 @@ def describe(pieces, fps: float) -> dict:
 
 def set_preview_inputs(path, material: str, **inputs) -> None:
     """Author UsdPreviewSurface inputs (float, or a 3-tuple colour) on a cache's material
-    ``material`` (Materials/<material>), as a writer of glass or cut-out materials would."""
+    ``material`` (Materials/<body>/<outer|inner>, e.g. "slab/outer"), as a writer of glass or cut-out materials would."""
     stage = Usd.Stage.Open(str(path))
     shader = stage.GetPrimAtPath(f"{schema.MATERIALS_SCOPE}/{material}/PreviewSurface")
     from pxr import UsdShade
