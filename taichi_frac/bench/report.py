@@ -71,6 +71,7 @@ def write(ctx: BenchContext, sections: list[Section], markdown_path: Path, head:
           readme_part: Path | None) -> None:
     body = [head, "", "## Contents", ""]
     body += [f"{i}. [{s.title}](#{i}-{_anchor(s.title)})" for i, s in enumerate(sections, 1)]
+    body += _separate_sections(markdown_path.parent / "benchmarks")
     for i, s in enumerate(sections, 1):
         body += ["", f"## {i}. {s.title}", "", s.markdown]
     markdown_path.parent.mkdir(parents=True, exist_ok=True)
@@ -79,6 +80,19 @@ def write(ctx: BenchContext, sections: list[Section], markdown_path: Path, head:
     if readme_part is not None:
         readme_part.write_text(readme_text(sections, markdown_path, readme_part))
         ctx.progress(f"wrote {readme_part}")
+
+
+def _separate_sections(folder: Path) -> list[str]:
+    """Links to the sections their own bench commands write (``docs/benchmarks/<part>.md``:
+    meshes, contact, piece geometry, stress models, sweeps), each titled by its first heading."""
+    pages = sorted(folder.glob("*.md"))
+    if not pages:
+        return []
+    lines = ["", "Written by their own commands (`taichi-frac bench <part>`), at their own commits:", ""]
+    for page in pages:
+        title = next((t.lstrip("# ").strip() for t in page.read_text().splitlines() if t.startswith("#")), page.stem)
+        lines.append(f"- [{title}]({folder.name}/{page.name})")
+    return lines
 
 
 def _anchor(title: str) -> str:
