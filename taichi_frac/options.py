@@ -332,6 +332,9 @@ class SimulationOptions:
         gravity: (3,) [m/s^2], world Z up.
         single_scale: collide with every surface particle instead of the boundary layer
             (the paper's "single-scale" column; for measurement).
+        surface_contact: contacts from the true surface (patches of surface triangles
+            under each collision sphere) instead of the spheres themselves: bodies rest
+            on their surface (docs/guide/contact.md).
         sleep_linear_speed: a body whose every point (|v| + |w| x bounding radius) is slower
             than this ... [m/s]
         sleep_angular_speed: ... and that turns slower than this [rad/s] ...
@@ -357,6 +360,7 @@ class SimulationOptions:
     solver_iterations: int = 10
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     single_scale: bool = False
+    surface_contact: bool = False
     sleep_linear_speed: float = 0.01
     sleep_angular_speed: float = 1.0
     sleep_time: float = 0.5

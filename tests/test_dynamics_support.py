@@ -89,8 +89,11 @@ def with_spheres(model, centres, radii):
     makes the collision geometry exact where a test checks the solver against a closed form
     (a tet-meshed box's boundary spheres make a bumpy bottom, a tet sphere's an uneven one)."""
     centres = np.asarray(centres, dtype=float).reshape(-1, 3)
+    # (no members: each sphere is its own surface, so the contacts are the spheres')
     return dataclasses.replace(model, boundary_position=centres, boundary_contact_position=None,
-                               boundary_radius=np.broadcast_to(np.asarray(radii, float), len(centres)).copy())
+                               boundary_radius=np.broadcast_to(np.asarray(radii, float), len(centres)).copy(),
+                               boundary_member_offsets=np.zeros(len(centres) + 1, dtype=np.int32),
+                               boundary_members=np.zeros(0, dtype=np.int32))
 
 
 def lowest_point(model, group_radius=True) -> float:

@@ -19,6 +19,7 @@ never carry an impulse.
 import taichi as ti
 
 from ..dynamics.bounds import is_idle, pair_motion
+from . import surface
 from .grid import CELLS_PER_SPHERE
 
 vec3 = ti.math.vec3
@@ -221,9 +222,13 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
     """Contact of particle ``i`` (body ``a``) with grid entry ``k`` of body ``o`` (its
     centre ``local`` [m] in o's frame, rotation ``rot`` o -> world), when their gap is
     within the margin plus the pair's closing (squared: no square root for the ~90 % of
-    candidates it rejects) and then the speculative reach of the two points."""
+    candidates it rejects) and then the speculative reach of the two points. When either
+    sphere has a contact patch (and not both have normals: ``surface.by_patches``), the
+    contact's normal, depth and point are the patches' (``surface.pair``) and the
+    speculative reach is that of their contact spots."""
     sphere = particles.grid_sphere[k]
     rj = sphere[3]
+    j = particles.grid_slot[k]
     d = local - vec3(sphere[0], sphere[1], sphere[2])
     mean_r = 0.5 * (ri + rj)
     limit = ri + rj + margin * mean_r + closing
@@ -234,11 +239,24 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
         if dist > 1e-9:
             n = rot @ (d / dist)
         xj = xi - n * dist
-        if gap < margin * mean_r + _speculative(bodies, statics, a, xi, o, xj, n, dt):
-            point = xj + n * (rj + 0.5 * gap)
+        point = xj + n * (rj + 0.5 * gap)
+        x_a, x_o = xi, xj
+        scale = ti.min(ri, rj)
+        if surface.by_patches(particles, i, j):
+            n_patch, gap_patch, spot_a, spot_o = surface.pair(bodies, particles, a, i, o, j, n)
+            if gap_patch >= -ti.static(surface.TRUSTED_DEPTH) * ti.max(ri, rj):
+                n, gap, x_a, x_o = n_patch, gap_patch, spot_a, spot_o
+                # Where along the surfaces: the smaller patch's spot (a chip on a wide
+                # patch touches under itself; the two spots' mean lay off the chip and
+                # spun it), half the gap across.
+                point = x_a - 0.5 * gap * n if ri <= rj else x_o + 0.5 * gap * n
+                # (the depth scale of a patch contact is the larger sphere's: a chip 2 mm
+                # into a slab is no deep overlap of the two)
+                scale = ti.max(ri, rj)
+        if gap < margin * mean_r + _speculative(bodies, statics, a, x_a, o, x_o, n, dt):
             mu = ti.sqrt(bodies.friction[a] * bodies.friction[o])
             e = ti.max(bodies.restitution[a], bodies.restitution[o])
-            _append(contacts, particles, i, particles.grid_slot[k], a, o, -1, n, point, gap, ti.min(ri, rj), mu, e)
+            _append(contacts, particles, i, j, a, o, -1, n, point, gap, scale, mu, e)
             if bodies.sleeping[o] == 1 and bodies.sleep_timer[a] < sleep_time:
                 bodies.wake_request[o] = 1
 
@@ -247,13 +265,20 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
 def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
                      contacts: ti.template(), margin, dt, i, a, x):
     """Sphere-plane and sphere-box contacts of particle ``i`` of awake body ``a`` (normal
-    out of the collider, i.e. into the body); ``x`` [m] its world centre."""
+    out of the collider, i.e. into the body); ``x`` [m] its world centre. The sphere
+    finds the contact; with a contact patch, its gap and point are the patch's
+    (``surface.against``)."""
     r = particles.radius[i]
+    patch = particles.point_count[i] > 0
     for k in range(statics.plane_count[None]):
         gap = x[2] - r - statics.plane_height[k]
+        spot = x
+        point = vec3(x[0], x[1], statics.plane_height[k])
+        if patch and gap < margin * r + bodies.motion[a]:
+            gap, spot = surface.against(bodies, particles, a, i, vec3(0.0, 0.0, 1.0), statics.plane_height[k])
+            point = spot - vec3(0.0, 0.0, 0.5 * gap)
         if gap < margin * r + bodies.motion[a] and gap < margin * r + _speculative(
-                bodies, statics, a, x, -1, x, vec3(0.0, 0.0, 1.0), dt):
-            point = vec3(x[0], x[1], statics.plane_height[k])
+                bodies, statics, a, spot, -1, spot, vec3(0.0, 0.0, 1.0), dt):
             mu = ti.sqrt(bodies.friction[a] * statics.plane_friction[k])
             e = ti.max(bodies.restitution[a], statics.plane_restitution[k])
             _append(contacts, particles, i, -1 - k, a, GROUND, k, vec3(0.0, 0.0, 1.0), point, gap, r, mu, e)
@@ -284,8 +309,13 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
                     q[m] = half[m] * side
                     gap = -depth[m] - r
         n = rot @ n_local
-        if gap < margin * r + bodies.motion[a] and gap < margin * r + _speculative(bodies, statics, a, x, -1, x, n, dt):
-            point = statics.box_center[k] + rot @ q
+        point = statics.box_center[k] + rot @ q
+        spot = x
+        if patch and gap < margin * r + bodies.motion[a]:
+            gap, spot = surface.against(bodies, particles, a, i, n, point.dot(n))
+            point = spot - 0.5 * gap * n
+        if gap < margin * r + bodies.motion[a] and gap < margin * r + _speculative(
+                bodies, statics, a, spot, -1, spot, n, dt):
             mu = ti.sqrt(bodies.friction[a] * statics.box_friction[k])
             e = ti.max(bodies.restitution[a], statics.box_restitution[k])
             _append(contacts, particles, i, -1000 - k, a, STATIC_BOX, k, n, point, gap, r, mu, e)
@@ -309,17 +339,20 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: 
                 xi = bodies.position[a] + bodies.rotation[a] @ particles.offset[i]
                 ri = particles.radius[i]
                 count = bodies.neighbor_count[a]
-                if count >= 0:
-                    for k in range(count):
+                listed = count >= 0
+                # (one call site for both cases: each is inlined whole, and compiling the
+                # narrowphase twice over doubled the kernel's build time)
+                for k in range(count if listed else bodies.slot_end[None]):
+                    o = k
+                    closing = 0.0
+                    if listed:
                         o = bodies.neighbors[a, k]
-                        if o > a or is_idle(bodies, o):
-                            _pair_contacts(bodies, particles, statics, contacts, margin, sleep_time, dt, i, a, xi, ri,
-                                           o, bodies.neighbor_motion[a, k])
-                else:
-                    for o in range(bodies.slot_end[None]):
-                        if o != a and bodies.active[o] == 1 and (o > a or is_idle(bodies, o)):
-                            _pair_contacts(bodies, particles, statics, contacts, margin, sleep_time, dt, i, a, xi, ri,
-                                           o, pair_motion(bodies, statics, a, o, dt))
+                        closing = bodies.neighbor_motion[a, k]
+                    if o != a and bodies.active[o] == 1 and (o > a or is_idle(bodies, o)):
+                        if not listed:
+                            closing = pair_motion(bodies, statics, a, o, dt)
+                        _pair_contacts(bodies, particles, statics, contacts, margin, sleep_time, dt, i, a, xi, ri,
+                                       o, closing)
                 if bodies.near_static[a] == 1:
                     _static_contacts(bodies, particles, statics, contacts, margin, dt, i, a, xi)
 

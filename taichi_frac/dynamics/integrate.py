@@ -14,6 +14,7 @@ of the start and predicted end angular velocity, which keeps the energy error at
 import taichi as ti
 
 from .. import runtime
+from ..collision import surface
 from .bounds import is_idle, motion_speed, near_statics
 from .quaternion import quat_integrate, quat_to_matrix
 
@@ -186,6 +187,10 @@ def hold_above_ground(bodies: ti.template(), particles: ti.template(), statics: 
                     r = particles.radius[p]
                     bottom = z0 + up.dot(particles.offset[p]) - r
                     for k in range(statics.plane_count[None]):
+                        if particles.point_count[p] > 0 and statics.plane_height[k] - bottom - GROUND_HOLD * r > 0.0:
+                            # (the sphere's bottom may stand proud of its patch: the
+                            # patch's own lowest point decides)
+                            bottom = z0 + surface.lowest(particles, p, up)
                         lift = ti.max(lift, statics.plane_height[k] - bottom - GROUND_HOLD * r)
                 if lift > 0.0:
                     bodies.position[b][2] += lift

@@ -26,6 +26,9 @@ class WorldCapacity:
             ``record_force_threshold``); more are counted in ``stats.impact_overflows``.
         max_static_boxes: static boxes (walls, inclines).
         max_planes: ground planes.
+        max_surface_points: contact-patch points over all bodies (``surface_contact``:
+            ~6 per boundary sphere at n = 4, ~3 per surface particle single-scale); None:
+            8 x max_boundary_particles. Freed ranges are reused (first fit).
     """
 
     max_bodies: int = 1024
@@ -34,8 +37,12 @@ class WorldCapacity:
     max_impacts: int = 16384
     max_static_boxes: int = 64
     max_planes: int = 4
+    max_surface_points: int | None = None
 
     def __post_init__(self):
+        if self.max_surface_points is None:
+            object.__setattr__(self, "max_surface_points", 8 * self.max_boundary_particles)
+        check_range("capacity", "max_surface_points", self.max_surface_points, 1, 1_000_000_000)
         check_range("capacity", "max_bodies", self.max_bodies, 1, 10_000_000)
         check_range("capacity", "max_boundary_particles", self.max_boundary_particles, 1, 100_000_000)
         check_range("capacity", "max_contacts", self.max_contacts, 1, 100_000_000)
@@ -84,6 +91,12 @@ class DynamicsOptions:
             dumbbell for seconds, and each touch wakes the pile it rolls into. A body much
             larger than its spheres (a whole ring, rolling resistance coefficient
             ~rolling_resistance x sphere radius / body radius) is barely slowed. 0: off.
+        surface_contact: bodies added while this is on collide through their true surface:
+            the collision spheres only find the pairs of surface patches that may touch,
+            and each contact's point, normal and depth come from the patches' triangles
+            (``collision/surface.py``), so a body rests on its surface, not on its
+            spheres. Off: sphere contacts (the spheres stand proud of a flat or gently
+            curved surface by up to R - sqrt(R^2 - rho^2)). Read when a body is added.
         single_scale: default of ``add_body(single_scale=None)``: collide with the physics
             surface particles instead of the boundary layer.
         sleep_linear_speed, sleep_angular_speed, sleep_time: a body whose every point is
@@ -112,6 +125,7 @@ class DynamicsOptions:
     max_correction_speed: float = 1.0
     restitution_threshold: float = 0.2
     rolling_resistance: float = 0.1
+    surface_contact: bool = False
     single_scale: bool = False
     sleep_linear_speed: float = 0.01
     sleep_angular_speed: float = 1.0
@@ -151,6 +165,7 @@ class DynamicsOptions:
             max_substeps=sim.max_substeps,
             substep_motion_fraction=sim.substep_motion_fraction,
             single_scale=sim.single_scale,
+            surface_contact=sim.surface_contact,
             sleep_linear_speed=sim.sleep_linear_speed,
             sleep_angular_speed=sim.sleep_angular_speed,
             sleep_time=sim.sleep_time,

@@ -146,11 +146,21 @@ class Particles:
         particle's entries (only the last store, ``cache_epoch``, is valid; add_body sets
         -1 on a reused slot). Writer: solver.store_impulses; read by the narrowphase when
         the same pair is made again.
+        Contact patches (``model.ContactPatches``): point_start, point_count (i32) the rows
+            of ``surface_point`` holding sphere P's patch (count 0: the sphere is its own
+            surface, the contacts are sphere contacts); patch_normal (vec3 body frame,
+            unit outward, or zero where the patch faces every way). surface_point, shape
+            (max_surface_points,): vec3 [m] body-frame points of the patches, each body's
+            in one contiguous range. Writer: add_body.
         slot_end: one past the highest slot in use.
     """
 
-    def __init__(self, capacity: int):
+    def __init__(self, capacity: int, max_surface_points: int = 1):
         self.capacity = capacity
+        self.point_start = ti.field(ti.i32, shape=capacity)
+        self.point_count = ti.field(ti.i32, shape=capacity)
+        self.patch_normal = vec3.field(shape=capacity)
+        self.surface_point = vec3.field(shape=max_surface_points)
         self.body = ti.field(ti.i32, shape=capacity)
         self.offset = vec3.field(shape=capacity)
         self.radius = ti.field(ti.f32, shape=capacity)

@@ -233,6 +233,7 @@ def _write_bodies(bodies: ti.template(), particles: ti.template(),
             particles.body[p] = slot
             particles.cache_stamp[0, p] = -1
             particles.cache_stamp[1, p] = -1
+            particles.point_count[p] = 0  # (sphere contacts unless _write_patches says otherwise)
             sphere = _sphere_f32(spheres, begin + k)
             particles.offset[p] = ti.math.vec3(sphere[0], sphere[1], sphere[2])
             particles.radius[p] = sphere[3]
@@ -241,6 +242,24 @@ def _write_bodies(bodies: ti.template(), particles: ti.template(),
             particles.grid_slot[p] = start + j
         for c in range(ints[b, _INT_GRID_END] - grid - count):
             particles.cell_first[ti.static(CELLS_PER_SPHERE) * start + c] = start + grid_ints[grid + count + c]
+
+
+@ti.kernel
+def _write_patches(particles: ti.template(), ints: ti.types.ndarray(dtype=ti.i32, ndim=2),
+                   normals: ti.types.ndarray(dtype=ti.f32, ndim=2), points: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+    """The contact patches of S spheres: ``ints`` (S,4) (particle slot, first row of
+    ``surface_point`` for its patch, its point count, the first row of those points in
+    ``points``), ``normals`` (S,3) body frame, ``points`` (P,3) [m] body frame."""
+    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
+    for s in range(ints.shape[0]):
+        p = ints[s, 0]
+        start = ints[s, 1]
+        particles.point_start[p] = start
+        particles.point_count[p] = ints[s, 2]
+        particles.patch_normal[p] = ti.math.vec3(normals[s, 0], normals[s, 1], normals[s, 2])
+        for k in range(ints[s, 2]):
+            row = ints[s, 3] + k
+            particles.surface_point[start + k] = ti.math.vec3(points[row, 0], points[row, 1], points[row, 2])
 
 
 @ti.kernel
@@ -405,7 +424,7 @@ class World:
         self.options = options or DynamicsOptions()
         cap = self.capacity
         self.bodies = Bodies(cap.max_bodies)
-        self.particles = Particles(cap.max_boundary_particles)
+        self.particles = Particles(cap.max_boundary_particles, cap.max_surface_points)
         self.statics = Statics(cap.max_planes, cap.max_static_boxes)
         self.grid = broadphase.BodyGrid(cap.max_bodies)
         self.contacts = narrowphase.Contacts(cap.max_contacts)
@@ -423,6 +442,8 @@ class World:
         self._free_ranges: list[tuple[int, int]] = [(0, cap.max_boundary_particles)]  # (start, count)
         self._body_range: dict[int, tuple[int, int]] = {}
         self._particles_in_use = 0
+        self._free_points: list[tuple[int, int]] = [(0, cap.max_surface_points)]  # (start, count)
+        self._point_range: dict[int, tuple[int, int]] = {}  # body slot -> its patch points
         self._particle_slot_end = 0
         self._plane_count = 0
         self._box_count = 0
@@ -475,7 +496,7 @@ class World:
                  for b in range(count)]
         if any(pose.shape != (13,) for pose in poses):
             raise ValueError("position, velocities need 3 components and orientation_wxyz 4")
-        layers = []
+        layers, patches = [], []
         for model in models:
             if single:
                 offsets, radii = model.particle_position[model.surface_particles], \
@@ -485,15 +506,26 @@ class World:
             if len(radii) == 0:
                 raise ValueError("the body has no collision particles (empty boundary layer)")
             layers.append((offsets, radii))
+            if self.options.surface_contact:
+                patches.append(model.surface_particle_patches if single else model.boundary_patches)
+                if len(patches[-1].offsets) != len(radii) + 1:
+                    raise ValueError(f"the model's boundary groups ({len(patches[-1].offsets) - 1}) do not match "
+                                     f"its {len(radii)} collision spheres: rebuild it, or add it with "
+                                     "DynamicsOptions(surface_contact=False)")
         taken = []  # (slot, start, count): given back if a later body does not fit
+        point_starts = []
         try:
             for offsets, radii in layers:
                 slot = self._allocate_body_slot()
                 taken.append((slot, self._allocate_particles(len(radii), slot_for_error=slot), len(radii)))
+            for patch in patches:
+                point_starts.append(self._allocate_points(len(patch.points)))
         except CapacityError:
             for slot, start, n in reversed(taken):  # (so the slots go out again in the same order)
                 self._free_body_slots.insert(0, slot)
                 self._release_particles(start, n)
+            for first, patch in zip(point_starts, patches):
+                self._free_points = _give_range(self._free_points, first, len(patch.points))
             raise
         ints = np.zeros((count, 8), dtype=np.int32)
         rows_out = np.empty((count, 43), dtype=np.float32)
@@ -519,6 +551,8 @@ class World:
         spheres = np.concatenate(sphere_rows).astype(np.float64)
         _write_bodies(self.bodies, self.particles, ints, rows_out, spheres,
                       np.concatenate(grid_rows).astype(np.int32), np.empty(len(spheres)))
+        if patches:
+            self._write_patches(taken, patches, point_starts)
         self.breakable = getattr(self, "breakable", {})
         for (slot, start, n), can_break in zip(taken, breakable):
             self._body_range[slot] = (start, n)
@@ -529,6 +563,19 @@ class World:
         self.bodies.slot_end[None] = self._body_slot_end
         return [slot for slot, _, _ in taken]
 
+    def _write_patches(self, taken, patches, point_starts) -> None:
+        """Copy the bodies' contact patches into their point ranges (one launch)."""
+        ints, rows_so_far = [], 0
+        for (slot, start, n), patch, first in zip(taken, patches, point_starts):
+            counts = np.diff(patch.offsets)
+            ints.append(np.column_stack([start + np.arange(n), first + patch.offsets[:-1], counts,
+                                         rows_so_far + patch.offsets[:-1]]))
+            rows_so_far += len(patch.points)
+            self._point_range[slot] = (first, len(patch.points))
+        _write_patches(self.particles, np.ascontiguousarray(np.concatenate(ints), dtype=np.int32),
+                       np.concatenate([p.normals for p in patches]).astype(np.float32),
+                       np.concatenate([p.points for p in patches]).astype(np.float32))
+
     def remove_body(self, body: int) -> None:
         """Free a body's slot and particle range (a parent replaced by its fragments)."""
         if body not in self._body_range:
@@ -538,6 +585,8 @@ class World:
         self._free_body_slots.append(body)
         self._release_particles(start, count)
         self._particles_in_use -= count
+        if body in self._point_range:
+            self._free_points = _give_range(self._free_points, *self._point_range.pop(body))
 
     def add_ground(self, height: float = 0.0, friction: float = 0.5, restitution: float = 0.2) -> int:
         """A horizontal ground plane z = height [m] (normal +Z); returns its index."""
@@ -591,6 +640,8 @@ class World:
         self._particle_slot_end = 0
         self.particles.slot_end[None] = 0
         self._free_ranges = [(0, self.capacity.max_boundary_particles)]
+        self._free_points = [(0, self.capacity.max_surface_points)]
+        self._point_range = {}
         self._plane_count = self._box_count = 0
         self.statics.plane_count[None] = 0
         self.statics.box_count[None] = 0
@@ -804,13 +855,9 @@ class World:
         return self._body_slot_end - 1
 
     def _allocate_particles(self, count: int, slot_for_error: int) -> int:
-        for k, (start, free) in enumerate(self._free_ranges):
-            if free >= count:
-                if free == count:
-                    self._free_ranges.pop(k)
-                else:
-                    self._free_ranges[k] = (start + count, free - count)
-                return start
+        start = _take_range(self._free_ranges, count)
+        if start is not None:
+            return start
         self._free_body_slots.insert(0, slot_for_error)
         raise CapacityError(
             f"no room for {count} more collision particles: {self._particles_in_use} of "
@@ -818,12 +865,38 @@ class World:
             f"(largest free range {max((f for _, f in self._free_ranges), default=0)}): "
             "raise WorldCapacity(max_boundary_particles=...)")
 
+    def _allocate_points(self, count: int) -> int:
+        start = _take_range(self._free_points, count)
+        if start is None:
+            raise CapacityError(
+                f"no room for {count} more contact-patch points (max_surface_points="
+                f"{self.capacity.max_surface_points}, largest free range "
+                f"{max((f for _, f in self._free_points), default=0)}): raise WorldCapacity(max_surface_points=...)")
+        return start
+
     def _release_particles(self, start: int, count: int) -> None:
-        ranges = sorted(self._free_ranges + [(start, count)])
-        merged: list[tuple[int, int]] = []
-        for s, n in ranges:
-            if merged and merged[-1][0] + merged[-1][1] == s:
-                merged[-1] = (merged[-1][0], merged[-1][1] + n)
+        self._free_ranges = _give_range(self._free_ranges, start, count)
+
+
+def _take_range(ranges: list, count: int):
+    """First fit: the start of ``count`` slots taken from the free ``ranges`` [(start,
+    count)] (updated in place), or None when no range is large enough."""
+    for k, (start, free) in enumerate(ranges):
+        if free >= count:
+            if free == count:
+                ranges.pop(k)
             else:
-                merged.append((s, n))
-        self._free_ranges = merged
+                ranges[k] = (start + count, free - count)
+            return start
+    return None
+
+
+def _give_range(ranges: list, start: int, count: int) -> list:
+    """The free ``ranges`` with [start, start + count) given back, neighbours merged."""
+    merged: list[tuple[int, int]] = []
+    for s, n in sorted(ranges + [(start, count)]):
+        if merged and merged[-1][0] + merged[-1][1] == s:
+            merged[-1] = (merged[-1][0], merged[-1][1] + n)
+        else:
+            merged.append((s, n))
+    return merged

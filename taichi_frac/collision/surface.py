@@ -1,0 +1,157 @@
+"""Contacts from the true surface: the narrowphase's spheres say which parts of two bodies
+may touch; this module says where, along which normal and how deep, from the surface
+patches behind the spheres (``model.ContactPatches``: the vertices of the boundary
+triangles of each sphere's member tets, in the body frame).
+
+Depth along a normal n is the gap between the two patches' supports (the separating-axis
+measure of their convex hulls):
+
+    gap(n) = min_{p in A} p . n - max_{q in B} q . n      (n from B into A)
+
+which depends on the surface alone, not on the sphere radius, so a flat face rests on the
+ground at its own height and a patch seen by two overlapping spheres is as deep in both.
+A patch's support along n extends over the plane through it, so a chip between two
+patches of a flat body is held by whichever sphere sees it: no hole opens between them.
+
+The normal is the candidate with the largest gap (the least penetration, as in the
+separating-axis test): B's patch normal, A's patch normal reversed, and the line between
+the sphere centres when neither patch has a normal (a patch facing every way, such as a
+one-tet chip's, has none). A pair of patches that both have normals, or neither, keeps
+the spheres' contact (``by_patches``). Against the ground
+the normal is +Z; against a static box it is the sphere's (out of the box at the point
+of the box nearest the sphere's centre, where the box's support along it is that point).
+
+A sphere without a patch (``point_count`` 0) is its own surface: its support along n is
+its centre's less its radius, so a sphere body meets a patch body consistently.
+"""
+
+import taichi as ti
+
+vec3 = ti.math.vec3
+
+#: A patch gap deeper than this fraction of the larger sphere's radius is not trusted: the
+#: narrowphase keeps the spheres' contact instead (``narrowphase._test_pair``). Speculative
+#: contacts keep real penetrations shallow; so deep a gap is a patch seen from behind (a
+#: sphere on the far face of a body thinner than it, reaching through to a chip on the
+#: near face), whose normal would push the chip through. The solver's own deep-overlap
+#: rule (``solver.DEEP_OVERLAP``) has the same bound.
+TRUSTED_DEPTH = 0.5
+
+#: Points within this fraction of the sphere's radius of a patch's deepest point share the
+#: contact: the contact point is their mean (a flat patch resting on a plane touches at its
+#: middle, not at whichever corner comes first).
+SUPPORT_BAND = 0.1
+
+
+@ti.func
+def lowest(particles: ti.template(), p, axis):
+    """min over sphere ``p``'s patch points of point . ``axis`` (body frame) [m]; the
+    sphere's own (centre . axis - radius) when it has no patch."""
+    low = lowest3(particles, p, ti.Matrix.rows([axis, axis, axis]))
+    return low[0]
+
+
+@ti.func
+def lowest3(particles: ti.template(), p, axes):
+    """``lowest`` along each row of ``axes`` (mat3, body frame) at once: vec3 [m] (one
+    pass over the points; the narrowphase's candidate normals share it)."""
+    count = particles.point_count[p]
+    reach = vec3(0.0)
+    for r in ti.static(range(3)):
+        reach[r] = ti.sqrt(axes[r, 0] ** 2 + axes[r, 1] ** 2 + axes[r, 2] ** 2)
+    low = axes @ particles.offset[p] - particles.radius[p] * reach
+    if count > 0:
+        low = vec3(1e30)
+        start = particles.point_start[p]
+        for k in range(start, start + count):
+            low = ti.min(low, axes @ particles.surface_point[k])
+    return low
+
+
+@ti.func
+def contact_spot(particles: ti.template(), p, axis, low):
+    """Body-frame mean of sphere ``p``'s patch points within ``SUPPORT_BAND`` of its radius
+    of the lowest level ``low`` along ``axis`` (the sphere's lowest point when it has no
+    patch)."""
+    count = particles.point_count[p]
+    spot = particles.offset[p] - particles.radius[p] * axis
+    if count > 0:
+        band = low + SUPPORT_BAND * particles.radius[p]
+        total = vec3(0.0)
+        weight = 0.0
+        start = particles.point_start[p]
+        for k in range(start, start + count):
+            x = particles.surface_point[k]
+            if x.dot(axis) <= band:
+                total += x
+                weight += 1.0
+        spot = total / weight
+    return spot
+
+
+@ti.func
+def pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centre_line):
+    """The contact of sphere ``i`` of body ``a`` with sphere ``j`` of body ``o``: (normal
+    from o into a (world, unit), gap [m] (< 0: penetration), a's contact spot, o's contact
+    spot (world [m])). ``centre_line``: unit world direction from j's centre to i's."""
+    rot_a = bodies.rotation[a]
+    rot_o = bodies.rotation[o]
+    x_a = bodies.position[a]
+    x_o = bodies.position[o]
+    normal_i = rot_a @ particles.patch_normal[i]
+    normal_j = rot_o @ particles.patch_normal[j]
+    has_i = normal_i.norm_sqr() > 0.25
+    has_j = normal_j.norm_sqr() > 0.25
+    # Rows: the candidate normals (world): the centre line, j's normal, i's reversed. The
+    # centre line only when neither patch has a normal: a patch is backed by its body,
+    # and an oblique line past its rim would let a chip that sank into it out sideways.
+    usable = vec3(0.0)
+    if not has_i and not has_j:
+        usable[0] = 1.0
+    candidates = ti.Matrix.rows([centre_line, normal_j, -normal_i])
+    if has_j:
+        usable[1] = 1.0
+    if has_i:
+        usable[2] = 1.0
+    low_a = lowest3(particles, i, candidates @ rot_a)
+    low_o = lowest3(particles, j, -(candidates @ rot_o))
+    gaps = candidates @ (x_a - x_o) + low_a + low_o
+    best = 0
+    best_gap = -1e30
+    for c in range(3):
+        if usable[c] > 0.0 and gaps[c] > best_gap:
+            best_gap = gaps[c]
+            best = c
+    n = vec3(candidates[best, 0], candidates[best, 1], candidates[best, 2])
+    spot_a = x_a + rot_a @ contact_spot(particles, i, rot_a.transpose() @ n, low_a[best])
+    spot_o = x_o + rot_o @ contact_spot(particles, j, -(rot_o.transpose() @ n), low_o[best])
+    return n, best_gap, spot_a, spot_o
+
+
+@ti.func
+def by_patches(particles: ti.template(), i, j):
+    """Whether the contact of spheres ``i`` and ``j`` comes from their patches: exactly
+    one of the two has a normal (a chip, or a patch folded round a small piece, on a
+    body's face). Two patches with normals (two curved bodies' surfaces) keep the
+    spheres' contact: the support gap along either normal, or along the centre line,
+    under-measures curved patches that do not face each other squarely, and each such
+    pair pushed the bodies apart (five stacked rings stood 6.7 mm apart each and drifted
+    17 mm in 10 s). Two without (two small pieces) keep it too: along the centre line
+    alone their hulls' gap jumped as they turned, and a pile of small blocks never
+    slept."""
+    has_patch = particles.point_count[i] > 0 or particles.point_count[j] > 0
+    normals = ti.cast(particles.patch_normal[i].norm_sqr() > 0.25, ti.i32) + ti.cast(
+        particles.patch_normal[j].norm_sqr() > 0.25, ti.i32)
+    return has_patch and normals == 1
+
+
+@ti.func
+def against(bodies: ti.template(), particles: ti.template(), a, i, n, level):
+    """Sphere ``i`` of body ``a`` against a static collider whose support along the world
+    normal ``n`` (out of the collider, into a) is ``level`` [m]: (gap [m], a's contact
+    spot (world [m]))."""
+    rot_a = bodies.rotation[a]
+    axis = rot_a.transpose() @ n
+    low = lowest(particles, i, axis)
+    spot = bodies.position[a] + rot_a @ contact_spot(particles, i, axis, low)
+    return bodies.position[a].dot(n) + low - level, spot
