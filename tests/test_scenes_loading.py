@@ -39,7 +39,7 @@ def test_single_ring_scene_matches_the_paper():
     (ring,) = scene.objects
     assert ring.primitive == "torus:major=0.1,minor=0.025" and ring.breakable
     # Porcelain, with the effective strength the scene documents (see its header comment).
-    assert ring.material == dataclasses.replace(MATERIAL_PRESETS["porcelain"], tensile_strength=6.0e6)
+    assert ring.material == dataclasses.replace(MATERIAL_PRESETS["porcelain"], tensile_strength=40.0e6)
     assert ring.position[2] == pytest.approx(1.0)
     assert ring.particles.target_particles == 5000
     assert scene.colliders[0].type == "ground" and scene.colliders[0].height == 0.0

@@ -88,8 +88,8 @@ def default_cases() -> list[SceneCase]:
     glass_scene, rings_scene = load_scene(glass), load_scene(rings)
     return [
         SceneCase("single ring, control 1", load_scene(ring, ["ring.fracture.crack_count=1"]), note="crack_count 1"),
-        SceneCase("single ring, control 2", load_scene(ring, ["ring.fracture.crack_count=2"]), note="crack_count 2"),
-        SceneCase("single ring, control 3", load_scene(ring, ["ring.fracture.crack_count=4"]), note="crack_count 4"),
+        SceneCase("single ring, control 2", load_scene(ring, ["ring.fracture.crack_count=3"]), note="crack_count 3"),
+        SceneCase("single ring, control 3", load_scene(ring, ["ring.fracture.crack_count=5"]), note="crack_count 5"),
         SceneCase("3 glass walls", glass_scene, timed=True, target_ms=20.0, variants=(
             *[(f"{SCENE_ROW}, seeds + {k}", load_scene(glass, other_seeds(glass_scene, k))) for k in GLASS_SEED_SHIFTS],
             ("crack_count 4, 3, 2 and two rings (the scene: 8, 7, 6 and three)", load_scene(glass, GLASS_FEWER_CRACKS)),
