@@ -26,10 +26,13 @@ import taichi_frac_blender  # noqa: E402
 
 def render_last_frame(cache: str, png: str, width: int, height: int, samples: int) -> None:
     bpy.ops.wm.read_factory_settings(use_empty=True)
+    if not hasattr(bpy.types.Object, "taichi_frac"):  # (the add-on's properties, once a process)
+        taichi_frac_blender.register()
     collection = taichi_frac_blender.import_cache(bpy.context, cache)
     scene = bpy.context.scene
     frame = scene.frame_end
-    low, high = render_cache.visible_bounds(list(collection.objects), [frame])
+    low, high = render_cache.framed_box(list(collection.all_objects), [frame])
+    render_cache.transmissive_glass(bpy.data.materials)
     render_cache.setup_stage(low, high, width, height, samples)
     scene.frame_set(frame)
     Path(png).parent.mkdir(parents=True, exist_ok=True)
