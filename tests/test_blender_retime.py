@@ -128,12 +128,13 @@ def test_preview_surface_inputs_read_as_authored(tmp_path):
     """Only the inputs a shader authors are read (None elsewhere: Blender keeps its default)."""
     path = tmp_path / "glass.usda"
     variants.write(path, [variants.Piece("pane", 0)], 24.0, 2)
-    variants.set_preview_inputs(path, "outer", opacity=0.1, opacityThreshold=0.0, ior=1.52)
+    variants.set_preview_inputs(path, "pane/outer", opacity=0.1, opacityThreshold=0.0, ior=1.52)
+    variants.clear_preview_inputs(path, "pane/inner", "opacity", "opacityThreshold", "ior")
     materials = {m.name: m for m in reader.read_cache(path).materials}
-    outer = materials["outer"]
+    outer = materials["pane_outer"]
     assert (outer.opacity, outer.opacity_threshold, outer.ior) == pytest.approx((0.1, 0.0, 1.52))
     assert outer.base_color == pytest.approx((0.80, 0.78, 0.72)) and outer.roughness == pytest.approx(0.30)
-    inner = materials["inner"]
+    inner = materials["pane_inner"]
     assert (inner.opacity, inner.opacity_threshold, inner.ior) == (None, None, None)
 
 

@@ -78,6 +78,16 @@ def set_preview_inputs(path, material: str, **inputs) -> None:
     stage.GetRootLayer().Save()
 
 
+def clear_preview_inputs(path, material: str, *names: str) -> None:
+    """Remove UsdPreviewSurface inputs from a cache's material ``material`` (as
+    ``set_preview_inputs`` names it), as a writer that authors fewer inputs would leave it."""
+    stage = Usd.Stage.Open(str(path))
+    shader = stage.GetPrimAtPath(f"{schema.MATERIALS_SCOPE}/{material}/PreviewSurface")
+    for name in names:
+        shader.RemoveProperty(f"inputs:{name}")
+    stage.GetRootLayer().Save()
+
+
 def set_schema_version(path, version: int) -> None:
     layer = Sdf.Layer.FindOrOpen(str(path))
     data = dict(layer.customLayerData)
