@@ -132,6 +132,11 @@ def _manifold_union(shells: list[tuple[np.ndarray, np.ndarray]]):
     if not solids:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
     union = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add) if len(solids) > 1 else solids[0]
+    # Cuts along nearly parallel faces and vertices 1e-7 apart (float32 exports) leave
+    # zero-area slivers; collapsing edges shorter than 1e-6 of the size removes them without
+    # moving anything visible.
+    box = np.asarray(union.bounding_box())
+    union = union.simplify(1e-6 * float(np.linalg.norm(box[3:] - box[:3])))
     out = union.to_mesh64()
     return np.asarray(out.vert_properties, dtype=np.float64)[:, :3], np.asarray(out.tri_verts, dtype=np.int64)
 
@@ -185,8 +190,36 @@ def _groups(label: np.ndarray, count: int) -> list[np.ndarray]:
     return [order[bounds[k]:bounds[k + 1]] for k in range(count)]
 
 
+#: Vertices closer than this fraction of the bounding-box diagonal are one vertex (float32
+#: exports leave copies ~1e-8 apart that make zero-area faces).
+WELD_FRACTION = 1e-7
+
+
+def weld_close_vertices(vertices: np.ndarray, faces: np.ndarray, distance: float) -> tuple[np.ndarray, int]:
+    """Faces (F,3) with vertices closer than ``distance`` [m] merged into one; and how many
+    vertices were merged away."""
+    import scipy.sparse as sp
+    import scipy.sparse.csgraph as csgraph
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(vertices).query_pairs(distance, output_type="ndarray")
+    if len(pairs) == 0:
+        return faces, 0
+    n = len(vertices)
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    count, label = csgraph.connected_components(graph, directed=False)
+    first = np.full(count, n, dtype=np.int64)
+    np.minimum.at(first, label, np.arange(n))
+    return first[label][faces], n - count
+
+
 def _clean(mesh: trimesh.Trimesh, report: RepairReport) -> trimesh.Trimesh:
     mesh = trimesh.Trimesh(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces), process=True)
+    faces, welded = weld_close_vertices(mesh.vertices, mesh.faces, WELD_FRACTION * float(np.linalg.norm(mesh.extents)))
+    if welded:
+        mesh = trimesh.Trimesh(mesh.vertices, faces, process=False)
+        mesh.remove_unreferenced_vertices()
+        report.add(f"welded {welded} vertices closer than {WELD_FRACTION:g} of the size to a neighbour")
     bad = degenerate_faces(mesh)
     if len(bad):
         mesh.update_faces(np.setdiff1d(np.arange(len(mesh.faces)), bad))
@@ -296,6 +329,21 @@ def repair_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, clock: StepCloc
         result = trimesh.Trimesh()
     if len(result.faces) and result.is_watertight and result.volume < 0:
         result.invert()
+    if len(result.faces) and len(degenerate_faces(result)):
+        # Zero-area slivers where the union cut a face next to a vertex: weld the vertices
+        # that close together (collapsing the slivers), MeshFix if that leaves it open.
+        slivers = len(degenerate_faces(result))
+        faces, _ = weld_close_vertices(result.vertices, result.faces,
+                                       WELD_FRACTION * float(np.linalg.norm(result.extents)))
+        welded = trimesh.Trimesh(result.vertices, faces, process=False)
+        welded.update_faces(np.setdiff1d(np.arange(len(welded.faces)), degenerate_faces(welded)))
+        welded.update_faces(welded.unique_faces())
+        welded.remove_unreferenced_vertices()
+        if not _is_closed(welded) or len(degenerate_faces(welded)):
+            v, f = clock.run("remove slivers (pymeshfix)", _meshfix, welded.vertices, welded.faces)
+            welded = trimesh.Trimesh(v, f, process=True)
+        result = welded
+        report.add(f"removed {slivers} zero-area slivers of the union")
     if len(result.faces) and result.body_count > 1:
         result = _drop_crumbs(result, report)
     if fixed_count or len(shells) > 1:
