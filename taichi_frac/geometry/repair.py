@@ -73,8 +73,9 @@ def _is_closed(mesh: trimesh.Trimesh) -> bool:
 
 
 def shell_labels(faces: np.ndarray) -> tuple[int, np.ndarray]:
-    """Shells of a face set: faces joined by a shared edge (any number of faces on it).
-    Returns (count, label (F,) int)."""
+    """Shells of a face set: faces joined across edges that exactly two faces share. A
+    non-manifold edge (a fin on a box, parts glued along an edge) separates shells, so
+    each can be closed on its own. Returns (count, label (F,) int)."""
     import scipy.sparse as sp
     import scipy.sparse.csgraph as csgraph
 
@@ -82,16 +83,16 @@ def shell_labels(faces: np.ndarray) -> tuple[int, np.ndarray]:
     count = len(faces)
     if count == 0:
         return 0, np.zeros(0, dtype=np.int64)
-    # Faces and edges as one bipartite graph: a face is joined to its three edges.
     e = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     base = int(e.max()) + 1
-    _, edge_id = np.unique(e[:, 0] * base + e[:, 1], return_inverse=True)
-    rows = np.repeat(np.arange(count), 3)
-    graph = sp.coo_matrix((np.ones(len(rows)), (rows, count + edge_id)), shape=(count + edge_id.max() + 1,) * 2)
+    _, edge_id, uses = np.unique(e[:, 0] * base + e[:, 1], return_inverse=True, return_counts=True)
+    owner = np.repeat(np.arange(count), 3)
+    manifold = uses[edge_id] == 2
+    order = np.argsort(edge_id[manifold], kind="stable")
+    pairs = owner[manifold][order].reshape(-1, 2)  # the two faces of each manifold edge
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
     n, label = csgraph.connected_components(graph, directed=False)
-    face_label = label[:count]
-    _, face_label = np.unique(face_label, return_inverse=True)
-    return int(face_label.max()) + 1, face_label
+    return int(n), label
 
 
 def _orient_outward(shell: trimesh.Trimesh) -> trimesh.Trimesh:
@@ -117,17 +118,15 @@ def _meshfix(vertices: np.ndarray, faces: np.ndarray):
 
 def _manifold_union(shells: list[tuple[np.ndarray, np.ndarray]]):
     """Exact union (manifold3d, float64) of closed outward shells [(vertices, faces)].
-    Returns (vertices, faces) or raises MeshError naming a shell manifold3d refuses."""
+    Returns (vertices, faces)."""
     import manifold3d
 
     solids = []
-    for index, (v, f) in enumerate(shells):
+    for v, f in shells:
         m = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.ascontiguousarray(v, dtype=np.float64),
                                                   tri_verts=np.ascontiguousarray(f, dtype=np.uint64)))
-        if m.status() != manifold3d.Error.NoError:
-            raise MeshError(f"shell {index} ({len(f)} faces) is not a closed manifold after closing "
-                            f"({m.status()})")
-        if not m.is_empty():
+        # A shell manifold3d refuses is left out; the kept-volume measure reports the loss.
+        if m.status() == manifold3d.Error.NoError and not m.is_empty():
             solids.append(m)
     if not solids:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
@@ -309,10 +308,12 @@ def repair_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, clock: StepCloc
             pieces = [cut.submesh([g], append=True, repair=False) for g in _groups(piece_label, piece_count)]
         for piece in pieces:
             v, f = clock.run("close shells (pymeshfix)", _meshfix, piece.vertices, piece.faces)
-            if len(f):
-                closed = trimesh.Trimesh(v, f, process=True)
-                if closed.is_watertight and closed.volume < 0:
-                    closed.invert()
+            closed = trimesh.Trimesh(v, f, process=True)
+            if len(closed.faces) and closed.is_watertight and closed.volume < 0:
+                closed.invert()
+            # A sheet with no inside (a fin, a single face) closes to nothing: the kept-volume
+            # measure below says whether anything with an inside went missing.
+            if len(closed.faces) and _is_closed(closed) and closed.volume > 0:
                 shells.append((np.asarray(closed.vertices), np.asarray(closed.faces)))
         fixed_count += 1
     if flipped:
