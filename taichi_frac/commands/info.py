@@ -63,7 +63,9 @@ def _table(report) -> str:
         ("physics surface particles", f"{report.surface_particles:,}"),
         ("boundary particles", f"{report.boundary_particles:,}"
          + (f" ({report.dropped_surface_particles} surface particles dropped)" if report.dropped_surface_particles else "")),
-        ("surface triangles in", "n/a (tet mesh)" if report.surface_triangles < 0 else f"{report.surface_triangles:,}"),
+        ("surface triangles in", "n/a (tet mesh)" if report.surface_triangles < 0 else f"{report.surface_triangles:,}"
+         + (f" (tets fill a copy of {report.tet_surface_triangles:,})"
+            if report.tet_surface_triangles not in (-1, report.surface_triangles) else "")),
         ("volume", f"{report.tet_volume:.6g} m^3 (surface {report.surface_volume:.6g} m^3, error {report.volume_error:+.2e})"),
         ("min dihedral angle", f"{report.min_dihedral_deg:.2f} deg ({report.sliver_count} tets below 5 deg)"),
         ("mass", f"{report.mass:.6g} kg"),
@@ -73,6 +75,12 @@ def _table(report) -> str:
         ("time", f"load {t.get('load', 0):.2f} s, mesh {t.get('mesh', 0):.2f} s, model {t.get('model', 0):.2f} s, "
                  f"total {t.get('total', 0):.2f} s"),
     ]
+    if report.kept_volume_fraction is not None:
+        rows.append(("kept of the input", f"{100 * report.kept_volume_fraction:.1f} % of its winding-number volume "
+                                          f"({report.input_volume:.6g} m^3)"))
+    if report.input_extents and report.tet_extents:
+        ratio = ", ".join(f"{t / i:.3f}" if i > 0 else "-" for t, i in zip(report.tet_extents, report.input_extents))
+        rows.append(("extents kept (x, y, z)", ratio))
     if report.repair_steps:
         rows.append(("repair", "; ".join(report.repair_steps)))
     width = max(len(k) for k, _ in rows)

@@ -156,6 +156,59 @@ def _cached_tetrahedralize(mesh, *, backend, target, max_volume, min_dihedral, u
     return tm, False
 
 
+def _cleaned_copy(copy: trimesh.Trimesh, clock: StepClock):
+    """``copy`` through MeshFix (degenerate spots, crossings), or None if that loses more
+    than 0.5 % of its volume or leaves it open."""
+    from .repair import _meshfix
+
+    v, f = clock.run("clean copy (pymeshfix)", _meshfix, copy.vertices, copy.faces)
+    cleaned = trimesh.Trimesh(v, f, process=True)
+    if not (cleaned.is_watertight and cleaned.is_winding_consistent) or abs(cleaned.volume / copy.volume - 1) > 0.005:
+        return None
+    return cleaned
+
+
+def _mesh_simplified(surface, count: int, clock: StepClock, kwargs: dict):
+    """Tets of the simplified copies of ``surface`` (``simplify.simplified_tet_surfaces``),
+    keeping the copy whose count is nearest ``count``. Returns (tet surface, TetMesh or None,
+    cache_hit, report line or None); (surface, None, False, ...) when no copy applies or the
+    mesher refused them all (the caller then meshes the full surface)."""
+    copies = simplified_tet_surfaces(surface, count, clock)
+    best, failed, tets, started = None, None, None, False
+    while True:
+        try:
+            copy, step = copies.send(tets) if started else next(copies)
+            started = True
+        except StopIteration:
+            break
+        try:
+            candidate, hit = _cached_tetrahedralize(copy, **kwargs)
+        except MeshError as exc:
+            if "ran out of time" in str(exc):
+                raise
+            # TetGen refuses some copies (near-degenerate spots): MeshFix cleans them, and if
+            # TetGen still refuses, a coarser copy is tried.
+            copy = _cleaned_copy(copy, clock)
+            try:
+                candidate, hit = _cached_tetrahedralize(copy, **kwargs) if copy is not None else (None, False)
+            except MeshError as again:
+                if "ran out of time" in str(again):
+                    raise
+                candidate = None
+            if candidate is None:
+                failed, tets = str(exc), 10 * count
+                continue
+            step += "; cleaned by pymeshfix for the mesher"
+        if best is None or abs(candidate.tet_count / count - 1) < abs(best[1].tet_count / count - 1):
+            best = (copy, candidate, hit, step)
+        tets = candidate.tet_count
+    if best is not None:
+        return best
+    if failed is not None:
+        return surface, None, False, f"meshed the full-resolution surface: the mesher refused the simplified copy ({failed})"
+    return surface, None, False, None
+
+
 def prepare_body(
     source,
     *,
@@ -233,20 +286,9 @@ def prepare_body(
         if simplify and not is_primitive:
             # The tets' spacing: the target count, or the count a volume bound asks for.
             count = target if target is not None else max(int(surface.volume / max_volume), 1)
-            copies = simplified_tet_surfaces(surface, count, clock)
-            tets = None
-            while True:
-                try:
-                    copy, step = copies.send(tets) if tm is not None else next(copies)
-                except StopIteration:
-                    break
-                candidate, hit = _cached_tetrahedralize(copy, **kwargs)
-                if tm is None or abs(candidate.tet_count / count - 1) < abs(tm.tet_count / count - 1):
-                    tet_surface, tm, cache_hit, chosen = copy, candidate, hit, step
-                tets = candidate.tet_count
-            if tm is not None:
-                repair_steps.append(chosen)
-        timings["simplify"] = time.perf_counter() - t1
+            tet_surface, tm, cache_hit, step = _mesh_simplified(surface, count, clock, kwargs)
+            if step:
+                repair_steps.append(step)
         if tm is None:
             tm, cache_hit = _cached_tetrahedralize(surface, **kwargs)
         timings["mesh"] = time.perf_counter() - t1
@@ -291,5 +333,6 @@ def prepare_body(
         input_extents=(list(repair_report.input_extents) if repair_report is not None and repair_report.input_extents
                        else (surface.extents.tolist() if surface is not None else extents.tolist())),
         tet_extents=extents.tolist(),
+        surface_closed=surface is None or bool(surface.is_watertight and surface.is_winding_consistent),
     )
     return model, report

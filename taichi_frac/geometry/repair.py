@@ -33,7 +33,7 @@ import numpy as np
 import trimesh
 
 from .bounded import StepClock
-from .validate import MeshError, _edges, degenerate_faces, self_intersections
+from .validate import MeshError, _edges, degenerate_faces, self_intersections, shell_labels
 
 #: Below this fraction of the input's winding-number volume kept, repair is an error.
 MIN_KEPT_FRACTION = 0.95
@@ -70,29 +70,6 @@ class RepairReport:
 
 def _is_closed(mesh: trimesh.Trimesh) -> bool:
     return bool(mesh.is_watertight and mesh.is_winding_consistent)
-
-
-def shell_labels(faces: np.ndarray) -> tuple[int, np.ndarray]:
-    """Shells of a face set: faces joined across edges that exactly two faces share. A
-    non-manifold edge (a fin on a box, parts glued along an edge) separates shells, so
-    each can be closed on its own. Returns (count, label (F,) int)."""
-    import scipy.sparse as sp
-    import scipy.sparse.csgraph as csgraph
-
-    faces = np.asarray(faces, dtype=np.int64)
-    count = len(faces)
-    if count == 0:
-        return 0, np.zeros(0, dtype=np.int64)
-    e = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    base = int(e.max()) + 1
-    _, edge_id, uses = np.unique(e[:, 0] * base + e[:, 1], return_inverse=True, return_counts=True)
-    owner = np.repeat(np.arange(count), 3)
-    manifold = uses[edge_id] == 2
-    order = np.argsort(edge_id[manifold], kind="stable")
-    pairs = owner[manifold][order].reshape(-1, 2)  # the two faces of each manifold edge
-    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
-    n, label = csgraph.connected_components(graph, directed=False)
-    return int(n), label
 
 
 def _orient_outward(shell: trimesh.Trimesh) -> trimesh.Trimesh:

@@ -169,9 +169,9 @@ def simplified_tet_surfaces(mesh: trimesh.Trimesh, target_particles: int, clock=
                                f"{len(copy[0].faces):,} faces (quadric decimation, {copy[1]})")
         if tets is None or tets <= 1.15 * target_particles:
             return
-        count = int(len(copy[0].faces) * (target_particles / tets) ** (2 / 3) * 0.95)
-        if count < MIN_FACES:
+        if len(copy[0].faces) <= MIN_FACES * 1.05:
             return
+        count = max(int(len(copy[0].faces) * (target_particles / tets) ** (2 / 3) * 0.95), MIN_FACES)
 
 
 def simplify_for_target(mesh: trimesh.Trimesh, target_particles: int, clock=None):

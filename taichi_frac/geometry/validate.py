@@ -49,6 +49,26 @@ def degenerate_faces(mesh: trimesh.Trimesh) -> np.ndarray:
     return np.nonzero(repeated | tiny)[0]
 
 
+def shell_labels(faces: np.ndarray) -> tuple[int, np.ndarray]:
+    """Shells of a face set: faces joined across edges that exactly two faces share. A
+    non-manifold edge (a fin on a box, parts glued along an edge) separates shells, so
+    each can be closed on its own. Returns (count, label (F,) int)."""
+    faces = np.asarray(faces, dtype=np.int64)
+    count = len(faces)
+    if count == 0:
+        return 0, np.zeros(0, dtype=np.int64)
+    e = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    base = int(e.max()) + 1
+    _, edge_id, uses = np.unique(e[:, 0] * base + e[:, 1], return_inverse=True, return_counts=True)
+    owner = np.repeat(np.arange(count), 3)
+    manifold = uses[edge_id] == 2
+    order = np.argsort(edge_id[manifold], kind="stable")
+    pairs = owner[manifold][order].reshape(-1, 2)  # the two faces of each manifold edge
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
+    n, label = csgraph.connected_components(graph, directed=False)
+    return int(n), label
+
+
 def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Pairs (K,2) of faces that cross each other (an edge of one passes through the other),
     i < j. Faces sharing a vertex are skipped and coplanar overlaps are not detected; any
@@ -84,10 +104,11 @@ def validate_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, allow_multipl
     if nonmanifold:
         raise MeshError(f"{label} is not manifold: {nonmanifold} edges are shared by more than two faces; "
                         f"{REPAIR_HINT}")
-    if not mesh.is_winding_consistent:
-        # Count faces whose winding disagrees with a neighbour: directed edges used twice.
-        directed = mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-        _, dcounts = np.unique(directed, axis=0, return_counts=True)
+    # Closed and manifold: consistent winding means every directed edge is used once (a
+    # flipped face traverses an edge in the same direction as its neighbour).
+    directed = np.asarray(mesh.faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    _, dcounts = np.unique(directed[:, 0] * (int(directed.max()) + 1) + directed[:, 1], return_counts=True)
+    if np.any(dcounts > 1):
         raise MeshError(f"{label} has inconsistent winding: {int(np.sum(dcounts > 1))} edges are traversed in "
                         "the same direction by both of their faces (some faces are flipped); "
                         f"{REPAIR_HINT} (trimesh.repair.fix_winding also fixes this)")
@@ -97,12 +118,12 @@ def validate_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, allow_multipl
             n_faces = len(np.unique(hits))
             raise MeshError(f"{label} self-intersects: {len(hits)} crossing face pairs ({n_faces} faces), e.g. "
                             f"faces {int(hits[0, 0])} and {int(hits[0, 1])}; {REPAIR_HINT}")
-    shells = mesh.body_count
+    shells, shell_of_face = shell_labels(mesh.faces)
     if shells > 1 and not allow_multiple_shells:
-        parts = sorted((len(p.faces) for p in mesh.split(only_watertight=False)), reverse=True)
+        parts = sorted(np.bincount(shell_of_face).tolist(), reverse=True)
         raise MeshError(f"{label} has {shells} disconnected shells (faces per shell: "
                         f"{', '.join(map(str, parts[:8]))}{', ...' if len(parts) > 8 else ''}); "
-                        "make one scene object per shell, or pass repair=True to keep the largest")
+                        "make one scene object per shell, or pass repair=True to unite overlapping shells")
     volume = float(mesh.volume)
     if volume <= 0:
         raise MeshError(f"{label} is inverted: enclosed volume {volume:.6g} m^3 is negative (normals point "
