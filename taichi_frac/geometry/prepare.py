@@ -111,11 +111,12 @@ def _surface_from_source(source, factor: float, repair: bool, edge_length_for, c
 
 
 def _cache_key(mesh: trimesh.Trimesh, backend: str, target: int | None, max_volume: float | None,
-               min_dihedral: float) -> str:
+               min_dihedral: float, relax_quality: bool = False) -> str:
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes())
     h.update(np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes())
-    h.update(repr((CACHE_VERSION, backend, target, max_volume, float(min_dihedral))).encode())
+    settings = (CACHE_VERSION, backend, target, max_volume, float(min_dihedral))
+    h.update(repr(settings + ((True,) if relax_quality else ())).encode())
     return h.hexdigest()
 
 
@@ -127,9 +128,10 @@ def _cache_root() -> Path:
     return runtime.cache_dir()
 
 
-def _cached_tetrahedralize(mesh, *, backend, target, max_volume, min_dihedral, use_cache, clock=None):
+def _cached_tetrahedralize(mesh, *, backend, target, max_volume, min_dihedral, use_cache, clock=None,
+                           relax_quality=False):
     """Returns (TetMesh, cache_hit); the mesher runs under ``clock``'s bound when given."""
-    key = _cache_key(mesh, backend, target, max_volume, min_dihedral)
+    key = _cache_key(mesh, backend, target, max_volume, min_dihedral, relax_quality)
     path = _cache_root() / "tets" / f"{key}.npz"
     if use_cache and path.exists():
         try:
@@ -143,7 +145,8 @@ def _cached_tetrahedralize(mesh, *, backend, target, max_volume, min_dihedral, u
                 ), True
         except (OSError, KeyError, ValueError):
             pass  # a corrupt or old entry: re-mesh and overwrite it
-    kwargs = dict(target_tets=target, max_volume=max_volume, backend=backend, min_dihedral_deg=min_dihedral)
+    kwargs = dict(target_tets=target, max_volume=max_volume, backend=backend, min_dihedral_deg=min_dihedral,
+                  relax_quality=relax_quality)
     tm = (clock.run(f"tetrahedralize ({backend})", tetrahedralize, mesh, **kwargs) if clock is not None
           else tetrahedralize(mesh, **kwargs))
     if use_cache:
@@ -174,6 +177,7 @@ def _mesh_simplified(surface, count: int, clock: StepClock, kwargs: dict):
     cache_hit, report line or None); (surface, None, False, ...) when no copy applies or the
     mesher refused them all (the caller then meshes the full surface)."""
     copies = simplified_tet_surfaces(surface, count, clock)
+    kwargs = dict(kwargs, relax_quality=True)  # a copy's count matters more than its last degree
     best, failed, tets, started = None, None, None, False
     while True:
         try:

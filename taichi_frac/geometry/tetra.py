@@ -151,6 +151,7 @@ def tetrahedralize(
     min_dihedral_deg: float = 10.0,
     tolerance: float = 0.1,
     count_tolerance: float = 0.15,
+    relax_quality: bool = False,
 ) -> TetMesh:
     """Fill the closed surface ``mesh`` [m] with tets.
 
@@ -158,9 +159,10 @@ def tetrahedralize(
     it) or ``max_volume`` [m^3] (handed to the mesher as is; tetgen's final optimisation
     may leave under 1 % of the tets up to ~15 % above it), or neither (the mesher's coarsest quality
     mesh). ``min_dihedral_deg`` is the quality bound handed to the mesher; the result
-    reports the angle actually reached. Where TetGen's quality bound keeps the count above
-    ``count_tolerance`` over the target (short surface features, thin parts), it re-meshes with
-    the looser bounds of :data:`_TETGEN_RELAXED_QUALITY` until the count fits.
+    reports the angle actually reached. With ``relax_quality``, where TetGen's quality bound
+    keeps the count above ``count_tolerance`` over the target (short surface features, thin
+    parts), it re-meshes with the looser bounds of :data:`_TETGEN_RELAXED_QUALITY` until the
+    count fits (used for simplified copies of artists' meshes; primitives keep the bound).
     """
     if backend not in BACKENDS:
         raise MeshError(f"unknown mesher backend {backend!r}: use one of {', '.join(BACKENDS)}")
@@ -197,7 +199,7 @@ def tetrahedralize(
             v2, t2 = mesh_once(retry_bound)
             if abs(len(t2) / target_tets - 1.0) < abs(miss - 1.0):
                 v, t, bound = v2, t2, retry_bound
-        if backend == "tetgen" and len(t) > (1.0 + count_tolerance) * target_tets:
+        if relax_quality and backend == "tetgen" and len(t) > (1.0 + count_tolerance) * target_tets:
             # The quality bound forces small tets along short surface features or thin parts
             # whatever the volume bound: trade quality for the count, reported as the min
             # dihedral angle and the sliver count.
