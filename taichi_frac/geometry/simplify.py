@@ -111,12 +111,12 @@ def simplify_to_faces(mesh: trimesh.Trimesh, face_count: int, clock=None, refere
     relaxed, with ``reference_volume`` (default: the mesh's) [m^3], or None.
 
     Returns (copy, how) or None. A copy that comes out open, self-crossing or off in volume
-    is retried with 1.5x the triangles, up to four times; if all fail, None (the mesher then
+    is retried with 1.15x the triangles, up to six times; if all fail, None (the mesher then
     gets the full surface and the count follows the surface, as the report will show).
     """
     volume = float(mesh.volume if reference_volume is None else reference_volume)
     count = max(int(face_count), MIN_FACES)
-    for _ in range(4):
+    for _ in range(6):
         if count >= len(mesh.faces):
             return None
         if clock is not None:
@@ -137,7 +137,7 @@ def simplify_to_faces(mesh: trimesh.Trimesh, face_count: int, clock=None, refere
                     continue
                 if len(self_intersections(candidate.vertices, candidate.faces)) == 0:
                     return candidate, how
-        count = int(count * 1.5)
+        count = int(count * 1.15)  # (the decimator's output is open at some counts, not at others)
     return None
 
 
@@ -163,6 +163,8 @@ def simplified_tet_surfaces(mesh: trimesh.Trimesh, target_particles: int, clock=
     count = wanted
     for _ in range(2):
         copy = simplify_to_faces(source, count, clock, reference_volume=volume)
+        if copy is None and source is not mesh:
+            copy = simplify_to_faces(mesh, count, clock)
         if copy is None:
             return
         tets = yield copy[0], (f"tetrahedralized a copy simplified to the particle spacing: {len(mesh.faces):,} -> "
