@@ -29,8 +29,9 @@ from .validate import self_intersections
 #: A surface triangle of the tet mesh is this many times the edge of a regular tet of the
 #: target particle volume (the same factor that makes primitives land on the target).
 EDGE_FACTOR = 1.3
-#: Simplify when the surface has more than this many times the triangles the target needs.
-FINER_FACTOR = 1.5
+#: Simplify when the surface has more than this many times the triangles the target needs
+#: (thin parts can need fewer than that count: the copies then get coarser, see below).
+FINER_FACTOR = 1.0
 #: A simplified copy's volume may differ from the input's by this fraction at most.
 VOLUME_TOLERANCE = 0.005
 #: Fewest triangles a simplified copy keeps (a coarser copy loses the shape, not just detail).
@@ -137,8 +138,25 @@ def simplify_to_faces(mesh: trimesh.Trimesh, face_count: int, clock=None, refere
                     continue
                 if len(self_intersections(candidate.vertices, candidate.faces)) == 0:
                     return candidate, how
+            # Thin parts (legs, ears) decimated into each other: MeshFix removes the crossings.
+            cleaned = _meshfix_copy(restore_volume(relaxed, volume), clock)
+            if cleaned is not None and abs(cleaned.volume / volume - 1.0) < 0.05:
+                cleaned = restore_volume(cleaned, volume)
+                if (abs(cleaned.volume / volume - 1.0) <= VOLUME_TOLERANCE
+                        and len(self_intersections(cleaned.vertices, cleaned.faces)) == 0):
+                    return cleaned, "relaxed, crossings removed by pymeshfix, volume restored"
         count = int(count * 1.15)  # (the decimator's output is open at some counts, not at others)
     return None
+
+
+def _meshfix_copy(copy: trimesh.Trimesh, clock=None):
+    """``copy`` through MeshFix, or None if that leaves it open."""
+    from .repair import _meshfix
+
+    v, f = clock.run("clean copy (pymeshfix)", _meshfix, copy.vertices, copy.faces) if clock is not None \
+        else _meshfix(copy.vertices, copy.faces)
+    cleaned = trimesh.Trimesh(v, f, process=True)
+    return cleaned if len(cleaned.faces) and cleaned.is_watertight and cleaned.is_winding_consistent else None
 
 
 def simplified_tet_surfaces(mesh: trimesh.Trimesh, target_particles: int, clock=None):
@@ -148,7 +166,7 @@ def simplified_tet_surfaces(mesh: trimesh.Trimesh, target_particles: int, clock=
 
     The first copy has :func:`target_face_count` faces; when its tets overshoot the target
     by more than 15 % (thin parts, many sharp features), the next has fewer faces, by the
-    overshoot to the 2/3 (tets ~ faces^(3/2) where the surface sets the count); two at most.
+    overshoot to the 2/3 (tets ~ faces^(3/2) where the surface sets the count); three at most.
     A large input is first decimated once to 8x the wanted faces, so later copies start small.
     """
     wanted = target_face_count(mesh.volume, mesh.area, target_particles)
@@ -161,7 +179,7 @@ def simplified_tet_surfaces(mesh: trimesh.Trimesh, target_particles: int, clock=
         if staged is not None:
             source = staged[0]
     count = wanted
-    for _ in range(2):
+    for _ in range(3):
         copy = simplify_to_faces(source, count, clock, reference_volume=volume)
         if copy is None and source is not mesh:
             copy = simplify_to_faces(mesh, count, clock)
