@@ -50,9 +50,13 @@ def _decimate(vertices: np.ndarray, faces: np.ndarray, face_count: int):
     import fast_simplification
 
     reduction = 1.0 - face_count / len(faces)
-    v, f = fast_simplification.simplify(np.ascontiguousarray(vertices, dtype=np.float64),
-                                        np.ascontiguousarray(faces, dtype=np.int64), target_reduction=reduction)
-    return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64)
+    # The decimator's error thresholds are absolute: work at unit size so that the same shape
+    # decimates the same way in millimetres or metres.
+    centre = vertices.mean(axis=0)
+    size = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))) or 1.0
+    unit = np.ascontiguousarray((vertices - centre) / size, dtype=np.float64)
+    v, f = fast_simplification.simplify(unit, np.ascontiguousarray(faces, dtype=np.int64), target_reduction=reduction)
+    return np.asarray(v, dtype=np.float64) * size + centre, np.asarray(f, dtype=np.int64)
 
 
 def relax_tangentially(mesh: trimesh.Trimesh, iterations: int = 4, step: float = 0.5,
