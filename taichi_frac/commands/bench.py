@@ -39,6 +39,16 @@ def _part_runner(key: str):
     return run
 
 
+def _run_meshes(args) -> int:
+    from ..bench.common import REPO, BenchContext
+    from ..bench.meshes import run
+
+    out = Path(args.out) if args.out else REPO / "out" / "bench"
+    section = run(BenchContext(quick=args.quick, markdown_dir=out, figure_dir=out / "benchmarks", arch=args.arch))
+    print(f"\n## {section.title}\n\n{section.markdown}")
+    return 0
+
+
 def _run_dynamics(args) -> int:
     from ..bench.dynamics import run_dynamics
 
@@ -78,6 +88,12 @@ def register(subparsers) -> None:
     w.add_argument("--out", type=Path, help="folder for sweep.md and its plot (default docs/benchmarks/)")
     w.add_argument("--parts", help="comma-separated subset: throughput,spread")
     w.set_defaults(func=_run_sweep)
+    m = targets.add_parser("meshes", help="artists' meshes: particles vs target, volume and extents kept, "
+                                          "prepare time, a 1 s drop (writes docs/benchmarks/meshes.md)")
+    m.add_argument("--quick", action="store_true", help="smaller stress cases, written under --out only")
+    m.add_argument("--out", type=Path, help="folder for the quick report and generated inputs (default out/bench/)")
+    m.add_argument("--arch", default="cpu")
+    m.set_defaults(func=_run_meshes)
     d = targets.add_parser("dynamics", help="the rigid-body table: 13 rings two- vs single-scale, a fragment pile")
     add_dynamics_arguments(d)
     d.set_defaults(func=_run_dynamics)

@@ -48,6 +48,8 @@ def register(subparsers) -> None:
                    help="material preset for the mass: porcelain, soda_lime_glass, concrete (default: porcelain)")
     p.add_argument("--backend", choices=("tetgen", "wildmeshing"), default="tetgen",
                    help="tet mesher (default: tetgen)")
+    p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
+                   help="wall-clock bound on loading, checking, repairing and meshing [s] (default: 60)")
     p.add_argument("--no-cache", action="store_true", help="do not read or write the on-disk tet cache")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.set_defaults(func=run)
@@ -63,7 +65,9 @@ def _table(report) -> str:
         ("physics surface particles", f"{report.surface_particles:,}"),
         ("boundary particles", f"{report.boundary_particles:,}"
          + (f" ({report.dropped_surface_particles} surface particles dropped)" if report.dropped_surface_particles else "")),
-        ("surface triangles in", "n/a (tet mesh)" if report.surface_triangles < 0 else f"{report.surface_triangles:,}"),
+        ("surface triangles in", "n/a (tet mesh)" if report.surface_triangles < 0 else f"{report.surface_triangles:,}"
+         + (f" (tets fill a copy of {report.tet_surface_triangles:,})"
+            if report.tet_surface_triangles not in (-1, report.surface_triangles) else "")),
         ("volume", f"{report.tet_volume:.6g} m^3 (surface {report.surface_volume:.6g} m^3, error {report.volume_error:+.2e})"),
         ("min dihedral angle", f"{report.min_dihedral_deg:.2f} deg ({report.sliver_count} tets below 5 deg)"),
         ("mass", f"{report.mass:.6g} kg"),
@@ -73,6 +77,12 @@ def _table(report) -> str:
         ("time", f"load {t.get('load', 0):.2f} s, mesh {t.get('mesh', 0):.2f} s, model {t.get('model', 0):.2f} s, "
                  f"total {t.get('total', 0):.2f} s"),
     ]
+    if report.kept_volume_fraction is not None:
+        rows.append(("kept of the input", f"{100 * report.kept_volume_fraction:.1f} % of its winding-number volume "
+                                          f"({report.input_volume:.6g} m^3)"))
+    if report.input_extents and report.tet_extents:
+        ratio = ", ".join(f"{t / i:.3f}" if i > 0 else "-" for t, i in zip(report.tet_extents, report.input_extents))
+        rows.append(("extents kept (x, y, z)", ratio))
     if report.repair_steps:
         rows.append(("repair", "; ".join(report.repair_steps)))
     width = max(len(k) for k, _ in rows)
@@ -90,6 +100,8 @@ def _check_arguments(args) -> None:
 
     if args.max_volume is not None and not (math.isfinite(args.max_volume) and args.max_volume > 0):
         raise OptionError(f"--max-volume {args.max_volume!r}: give a tet volume above 0 m^3, e.g. 1e-7")
+    if not (math.isfinite(args.time_limit) and args.time_limit > 0):
+        raise OptionError(f"--time-limit {args.time_limit!r}: give a number of seconds above 0, e.g. 300")
     factor = unit_scale(args.scale, args.units)
     if parse_primitive_spec(args.source) is not None:
         check_primitive_size(args.source, factor)
@@ -106,7 +118,7 @@ def run(args) -> int:
                                     keep_leftovers=not args.drop_leftovers)
         _, report = prepare_body(args.source, scale=args.scale, units=args.units, material=args.material,
                                  particles=particles, repair=args.repair, max_volume=args.max_volume,
-                                 backend=args.backend, use_cache=not args.no_cache)
+                                 backend=args.backend, use_cache=not args.no_cache, time_limit=args.time_limit)
     except (MeshError, OptionError) as exc:
         print(f"taichi-frac info: error: {exc}", file=sys.stderr)
         return 2

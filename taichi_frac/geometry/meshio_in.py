@@ -1,7 +1,9 @@
 """Loading meshes from files: surfaces via trimesh, tet meshes via meshio.
 
-Surfaces (OBJ, STL, PLY, OFF, glTF/GLB) are loaded as geometry only: materials and
-textures are skipped, so an OBJ whose .mtl names a missing texture still loads. Multi-mesh
+Surfaces (OBJ, STL, PLY, OFF, glTF/GLB) are loaded as geometry and texture coordinates:
+materials and textures are skipped, so an OBJ whose .mtl names a missing texture still
+loads. Vertices are merged by position (a UV seam does not open the surface); the UVs are
+kept per corner (``mesh.metadata["corner_uvs"]``, (F,3,2)) and per vertex. Multi-mesh
 files (a glTF scene) are flattened into one mesh with their node transforms applied; each
 piece must then be a closed shell, and several shells are an error unless repaired.
 
@@ -89,6 +91,10 @@ def read_surface(path: str | os.PathLike) -> trimesh.Trimesh:
         loaded = trimesh.Trimesh()  # a point cloud or a path: no faces
     vertices = np.asarray(loaded.vertices)
     _check_finite(vertices, path.name)
+    uv = getattr(loaded.visual, "uv", None)
+    corner_uvs = None
+    if uv is not None and len(uv) == len(vertices) and len(loaded.faces):
+        corner_uvs = np.asarray(uv, dtype=np.float64)[np.asarray(loaded.faces)]
     # Merge duplicate vertices (STL stores each triangle's corners separately). trimesh
     # merges within an absolute 1e-8, which collapses a mesh of 1e-9 units to a point: the
     # merge runs on the mesh scaled to about unit size by a power of two (exact, so a mesh
@@ -98,6 +104,8 @@ def read_surface(path: str | os.PathLike) -> trimesh.Trimesh:
     mesh = trimesh.Trimesh(vertices * unit, loaded.faces, process=True)
     mesh.apply_scale(1.0 / unit)
     mesh.metadata["file_extent"] = extent
+    if corner_uvs is not None and len(mesh.faces) == len(corner_uvs):
+        attach_corner_uvs(mesh, corner_uvs)
     return mesh
 
 
@@ -127,8 +135,43 @@ def _check_finite(vertices: np.ndarray, name: str) -> None:
                         f"= {vertices[bad[0]].tolist()}; fix them in the modelling program and export again")
 
 
+def attach_corner_uvs(mesh: trimesh.Trimesh, corner_uvs: np.ndarray) -> None:
+    """Give ``mesh`` its corners' UVs (F,3,2): exactly in ``metadata["corner_uvs"]``, and per
+    vertex as a TextureVisuals (a vertex on a UV seam takes one side's UV)."""
+    per_vertex = np.zeros((len(mesh.vertices), 2))
+    per_vertex[np.asarray(mesh.faces).reshape(-1)] = corner_uvs.reshape(-1, 2)
+    mesh.visual = trimesh.visual.TextureVisuals(uv=per_vertex)
+    mesh.metadata["corner_uvs"] = np.asarray(corner_uvs, dtype=np.float64)
+
+
+def check_or_repair(mesh: trimesh.Trimesh, name: str, *, repair: bool = False, clock=None,
+                    check_self_intersection: bool = True) -> trimesh.Trimesh:
+    """``mesh`` checked (``validate_surface``) or, with ``repair``, repaired first
+    (``repair.repair_surface``, its steps in ``metadata["repair"]`` and its report in
+    ``metadata["repair_report"]``); input UVs are carried onto a repaired surface."""
+    steps: list[str] = []
+    report = None
+    if repair:
+        from .repair import repair_surface
+        from .surface_attributes import boundary_corner_attributes
+
+        repaired, report = repair_surface(mesh, name, clock=clock)
+        if mesh.metadata.get("corner_uvs") is not None:
+            # Each corner takes the UV of the input triangle it lies on.
+            _, uvs = boundary_corner_attributes(mesh, repaired.triangles)
+            attach_corner_uvs(repaired, uvs)
+        mesh, steps = repaired, report.steps
+    if clock is not None:
+        clock.inline("validate", validate_surface, mesh, name, check_self_intersection=check_self_intersection)
+    else:
+        validate_surface(mesh, name, check_self_intersection=check_self_intersection)
+    mesh.metadata["repair"] = steps
+    mesh.metadata["repair_report"] = report
+    return mesh
+
+
 def load_surface(path: str | os.PathLike, *, scale: float = 1.0, units: str = "m", repair: bool = False,
-                 check_self_intersection: bool = True) -> trimesh.Trimesh:
+                 check_self_intersection: bool = True, clock=None) -> trimesh.Trimesh:
     """Load a closed surface mesh in metres and check it (see ``validate_surface``).
 
     Args:
@@ -137,24 +180,18 @@ def load_surface(path: str | os.PathLike, *, scale: float = 1.0, units: str = "m
         units: length unit of the file's coordinates: "m", "cm" or "mm".
         repair: fix holes, flipped faces, overlapping shells and self-intersections first
             (``repair.repair_surface``); the steps taken are in ``mesh.metadata["repair"]``.
+        clock: a ``bounded.StepClock`` whose time bound the steps run under (None: unbounded).
 
     Raises:
         MeshError: the file is missing, unreadable, or fails a check (message says which).
     """
     path = Path(path)
     factor = unit_scale(scale, units)
-    mesh = read_surface(path)
+    mesh = clock.inline("load", read_surface, path) if clock is not None else read_surface(path)
     mesh.apply_scale(factor)
     if len(mesh.faces):
         check_size(mesh.metadata["file_extent"] * factor, repr(path.name), scale, units)
-    steps: list[str] = []
-    if repair:
-        from .repair import repair_surface
-
-        mesh, report = repair_surface(mesh, path.name)
-        steps = report.steps
-    validate_surface(mesh, path.name, check_self_intersection=check_self_intersection)
-    mesh.metadata["repair"] = steps
+    mesh = check_or_repair(mesh, path.name, repair=repair, clock=clock, check_self_intersection=check_self_intersection)
     mesh.metadata["source"] = str(path)
     return mesh
 

@@ -22,8 +22,10 @@ import trimesh
 
 from ..model import BodyModel, build_body_model
 from ..options import Material, ParticleOptions, material_preset
-from .meshio_in import is_tet_file, load_surface, load_tet_mesh, unit_scale
+from .bounded import DEFAULT_PREPARE_SECONDS, StepClock
+from .meshio_in import check_or_repair, is_tet_file, load_surface, load_tet_mesh, unit_scale
 from .primitives import make_primitive, parse_primitive_spec
+from .simplify import simplified_tet_surfaces
 from .tetra import TetMesh, regular_tet_edge, tetrahedralize
 from .topology import dihedral_angles_deg, signed_volumes
 from .validate import MeshError, validate_surface
@@ -64,26 +66,38 @@ class PrepareReport:
     cache_hit: bool
     repair_steps: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
-    # The input surface in metres, source frame (None for tet-mesh files): shading
-    # attributes for the cache come from it. Not part of the printed report.
+    # The artist's solid at full input resolution (None for tet-mesh files): closed,
+    # manifold, outward, in metres in the source frame (the frame of the BodyModel's
+    # com_in_source); its outer triangles are the input's own (split only where shells cross
+    # or holes were closed), with the input's UVs (per vertex, and exactly per corner in
+    # ``surface.metadata["corner_uvs"]`` (F,3,2)) where it had them. The tets fill
+    # ``tet_surface`` (None: this surface itself). Not part of the printed report.
     surface: object = field(default=None, repr=False, compare=False)
+    tet_surface: object = field(default=None, repr=False, compare=False)
+    #: Triangles of the surface the tets fill (differs from surface_triangles when simplified).
+    tet_surface_triangles: int = -1
+    #: Fraction of the input's generalized winding-number volume inside the repaired solid
+    #: (None without repair: the input itself is the solid).
+    kept_volume_fraction: float | None = None
+    #: Volume of the input's winding-number solid [m^3] (None without repair).
+    input_volume: float | None = None
+    #: Bounding-box sizes (3,) [m] of the input and of the simulated tets.
+    input_extents: list = field(default_factory=list)
+    tet_extents: list = field(default_factory=list)
+    #: Whether ``surface`` is closed at full resolution (False: the best surface there was).
+    surface_closed: bool = True
 
     def as_dict(self) -> dict:
-        return {k: v for k, v in self.__dict__.items() if k != "surface"}
+        return {k: v for k, v in self.__dict__.items() if k not in ("surface", "tet_surface")}
 
 
-def _surface_from_source(source, factor: float, repair: bool, edge_length_for):
-    """Returns (name, trimesh surface in metres) for a path, primitive spec or Trimesh."""
+def _surface_from_source(source, factor: float, repair: bool, edge_length_for, clock: StepClock):
+    """Returns (name, trimesh surface in metres, is_primitive) for a path, primitive spec or
+    Trimesh; a mesh's repair report is in ``surface.metadata["repair_report"]``."""
     if isinstance(source, trimesh.Trimesh):
         mesh = source.copy()
         mesh.apply_scale(factor)
-        if repair:
-            from .repair import repair_surface
-
-            mesh, report = repair_surface(mesh, "mesh")
-            mesh.metadata["repair"] = report.steps
-        validate_surface(mesh, "mesh")
-        return "mesh", mesh
+        return "mesh", check_or_repair(mesh, "mesh", repair=repair, clock=clock), False
     spec = str(source)
     parsed = parse_primitive_spec(spec) if not os.path.exists(spec) else None
     if parsed is not None:
@@ -92,16 +106,17 @@ def _surface_from_source(source, factor: float, repair: bool, edge_length_for):
         volume = make_primitive(name, params).volume * factor**3
         mesh = make_primitive(name, params, edge_length=edge_length_for(volume) / factor)
         mesh.apply_scale(factor)
-        return spec, mesh
-    return Path(spec).name, load_surface(spec, scale=factor, repair=repair)
+        return spec, mesh, True
+    return Path(spec).name, load_surface(spec, scale=factor, repair=repair, clock=clock), False
 
 
 def _cache_key(mesh: trimesh.Trimesh, backend: str, target: int | None, max_volume: float | None,
-               min_dihedral: float) -> str:
+               min_dihedral: float, relax_quality: bool = False) -> str:
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes())
     h.update(np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes())
-    h.update(repr((CACHE_VERSION, backend, target, max_volume, float(min_dihedral))).encode())
+    settings = (CACHE_VERSION, backend, target, max_volume, float(min_dihedral))
+    h.update(repr(settings + ((True,) if relax_quality else ())).encode())
     return h.hexdigest()
 
 
@@ -113,9 +128,10 @@ def _cache_root() -> Path:
     return runtime.cache_dir()
 
 
-def _cached_tetrahedralize(mesh, *, backend, target, max_volume, min_dihedral, use_cache):
-    """Returns (TetMesh, cache_hit)."""
-    key = _cache_key(mesh, backend, target, max_volume, min_dihedral)
+def _cached_tetrahedralize(mesh, *, backend, target, max_volume, min_dihedral, use_cache, clock=None,
+                           relax_quality=False):
+    """Returns (TetMesh, cache_hit); the mesher runs under ``clock``'s bound when given."""
+    key = _cache_key(mesh, backend, target, max_volume, min_dihedral, relax_quality)
     path = _cache_root() / "tets" / f"{key}.npz"
     if use_cache and path.exists():
         try:
@@ -129,7 +145,10 @@ def _cached_tetrahedralize(mesh, *, backend, target, max_volume, min_dihedral, u
                 ), True
         except (OSError, KeyError, ValueError):
             pass  # a corrupt or old entry: re-mesh and overwrite it
-    tm = tetrahedralize(mesh, target_tets=target, max_volume=max_volume, backend=backend, min_dihedral_deg=min_dihedral)
+    kwargs = dict(target_tets=target, max_volume=max_volume, backend=backend, min_dihedral_deg=min_dihedral,
+                  relax_quality=relax_quality)
+    tm = (clock.run(f"tetrahedralize ({backend})", tetrahedralize, mesh, **kwargs) if clock is not None
+          else tetrahedralize(mesh, **kwargs))
     if use_cache:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
@@ -138,6 +157,60 @@ def _cached_tetrahedralize(mesh, *, backend, target, max_volume, min_dihedral, u
         np.savez(tmp, vertices=tm.vertices, tets=tm.tets, meta=meta)
         os.replace(tmp, path)  # atomic: a parallel run never reads half a file
     return tm, False
+
+
+def _cleaned_copy(copy: trimesh.Trimesh, clock: StepClock):
+    """``copy`` through MeshFix (degenerate spots, crossings), or None if that loses more
+    than 0.5 % of its volume or leaves it open."""
+    from .repair import _meshfix
+
+    v, f = clock.run("clean copy (pymeshfix)", _meshfix, copy.vertices, copy.faces)
+    cleaned = trimesh.Trimesh(v, f, process=True)
+    if not (cleaned.is_watertight and cleaned.is_winding_consistent) or abs(cleaned.volume / copy.volume - 1) > 0.005:
+        return None
+    return cleaned
+
+
+def _mesh_simplified(surface, count: int, clock: StepClock, kwargs: dict):
+    """Tets of the simplified copies of ``surface`` (``simplify.simplified_tet_surfaces``),
+    keeping the copy whose count is nearest ``count``. Returns (tet surface, TetMesh or None,
+    cache_hit, report line or None); (surface, None, False, ...) when no copy applies or the
+    mesher refused them all (the caller then meshes the full surface)."""
+    copies = simplified_tet_surfaces(surface, count, clock)
+    kwargs = dict(kwargs, relax_quality=True)  # a copy's count matters more than its last degree
+    best, failed, tets, started = None, None, None, False
+    while True:
+        try:
+            copy, step = copies.send(tets) if started else next(copies)
+            started = True
+        except StopIteration:
+            break
+        try:
+            candidate, hit = _cached_tetrahedralize(copy, **kwargs)
+        except MeshError as exc:
+            if "ran out of time" in str(exc):
+                raise
+            # TetGen refuses some copies (near-degenerate spots): MeshFix cleans them, and if
+            # TetGen still refuses, a coarser copy is tried.
+            copy = _cleaned_copy(copy, clock)
+            try:
+                candidate, hit = _cached_tetrahedralize(copy, **kwargs) if copy is not None else (None, False)
+            except MeshError as again:
+                if "ran out of time" in str(again):
+                    raise
+                candidate = None
+            if candidate is None:
+                failed, tets = str(exc), 10 * count
+                continue
+            step += "; cleaned by pymeshfix for the mesher"
+        if best is None or abs(candidate.tet_count / count - 1) < abs(best[1].tet_count / count - 1):
+            best = (copy, candidate, hit, step)
+        tets = candidate.tet_count
+    if best is not None:
+        return best
+    if failed is not None:
+        return surface, None, False, f"meshed the full-resolution surface: the mesher refused the simplified copy ({failed})"
+    return surface, None, False, None
 
 
 def prepare_body(
@@ -151,6 +224,8 @@ def prepare_body(
     max_volume: float | None = None,
     backend: str = "tetgen",
     use_cache: bool = True,
+    time_limit: float | None = DEFAULT_PREPARE_SECONDS,
+    simplify: bool = True,
 ) -> tuple[BodyModel, PrepareReport]:
     """Build the two-scale model of one solid.
 
@@ -164,6 +239,11 @@ def prepare_body(
         max_volume: mesh with this tet volume bound [m^3] instead of a target count.
         backend: tet mesher ("tetgen" or "wildmeshing").
         use_cache: read and write the on-disk tet cache.
+        time_limit: wall-clock bound [s] on loading, checking, repairing, simplifying and
+            meshing a surface (None: unbounded); running out is a MeshError naming the step.
+        simplify: mesh a copy of a surface finer than the target's particle spacing,
+            decimated to that spacing (``simplify.simplify_for_target``); primitives are
+            built at that spacing already and never simplified.
 
     Returns (BodyModel in its body frame, PrepareReport).
     """
@@ -189,19 +269,34 @@ def prepare_body(
                      runs=0, seconds=0.0)
         surface_triangles = -1
         surface = None
+        tet_surface = None
+        repair_report = None
         timings["mesh"] = 0.0
     else:
         target = None if max_volume is not None else particles.target_particles
         def edge_for(volume):
             return PRIMITIVE_EDGE_FACTOR * regular_tet_edge(volume / (target or max(volume / max_volume, 1.0)))
-        name, surface = _surface_from_source(source, factor, repair, edge_for)
+        clock = StepClock(name=Path(str(source)).name if not isinstance(source, trimesh.Trimesh) else "mesh",
+                          seconds=time_limit)
+        name, surface, is_primitive = _surface_from_source(source, factor, repair, edge_for, clock)
         repair_steps = list(surface.metadata.get("repair", []))
+        repair_report = surface.metadata.get("repair_report")
         surface_triangles = len(surface.faces)
         timings["load"] = time.perf_counter() - t0
         t1 = time.perf_counter()
-        tm, cache_hit = _cached_tetrahedralize(surface, backend=backend, target=target, max_volume=max_volume,
-                                               min_dihedral=particles.min_dihedral_deg, use_cache=use_cache)
+        kwargs = dict(backend=backend, target=target, max_volume=max_volume,
+                      min_dihedral=particles.min_dihedral_deg, use_cache=use_cache, clock=clock)
+        tet_surface, tm, cache_hit = surface, None, False
+        if simplify and not is_primitive:
+            # The tets' spacing: the target count, or the count a volume bound asks for.
+            count = target if target is not None else max(int(surface.volume / max_volume), 1)
+            tet_surface, tm, cache_hit, step = _mesh_simplified(surface, count, clock, kwargs)
+            if step:
+                repair_steps.append(step)
+        if tm is None:
+            tm, cache_hit = _cached_tetrahedralize(surface, **kwargs)
         timings["mesh"] = time.perf_counter() - t1
+        timings.update({f"step: {k}": v for k, v in clock.step_seconds.items()})
     t2 = time.perf_counter()
     try:
         model = build_body_model(tm.vertices, tm.tets, material.density,
@@ -210,6 +305,9 @@ def prepare_body(
     except ValueError as exc:
         raise MeshError(f"{name!r}: cannot build a particle model from its tets: {exc}") from exc
     timings["model"] = time.perf_counter() - t2
+    # The simulated solid is measured against the artist's full-resolution surface.
+    reference_volume = float(surface.volume) if surface is not None else tm.surface_volume
+    extents = np.ptp(tm.vertices, axis=0)
     timings["total"] = time.perf_counter() - t0
     report = PrepareReport(
         source=name,
@@ -219,9 +317,9 @@ def prepare_body(
         dropped_surface_particles=len(model.dropped_surface_particles),
         tets=model.tet_count,
         surface_triangles=surface_triangles,
-        surface_volume=tm.surface_volume,
+        surface_volume=reference_volume,
         tet_volume=model.volume,
-        volume_error=float(model.volume / tm.surface_volume - 1.0),
+        volume_error=float(model.volume / reference_volume - 1.0),
         min_dihedral_deg=tm.min_dihedral_deg,
         sliver_count=tm.sliver_count,
         mass=model.mass,
@@ -232,5 +330,13 @@ def prepare_body(
         repair_steps=repair_steps,
         timings=timings,
         surface=surface,
+        tet_surface=None if tet_surface is surface else tet_surface,
+        tet_surface_triangles=-1 if surface is None else len(tet_surface.faces),
+        kept_volume_fraction=None if repair_report is None else repair_report.kept_fraction,
+        input_volume=None if repair_report is None else repair_report.input_volume,
+        input_extents=(list(repair_report.input_extents) if repair_report is not None and repair_report.input_extents
+                       else (surface.extents.tolist() if surface is not None else extents.tolist())),
+        tet_extents=extents.tolist(),
+        surface_closed=surface is None or bool(surface.is_watertight and surface.is_winding_consistent),
     )
     return model, report

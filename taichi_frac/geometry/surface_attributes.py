@@ -7,7 +7,9 @@ corner normals and UVs interpolated barycentrically. Corner normals are area-wei
 face normals around the vertex over the faces within ``crease_angle_deg`` (60 degrees) of the face
 itself, so curved surfaces shade smoothly (coarse primitives have 45 degrees between
 neighbouring facets) and sharp edges (a box, a wall: 90 degrees) stay sharp.
-UVs come from the input mesh's texture coordinates where it has any (None otherwise).
+UVs come from the input mesh's texture coordinates where it has any (None otherwise): its
+exact per-corner UVs (``metadata["corner_uvs"]``, which keep both sides of a UV seam) when
+given, else its per-vertex UVs.
 """
 
 from __future__ import annotations
@@ -59,8 +61,12 @@ def boundary_corner_attributes(surface: trimesh.Trimesh, corners: np.ndarray,
     normals = np.einsum("ik,ikd->id", bary, corner_normals).reshape(count, 3, 3)
     normals /= np.maximum(np.linalg.norm(normals, axis=2, keepdims=True), 1e-300)
     uv = getattr(surface.visual, "uv", None)
+    corner_uvs = surface.metadata.get("corner_uvs")
     uvs = None
-    if uv is not None and len(uv) == len(surface.vertices):
+    if corner_uvs is not None and len(corner_uvs) == len(surface.faces):
+        tri_uv = np.asarray(corner_uvs, dtype=np.float64)[triangle]  # (3F,3,2)
+        uvs = np.einsum("ik,ikd->id", bary, tri_uv).reshape(count, 3, 2)
+    elif uv is not None and len(uv) == len(surface.vertices):
         tri_uv = np.asarray(uv, dtype=np.float64)[np.asarray(surface.faces)[triangle]]  # (3F,3,2)
         uvs = np.einsum("ik,ikd->id", bary, tri_uv).reshape(count, 3, 2)
     return normals, uvs

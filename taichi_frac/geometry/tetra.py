@@ -65,12 +65,12 @@ class TetMesh:
         return len(self.tets)
 
 
-def _tetgen(vertices, faces, max_volume, min_dihedral_deg):
+def _tetgen(vertices, faces, max_volume, min_dihedral_deg, minratio=1.5):
     import tetgen
 
     # The optimisation settings (flips + smoothing, dihedral target 165 deg) halve the
     # slivers left by plain quality refinement at no measurable cost (measured on tori).
-    kwargs = dict(quality=True, minratio=1.5, mindihedral=min_dihedral_deg, verbose=0, opt_scheme=7,
+    kwargs = dict(quality=True, minratio=minratio, mindihedral=min_dihedral_deg, verbose=0, opt_scheme=7,
                   opt_max_flip_level=5, opt_iterations=20, optmaxdihedral=165.0)
     if max_volume is not None:
         kwargs.update(fixedvolume=True, maxvolume=float(max_volume))
@@ -130,6 +130,11 @@ BACKENDS = {"tetgen": _tetgen, "wildmeshing": _wildmeshing}
 _TETGEN_OVERSHOOT = 2.0
 
 
+#: Looser (radius-edge ratio, min dihedral [deg]) TetGen bounds tried in turn when the quality
+#: bound alone overshoots the target count.
+_TETGEN_RELAXED_QUALITY = ((2.0, 5.0), (4.0, 0.0))
+
+
 def register_backend(name: str, function) -> None:
     """Add a mesher: ``function(vertices (V,3), faces (F,3), max_volume or None,
     min_dihedral_deg) -> (vertices (V',3), tets (T,4))``."""
@@ -149,6 +154,8 @@ def tetrahedralize(
     backend: str = "tetgen",
     min_dihedral_deg: float = 10.0,
     tolerance: float = 0.1,
+    count_tolerance: float = 0.15,
+    relax_quality: bool = False,
 ) -> TetMesh:
     """Fill the closed surface ``mesh`` [m] with tets.
 
@@ -156,7 +163,10 @@ def tetrahedralize(
     it) or ``max_volume`` [m^3] (handed to the mesher as is; tetgen's final optimisation
     may leave under 1 % of the tets up to ~15 % above it), or neither (the mesher's coarsest quality
     mesh). ``min_dihedral_deg`` is the quality bound handed to the mesher; the result
-    reports the angle actually reached.
+    reports the angle actually reached. With ``relax_quality``, where TetGen's quality bound
+    keeps the count above ``count_tolerance`` over the target (short surface features, thin
+    parts), it re-meshes with the looser bounds of :data:`_TETGEN_RELAXED_QUALITY` until the
+    count fits (used for simplified copies of artists' meshes; primitives keep the bound).
     """
     if backend not in BACKENDS:
         raise MeshError(f"unknown mesher backend {backend!r}: use one of {', '.join(BACKENDS)}")
@@ -169,10 +179,11 @@ def tetrahedralize(
     start = time.perf_counter()
     runs = 0
 
-    def mesh_once(bound):
+    def mesh_once(bound, quality=None):
         nonlocal runs
         runs += 1
-        v, t = run(vertices, faces, bound, min_dihedral_deg)
+        v, t = run(vertices, faces, bound, min_dihedral_deg) if quality is None else _tetgen(
+            vertices, faces, bound, quality[1], minratio=quality[0])
         if len(t) == 0:
             raise MeshError(f"mesher {backend!r} produced no tets (is the surface closed?)")
         v, t, _ = compact_vertices(v, t)
@@ -192,6 +203,16 @@ def tetrahedralize(
             v2, t2 = mesh_once(retry_bound)
             if abs(len(t2) / target_tets - 1.0) < abs(miss - 1.0):
                 v, t, bound = v2, t2, retry_bound
+        if relax_quality and backend == "tetgen" and len(t) > (1.0 + count_tolerance) * target_tets:
+            # The quality bound forces small tets along short surface features or thin parts
+            # whatever the volume bound: trade quality for the count, reported as the min
+            # dihedral angle and the sliver count.
+            for quality in _TETGEN_RELAXED_QUALITY:
+                v2, t2 = mesh_once(bound, quality)
+                if len(t2) < len(t):
+                    v, t = v2, t2
+                if len(t) <= (1.0 + count_tolerance) * target_tets:
+                    break
     tet_volume = signed_volumes(v, t)
     dihedral = dihedral_angles_deg(v, t).min(axis=1)
     return TetMesh(

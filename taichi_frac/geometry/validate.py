@@ -11,7 +11,6 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
 import trimesh
-from scipy.spatial import cKDTree
 
 REPAIR_HINT = "pass repair=True (CLI: --repair) to try an automatic fix, or fix it in a modelling tool"
 
@@ -22,10 +21,12 @@ class MeshError(ValueError):
 
 
 def _edges(faces: np.ndarray):
-    """Unique undirected edges (E,2) and how many faces use each (E,)."""
-    e = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    unique, counts = np.unique(e, axis=0, return_counts=True)
-    return unique, counts
+    """Unique undirected edges (E,2) and how many faces use each (E,). Edges are packed into
+    one int64 each, so that a million faces take a 1-D sort instead of a row sort."""
+    e = np.sort(np.asarray(faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    base = int(e.max()) + 1 if len(e) else 1
+    unique, counts = np.unique(e[:, 0] * base + e[:, 1], return_counts=True)
+    return np.stack([unique // base, unique % base], axis=1), counts
 
 
 def count_loops(edges: np.ndarray) -> int:
@@ -48,55 +49,34 @@ def degenerate_faces(mesh: trimesh.Trimesh) -> np.ndarray:
     return np.nonzero(repeated | tiny)[0]
 
 
-def self_intersections(vertices: np.ndarray, faces: np.ndarray, max_pairs: int = 50_000_000) -> np.ndarray:
-    """Pairs (K,2) of faces that cross each other (an edge of one passes through the other).
-
-    Broad phase: a k-d tree on face centroids with the largest face circumradius as reach,
-    then bounding-box overlap. Narrow phase: vectorised segment-triangle tests
-    (Moller-Trumbore). Faces sharing a vertex are skipped: neighbours always touch, and
-    folds between neighbours show up as inconsistent winding or degenerate faces instead.
-    Coplanar overlaps are not detected.
-    """
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    tri = v[f]
-    centroid = tri.mean(axis=1)
-    reach = np.linalg.norm(tri - centroid[:, None], axis=2).max(axis=1)
-    tree = cKDTree(centroid)
-    pairs = tree.query_pairs(r=2.0 * float(reach.max()) * (1 + 1e-9), output_type="ndarray")
-    if len(pairs) > max_pairs:
-        raise MeshError(f"self-intersection check: {len(pairs)} candidate face pairs is too many")
-    lo, hi = tri.min(axis=1), tri.max(axis=1)
-    a, b = pairs[:, 0], pairs[:, 1]
-    overlap = np.all((lo[a] <= hi[b]) & (lo[b] <= hi[a]), axis=1)
-    share = (f[a][:, :, None] == f[b][:, None, :]).any(axis=(1, 2))
-    pairs = pairs[overlap & ~share]
-    if len(pairs) == 0:
-        return np.zeros((0, 2), dtype=np.int64)
-    hit = np.zeros(len(pairs), dtype=bool)
-    for first, second in ((0, 1), (1, 0)):
-        t_idx, s_idx = pairs[:, first], pairs[:, second]
-        for i, j in ((0, 1), (1, 2), (2, 0)):
-            hit |= _segment_hits_triangle(tri[s_idx, i], tri[s_idx, j], tri[t_idx])
-    return pairs[hit]
+def shell_labels(faces: np.ndarray) -> tuple[int, np.ndarray]:
+    """Shells of a face set: faces joined across edges that exactly two faces share. A
+    non-manifold edge (a fin on a box, parts glued along an edge) separates shells, so
+    each can be closed on its own. Returns (count, label (F,) int)."""
+    faces = np.asarray(faces, dtype=np.int64)
+    count = len(faces)
+    if count == 0:
+        return 0, np.zeros(0, dtype=np.int64)
+    e = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    base = int(e.max()) + 1
+    _, edge_id, uses = np.unique(e[:, 0] * base + e[:, 1], return_inverse=True, return_counts=True)
+    owner = np.repeat(np.arange(count), 3)
+    manifold = uses[edge_id] == 2
+    order = np.argsort(edge_id[manifold], kind="stable")
+    pairs = owner[manifold][order].reshape(-1, 2)  # the two faces of each manifold edge
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
+    n, label = csgraph.connected_components(graph, directed=False)
+    return int(n), label
 
 
-def _segment_hits_triangle(p0, p1, tri, eps=1e-12):
-    """Vectorised: does segment p0-p1 (K,3) cross triangle tri (K,3,3) in its interior?"""
-    d = p1 - p0
-    e1 = tri[:, 1] - tri[:, 0]
-    e2 = tri[:, 2] - tri[:, 0]
-    h = np.cross(d, e2)
-    det = np.einsum("ij,ij->i", e1, h)
-    scale = np.linalg.norm(d, axis=1) * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
-    ok = np.abs(det) > 1e-9 * np.maximum(scale, 1e-300)  # not parallel (coplanar skipped)
-    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-    s = p0 - tri[:, 0]
-    u = inv * np.einsum("ij,ij->i", s, h)
-    q = np.cross(s, e1)
-    w = inv * np.einsum("ij,ij->i", d, q)
-    t = inv * np.einsum("ij,ij->i", e2, q)
-    return ok & (u > eps) & (w > eps) & (u + w < 1 - eps) & (t > eps) & (t < 1 - eps)
+def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Pairs (K,2) of faces that cross each other (an edge of one passes through the other),
+    i < j. Faces sharing a vertex are skipped and coplanar overlaps are not detected; any
+    size is checked, in linear time (``intersections.crossing_face_pairs``: a hierarchical
+    grid broad phase and float64 segment-triangle tests in one Taichi kernel)."""
+    from .intersections import crossing_face_pairs
+
+    return crossing_face_pairs(vertices, faces)
 
 
 def validate_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, allow_multiple_shells: bool = False,
@@ -124,10 +104,11 @@ def validate_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, allow_multipl
     if nonmanifold:
         raise MeshError(f"{label} is not manifold: {nonmanifold} edges are shared by more than two faces; "
                         f"{REPAIR_HINT}")
-    if not mesh.is_winding_consistent:
-        # Count faces whose winding disagrees with a neighbour: directed edges used twice.
-        directed = mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-        _, dcounts = np.unique(directed, axis=0, return_counts=True)
+    # Closed and manifold: consistent winding means every directed edge is used once (a
+    # flipped face traverses an edge in the same direction as its neighbour).
+    directed = np.asarray(mesh.faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    _, dcounts = np.unique(directed[:, 0] * (int(directed.max()) + 1) + directed[:, 1], return_counts=True)
+    if np.any(dcounts > 1):
         raise MeshError(f"{label} has inconsistent winding: {int(np.sum(dcounts > 1))} edges are traversed in "
                         "the same direction by both of their faces (some faces are flipped); "
                         f"{REPAIR_HINT} (trimesh.repair.fix_winding also fixes this)")
@@ -137,12 +118,12 @@ def validate_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, allow_multipl
             n_faces = len(np.unique(hits))
             raise MeshError(f"{label} self-intersects: {len(hits)} crossing face pairs ({n_faces} faces), e.g. "
                             f"faces {int(hits[0, 0])} and {int(hits[0, 1])}; {REPAIR_HINT}")
-    shells = mesh.body_count
+    shells, shell_of_face = shell_labels(mesh.faces)
     if shells > 1 and not allow_multiple_shells:
-        parts = sorted((len(p.faces) for p in mesh.split(only_watertight=False)), reverse=True)
+        parts = sorted(np.bincount(shell_of_face).tolist(), reverse=True)
         raise MeshError(f"{label} has {shells} disconnected shells (faces per shell: "
                         f"{', '.join(map(str, parts[:8]))}{', ...' if len(parts) > 8 else ''}); "
-                        "make one scene object per shell, or pass repair=True to keep the largest")
+                        "make one scene object per shell, or pass repair=True to unite overlapping shells")
     volume = float(mesh.volume)
     if volume <= 0:
         raise MeshError(f"{label} is inverted: enclosed volume {volume:.6g} m^3 is negative (normals point "

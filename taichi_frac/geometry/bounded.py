@@ -1,0 +1,120 @@
+"""Running one preparation step under a time bound that names the step when it runs out.
+
+The mesh libraries (MeshFix, manifold3d, TetGen, the quadric simplifier) are native code
+that Python cannot interrupt, so a bounded step runs in a forked child process (the child
+shares the parent's memory copy-on-write, so starting it costs milliseconds, not an
+interpreter start-up) and is killed when its time is up. Where fork is not available the
+step runs inline and the bound is checked after it returns.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import pickle
+import time
+from dataclasses import dataclass, field
+
+from .validate import MeshError
+
+#: Wall-clock bound for everything ``prepare_body`` does to one surface [s].
+DEFAULT_PREPARE_SECONDS = 60.0
+
+
+@dataclass
+class StepClock:
+    """A deadline shared by the steps of one preparation, and how long each step took.
+
+    Attributes:
+        name: what messages call the mesh (the file name).
+        seconds: the whole preparation's bound [s] (None: unbounded).
+        step_seconds: wall time of each step that ran [s], in order.
+    """
+
+    name: str = "mesh"
+    seconds: float | None = DEFAULT_PREPARE_SECONDS
+    start: float = field(default_factory=time.perf_counter)
+    step_seconds: dict = field(default_factory=dict)
+
+    def remaining(self) -> float | None:
+        if self.seconds is None:
+            return None
+        return self.seconds - (time.perf_counter() - self.start)
+
+    def ran_out(self, step: str):
+        return MeshError(f"{self.name!r}: step '{step}' ran out of time: the preparation's bound of "
+                         f"{self.seconds:.0f} s was used up ({self._spent()}); simplify the mesh in a "
+                         "modelling tool, or raise the bound (prepare_body(time_limit=...), taichi-frac info --time-limit)")
+
+    def _spent(self) -> str:
+        spent = ", ".join(f"{k} {v:.1f} s" for k, v in self.step_seconds.items())
+        return f"time spent: {spent}" if spent else "no step finished"
+
+    def check(self, step: str) -> None:
+        """Raise if the bound is used up (call after a step that ran inline)."""
+        left = self.remaining()
+        if left is not None and left <= 0:
+            raise self.ran_out(step)
+
+    def run(self, step: str, function, *args, **kwargs):
+        """``function(*args, **kwargs)`` in a forked child, killed when the bound runs out.
+        Exceptions raised in the child are raised here; a crash of the child names the step."""
+        t0 = time.perf_counter()
+        try:
+            return self._run(step, function, args, kwargs)
+        finally:
+            self.step_seconds[step] = self.step_seconds.get(step, 0.0) + time.perf_counter() - t0
+
+    def inline(self, step: str, function, *args, **kwargs):
+        """Run a numpy step in this process, then check the bound."""
+        t0 = time.perf_counter()
+        try:
+            return function(*args, **kwargs)
+        finally:
+            self.step_seconds[step] = self.step_seconds.get(step, 0.0) + time.perf_counter() - t0
+            self.check(step)
+
+    def _run(self, step, function, args, kwargs):
+        left = self.remaining()
+        if left is not None and left <= 0:
+            raise self.ran_out(step)
+        if "fork" not in multiprocessing.get_all_start_methods():
+            result = function(*args, **kwargs)
+            self.check(step)
+            return result
+        context = multiprocessing.get_context("fork")
+        receive, send = context.Pipe(duplex=False)
+        child = context.Process(target=_child, args=(send, function, args, kwargs), daemon=True)
+        child.start()
+        send.close()
+        try:
+            if not receive.poll(left):
+                raise self.ran_out(step)
+            try:
+                ok, payload = pickle.loads(receive.recv_bytes())
+            except EOFError:
+                child.join(5)
+                raise MeshError(f"{self.name!r}: step '{step}' crashed (exit code {child.exitcode}); "
+                                "repair the mesh in a modelling tool or try backend='wildmeshing'") from None
+        finally:
+            receive.close()
+            if child.is_alive():
+                child.kill()
+            child.join()
+        if not ok:
+            raise payload
+        return payload
+
+
+def _child(send, function, args, kwargs) -> None:
+    try:
+        message = (True, function(*args, **kwargs))
+    except BaseException as exc:  # sent back and raised in the parent
+        message = (False, exc)
+    try:
+        data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception as exc:
+        data = pickle.dumps((False, MeshError(f"step result could not be sent back: {exc}")))
+    send.send_bytes(data)
+    send.close()
+    os._exit(0)  # skip the parent's atexit handlers (Taichi's) in the child

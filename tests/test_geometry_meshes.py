@@ -1,0 +1,239 @@
+"""Artists' meshes: every failure class built here (overlapping open shells, holes,
+self-crossings, non-manifold edges, a dense surface, UV seams, time bounds), checked against
+closed-form volumes and extents or a brute-force reference; then the public test meshes of
+../shared/meshes when they are there."""
+
+import time
+
+import numpy as np
+import pytest
+import trimesh
+
+from taichi_frac.bench.meshes import shared_meshes_dir
+from taichi_frac.geometry import repair as repair_module
+from taichi_frac.geometry.bounded import StepClock
+from taichi_frac.geometry.intersections import crossing_face_pairs
+from taichi_frac.geometry.meshio_in import load_surface
+from taichi_frac.geometry.prepare import prepare_body
+from taichi_frac.geometry.repair import repair_surface
+from taichi_frac.geometry.validate import MeshError, validate_surface
+from taichi_frac.options import ParticleOptions
+
+SHARED = shared_meshes_dir()
+
+
+def _without(mesh, drop):
+    keep = np.setdiff1d(np.arange(len(mesh.faces)), drop)
+    return trimesh.Trimesh(mesh.vertices, mesh.faces[keep], process=False)
+
+
+def _faces_facing(mesh, axis, sign):
+    """Faces of a box whose normal points along +/- axis."""
+    return np.nonzero(mesh.face_normals[:, axis] * sign > 0.99)[0]
+
+
+def _teapot_like():
+    """A unit box open at the top (the body) and a 1.0 x 0.2 x 0.2 tube open at both ends
+    (the spout) through its +x wall: union volume 1 + 0.7 x 0.2 x 0.2, x from -0.5 to 1.2."""
+    body = trimesh.creation.box((1.0, 1.0, 1.0))
+    body = _without(body, _faces_facing(body, 2, +1))
+    spout = trimesh.creation.box((1.0, 0.2, 0.2))
+    spout.apply_translation((0.7, 0.0, 0.0))
+    spout = _without(spout, np.concatenate([_faces_facing(spout, 0, +1), _faces_facing(spout, 0, -1)]))
+    return trimesh.util.concatenate([body, spout])
+
+
+# --- the broad phase against brute force ------------------------------------------------------
+
+def _crosses(p0, p1, t):
+    """Vectorised Moller-Trumbore: segment p0-p1 (K,3) through triangle t (K,3,3)'s interior."""
+    d = p1 - p0
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    h = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, h)
+    scale = np.linalg.norm(d, axis=1) * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+    ok = np.abs(det) > 1e-9 * np.maximum(scale, 1e-300)
+    det = np.where(ok, det, 1.0)
+    s = p0 - t[:, 0]
+    u = np.einsum("ij,ij->i", s, h) / det
+    q = np.cross(s, e1)
+    w = np.einsum("ij,ij->i", d, q) / det
+    k = np.einsum("ij,ij->i", e2, q) / det
+    eps = 1e-12
+    return ok & (u > eps) & (w > eps) & (u + w < 1 - eps) & (k > eps) & (k < 1 - eps)
+
+
+def _brute_force_pairs(vertices, faces):
+    """Every pair i < j tested, no broad phase: an edge of one crossing the other's interior."""
+    i, j = np.triu_indices(len(faces), k=1)
+    share = (faces[i][:, :, None] == faces[j][:, None, :]).any(axis=(1, 2))
+    i, j = i[~share], j[~share]
+    a, b = vertices[faces[i]], vertices[faces[j]]
+    hit = np.zeros(len(i), dtype=bool)
+    for m in range(3):
+        hit |= _crosses(b[:, m], b[:, (m + 1) % 3], a) | _crosses(a[:, m], a[:, (m + 1) % 3], b)
+    return np.stack([i[hit], j[hit]], axis=1).astype(np.int64)
+
+
+def test_crossing_pairs_match_brute_force_on_mixed_sizes():
+    # Small triangles and a few up to 100x larger (several grid levels), randomly placed.
+    rng = np.random.default_rng(3)
+    n = 500
+    centres = rng.random((n, 3))
+    size = np.where(rng.random(n) < 0.05, 0.3, 0.08 * rng.random(n) + 0.003)
+    vertices = (centres[:, None, :] + size[:, None, None] * rng.normal(size=(n, 3, 3))).reshape(-1, 3)
+    faces = np.arange(len(vertices)).reshape(-1, 3)
+    expected = _brute_force_pairs(vertices, faces)
+    got = crossing_face_pairs(vertices, faces)
+    assert len(expected) > 50
+    np.testing.assert_array_equal(got, expected)
+
+
+def test_crossing_pairs_buffer_grows_instead_of_refusing():
+    # 80 triangles all crossing one another: 3,160 pairs through a 10-pair buffer.
+    t = np.linspace(0, 1, 80)
+    vertices = np.concatenate([np.stack([np.full(80, -1.0), t, np.full(80, -1.0)], 1),
+                               np.stack([np.full(80, 1.0), t + 0.01, np.full(80, 1.0)], 1),
+                               np.stack([np.full(80, 0.0), t, np.full(80, 1.5)], 1)])
+    faces = np.stack([np.arange(80), np.arange(80) + 80, np.arange(80) + 160], 1)
+    other = trimesh.creation.box((4, 4, 0.001)).triangles.reshape(-1, 3)
+    v = np.concatenate([vertices, other + [0, 0.5, 0.3]])
+    f = np.concatenate([faces, np.arange(len(other)).reshape(-1, 3) + 240])
+    pairs = crossing_face_pairs(v, f, capacity=10)
+    assert len(pairs) == len(_brute_force_pairs(v, f)) > 10
+
+
+# --- repair: every part kept ------------------------------------------------------------------
+
+def test_overlapping_open_shells_keep_every_part():
+    mesh, report = repair_surface(_teapot_like(), "teapot-like.obj")
+    validate_surface(mesh, "teapot-like.obj")
+    assert mesh.volume == pytest.approx(1.0 + 0.7 * 0.2 * 0.2, rel=1e-6)
+    np.testing.assert_allclose(mesh.extents, [1.7, 1.0, 1.0], rtol=1e-9)
+    assert report.shells == 2
+    # The winding-number reference: 40,000 samples of a 1.7 m^3 box, ~0.5 % standard error.
+    assert report.kept_fraction > 0.99
+    assert report.input_volume == pytest.approx(1.028, rel=0.03)
+    # The outer surface is the input's own triangles: every input vertex not buried inside
+    # the body (the spout's inner end, x = 0.2) is on it.
+    vertices = _teapot_like().vertices
+    outside = vertices[~np.isclose(vertices[:, 0], 0.2)]
+    assert np.abs(trimesh.proximity.signed_distance(mesh, outside)).max() < 1e-9
+
+
+def test_losing_a_part_is_an_error_that_names_it(monkeypatch):
+    real_union = repair_module._manifold_union
+    monkeypatch.setattr(repair_module, "_manifold_union", lambda shells: real_union(shells[:1]))
+    a = trimesh.creation.box((1.0, 1.0, 1.0))
+    b = trimesh.creation.box((1.0, 1.0, 1.0))
+    b.apply_translation((3.0, 0.0, 0.0))
+    b.invert()  # a flipped shell far away: its winding number is -1 inside
+    with pytest.raises(MeshError, match=r"'two.obj': repair would keep only (49|50|51)\.\d % of the input's volume "
+                                        r"\(2(\.\d+)? m\^3 by winding number, 2 shells\); it would lose the region "
+                                        r"x 2\.5\d*\.\.3\.5\d*, .*nearest to shell 1 \(12 faces\)"):
+        repair_surface(trimesh.util.concatenate([a, b]), "two.obj")
+
+
+def test_holes_are_closed_with_the_volume_kept():
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.1)
+    rng = np.random.default_rng(0)
+    holey = _without(sphere, rng.choice(len(sphere.faces), 60, replace=False))
+    with pytest.raises(MeshError, match="is not closed"):
+        validate_surface(holey, "holey.obj")
+    mesh, report = repair_surface(holey, "holey.obj")
+    assert mesh.volume == pytest.approx(sphere.volume, rel=0.005)
+    assert report.kept_fraction > 0.99
+
+
+def test_crossing_closed_shells_keep_the_part_outside():
+    # A thin horn through a body's wall (two closed shells whose faces cross): the union keeps
+    # the horn's full length, and its faces outside are the input's.
+    body = trimesh.creation.box((1.0, 1.0, 1.0))
+    horn = trimesh.creation.box((1.2, 0.1, 0.1))
+    horn.apply_translation((0.9, 0.0, 0.0))
+    mesh = trimesh.util.concatenate([body, horn])
+    assert len(crossing_face_pairs(mesh.vertices, mesh.faces)) > 0
+    fixed, report = repair_surface(mesh, "horned.obj")
+    validate_surface(fixed, "horned.obj")
+    np.testing.assert_allclose(fixed.extents, [2.0, 1.0, 1.0], rtol=1e-9)
+    assert fixed.volume == pytest.approx(1.0 + 1.0 * 0.1 * 0.1, rel=1e-9)
+    assert report.steps == ["united 2 overlapping shells (manifold3d)"]
+
+
+def test_non_manifold_edge_is_resolved():
+    # A closed box and a fin: a triangle hanging on one of the box's edges (3 faces there).
+    box = trimesh.creation.box((1.0, 1.0, 1.0))
+    edge = box.edges_unique[0]
+    apex = box.vertices[edge].mean(axis=0) * 3.0
+    vertices = np.vstack([box.vertices, apex])
+    faces = np.vstack([box.faces, [edge[0], edge[1], len(box.vertices)]])
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    with pytest.raises(MeshError, match="not closed|not manifold"):
+        validate_surface(mesh, "fin.obj")
+    fixed, report = repair_surface(mesh, "fin.obj")
+    validate_surface(fixed, "fin.obj")
+    assert fixed.volume == pytest.approx(1.0, rel=0.01)
+
+
+def test_a_step_that_runs_out_of_time_is_named():
+    clock = StepClock(name="slow.obj", seconds=0.5)
+    with pytest.raises(MeshError, match=r"'slow.obj': step 'nap' ran out of time: the preparation's bound of "
+                                        r"0 s was used up"):
+        clock.run("nap", time.sleep, 5.0)
+    assert clock.remaining() > -1.0  # the child was killed at the bound, not waited for
+    with pytest.raises(MeshError, match=r"step 'clean-up' ran out of time"):
+        repair_surface(_teapot_like(), "late.obj", clock=StepClock(name="late.obj", seconds=1e-9))
+
+
+# --- resolution set by the target -------------------------------------------------------------
+
+def test_dense_surface_meshes_at_the_target():
+    sphere = trimesh.creation.icosphere(subdivisions=5, radius=0.05)  # 20,480 faces
+    model, report = prepare_body(sphere, particles=ParticleOptions(target_particles=1500), use_cache=False)
+    assert report.surface_triangles == 20480 and report.surface is not None
+    assert len(report.surface.faces) == 20480  # the artist's surface stays full resolution
+    assert report.tet_surface_triangles < 2000
+    assert abs(report.physics_particles / 1500 - 1) <= 0.15
+    assert abs(model.volume / sphere.volume - 1) <= 0.01
+    np.testing.assert_allclose(report.tet_extents, report.input_extents, rtol=0.02)
+
+
+def test_primitives_are_never_simplified():
+    _, with_simplify = prepare_body("torus", use_cache=False)
+    _, without = prepare_body("torus", use_cache=False, simplify=False)
+    assert with_simplify.tet_surface is None and with_simplify.tets == without.tets
+
+
+# --- UVs ---------------------------------------------------------------------------------------
+
+def test_uv_seams_do_not_open_the_surface(tmp_path):
+    box = trimesh.creation.box((1.0, 1.0, 1.0))
+    # Each face's corners get their own UVs (a seam everywhere), as an OBJ with v/vt writes.
+    lines = [f"v {a} {b} {c}" for a, b, c in box.vertices]
+    corner_uv = np.array([[0, 0], [1, 0], [0, 1]], dtype=float) * 0.5 + (np.arange(len(box.faces)) * 0.01)[:, None, None]
+    lines += [f"vt {u} {v}" for u, v in corner_uv.reshape(-1, 2)]
+    lines += [f"f {a + 1}/{3 * k + 1} {b + 1}/{3 * k + 2} {c + 1}/{3 * k + 3}" for k, (a, b, c) in enumerate(box.faces)]
+    path = tmp_path / "seams.obj"
+    path.write_text("\n".join(lines) + "\n")
+    mesh = load_surface(path)
+    assert mesh.is_watertight and len(mesh.vertices) == 8
+    np.testing.assert_allclose(mesh.metadata["corner_uvs"], corner_uv)
+    assert len(mesh.visual.uv) == 8
+
+
+# --- the public test meshes --------------------------------------------------------------------
+
+@pytest.mark.parametrize("name,shells", [("teapot", 4), ("suzanne", 3), ("cow", 1), ("beetle", 2)])
+def test_shared_meshes_keep_their_whole_shape(name, shells):
+    """``shells``: at least this many (non-manifold edges split shells further)."""
+    path = SHARED / f"{name}.obj"
+    if not path.exists():
+        pytest.skip(f"{path} is not there (the public test meshes live beside the checkout)")
+    mesh = load_surface(path, repair=True)
+    report = mesh.metadata["repair_report"]
+    assert report.shells >= shells
+    assert report.kept_fraction >= 0.99
+    np.testing.assert_allclose(report.output_extents, report.input_extents, rtol=0.01)
+    # Closing an open shell can add volume the winding number counts as half outside (the
+    # beetle's open underside), never lose it.
+    assert mesh.volume >= 0.95 * report.input_volume
