@@ -200,6 +200,7 @@ def object_surface(obj) -> trimesh.Trimesh:
     """The closed surface [m] of scene object ``obj`` that ``prepare_body`` meshes (the same
     facets for a primitive: the same edge length from its particle target), moved so its
     centre of mass is the origin (our body frame)."""
+    from ..geometry.bounded import StepClock
     from ..geometry.meshio_in import unit_scale
     from ..geometry.prepare import PRIMITIVE_EDGE_FACTOR, _surface_from_source
     from ..geometry.tetra import regular_tet_edge
@@ -209,7 +210,8 @@ def object_surface(obj) -> trimesh.Trimesh:
     def edge_for(volume):  # prepare_body's, for a particle target
         return PRIMITIVE_EDGE_FACTOR * regular_tet_edge(volume / target)
 
-    _, surface = _surface_from_source(obj.source, unit_scale(obj.scale, obj.units), obj.repair, edge_for)
+    _, surface, _ = _surface_from_source(obj.source, unit_scale(obj.scale, obj.units), obj.repair, edge_for,
+                                         StepClock(name=str(obj.source)))
     surface = surface.copy()
     surface.apply_translation(-surface.center_mass)
     return surface
