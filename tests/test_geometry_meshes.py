@@ -3,6 +3,7 @@ self-crossings, non-manifold edges, a dense surface, UV seams, time bounds), che
 closed-form volumes and extents or a brute-force reference; then the public test meshes of
 ../shared/meshes when they are there."""
 
+import os
 import time
 
 import numpy as np
@@ -11,6 +12,7 @@ import trimesh
 
 from taichi_frac.bench.meshes import shared_meshes_dir
 from taichi_frac.geometry import repair as repair_module
+from taichi_frac.geometry import tetra as tetra_module
 from taichi_frac.geometry.bounded import StepClock
 from taichi_frac.geometry.intersections import crossing_face_pairs
 from taichi_frac.geometry.meshio_in import load_surface
@@ -183,6 +185,29 @@ def test_a_step_that_runs_out_of_time_is_named():
     assert clock.remaining() > -1.0  # the child was killed at the bound, not waited for
     with pytest.raises(MeshError, match=r"step 'clean-up' ran out of time"):
         repair_surface(_teapot_like(), "late.obj", clock=StepClock(name="late.obj", seconds=1e-9))
+
+
+def _hanging_tetgen(*args, **kwargs):
+    time.sleep(60.0)  # TetGen looping on a union of many shells (the beetle)
+
+
+def _crashing_tetgen(*args, **kwargs):
+    os._exit(134)  # TetGen dying in native code (as an abort does)
+
+
+@pytest.mark.parametrize("mesher,why", [(_hanging_tetgen, "ran past its share"), (_crashing_tetgen, "crashed")])
+def test_tetgen_hang_or_crash_falls_back_to_ftetwild(monkeypatch, mesher, why):
+    pytest.importorskip("wildmeshing")
+    monkeypatch.setitem(tetra_module.BACKENDS, "tetgen", mesher)
+    monkeypatch.setattr(tetra_module, "_tetgen", mesher)  # the relaxed-quality re-runs too
+    box = trimesh.creation.box((0.1, 0.1, 0.1))
+    start = time.perf_counter()
+    model, report = prepare_body(box, particles=ParticleOptions(target_particles=300), use_cache=False,
+                                 time_limit=25.0)
+    assert time.perf_counter() - start < 25.0
+    assert report.backend == "wildmeshing"
+    assert any("fTetWild" in step and why.split()[0] in step for step in report.repair_steps), report.repair_steps
+    assert abs(model.volume / box.volume - 1) <= 0.01
 
 
 # --- resolution set by the target -------------------------------------------------------------
