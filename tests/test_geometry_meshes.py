@@ -297,3 +297,35 @@ def test_teapot_meets_the_particle_target():
     _, report = prepare_body(str(path), scale=_scale_for(str(path)), repair=True,
                              particles=ParticleOptions(target_particles=5000), use_cache=False, time_limit=120)
     assert abs(report.physics_particles / 5000 - 1) <= 0.15, report.physics_particles
+
+
+def test_edge_checks_take_one_sort_and_agree_with_a_reference(monkeypatch):
+    """The edge, winding and shell checks of ``validate_surface`` group the half-edges with
+    one 1-D sort (a 1.3M-face sphere's checks took 14 s with three ``np.unique`` passes and
+    trimesh's area and volume; 3.1 s now, crossings included): no ``np.unique`` on the way,
+    and the same verdicts and shells as a per-edge reference."""
+    from taichi_frac.geometry import validate as validate_module
+
+    def no_unique(*args, **kwargs):
+        raise AssertionError("np.unique called")
+
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    flipped = sphere.faces.copy()
+    flipped[[0, 7]] = flipped[[0, 7], ::-1]
+    two = trimesh.util.concatenate([sphere, trimesh.creation.box(bounds=[[3, 3, 3], [4, 4, 4]])])
+    reference_edges = {}
+    for face_index, face in enumerate(flipped):
+        for a, b in zip(face, np.roll(face, -1)):
+            reference_edges.setdefault((min(a, b), max(a, b)), []).append((a < b, face_index))
+    same_way = sum(1 for uses in reference_edges.values() if uses[0][0] == uses[1][0])
+    validate_surface(sphere, "sphere")  # the crossing kernel's broad phase may use np.unique
+    with pytest.raises(MeshError, match=r"not closed: 1 boundary loop, 3 open edges"):
+        validate_surface(_without(sphere, [5]), "holed")  # counting loops (error path) may too
+    monkeypatch.setattr(validate_module.np, "unique", no_unique)
+    validate_surface(sphere, "sphere", check_self_intersection=False)
+    with pytest.raises(MeshError, match=rf"inconsistent winding: {same_way} edges"):
+        validate_surface(trimesh.Trimesh(sphere.vertices, flipped, process=False), "flipped")
+    with pytest.raises(MeshError, match=r"2 disconnected shells"):
+        validate_surface(two, "two", check_self_intersection=False)
+    count, label = validate_module.shell_labels(two.faces)
+    assert count == 2 and np.array_equal(label, (np.arange(len(two.faces)) >= len(sphere.faces)).astype(label.dtype))
