@@ -21,6 +21,10 @@ from .validate import MeshError
 DEFAULT_PREPARE_SECONDS = 60.0
 
 
+class StepShareExceeded(MeshError):
+    """A step ran past its share of the bound (:meth:`StepClock.run_within`); time is left."""
+
+
 @dataclass
 class StepClock:
     """A deadline shared by the steps of one preparation, and how long each step took.
@@ -59,9 +63,15 @@ class StepClock:
     def run(self, step: str, function, *args, **kwargs):
         """``function(*args, **kwargs)`` in a forked child, killed when the bound runs out.
         Exceptions raised in the child are raised here; a crash of the child names the step."""
+        return self.run_within(step, None, function, *args, **kwargs)
+
+    def run_within(self, step: str, share: float | None, function, *args, **kwargs):
+        """:meth:`run` with the step also stopped after ``share`` seconds (None: only the
+        whole bound); running out of the share raises :class:`StepShareExceeded`, which a
+        caller can answer with a fallback in the time left."""
         t0 = time.perf_counter()
         try:
-            return self._run(step, function, args, kwargs)
+            return self._run(step, function, args, kwargs, share)
         finally:
             self.step_seconds[step] = self.step_seconds.get(step, 0.0) + time.perf_counter() - t0
 
@@ -74,10 +84,13 @@ class StepClock:
             self.step_seconds[step] = self.step_seconds.get(step, 0.0) + time.perf_counter() - t0
             self.check(step)
 
-    def _run(self, step, function, args, kwargs):
+    def _run(self, step, function, args, kwargs, share=None):
         left = self.remaining()
         if left is not None and left <= 0:
             raise self.ran_out(step)
+        by_share = share is not None and (left is None or share < left)
+        if by_share:
+            left = share
         if "fork" not in multiprocessing.get_all_start_methods():
             result = function(*args, **kwargs)
             self.check(step)
@@ -89,6 +102,8 @@ class StepClock:
         send.close()
         try:
             if not receive.poll(left):
+                if by_share:
+                    raise StepShareExceeded(f"{self.name!r}: step '{step}' ran past its share of {share:.1f} s")
                 raise self.ran_out(step)
             try:
                 ok, payload = pickle.loads(receive.recv_bytes())

@@ -22,11 +22,11 @@ import trimesh
 
 from ..model import BodyModel, build_body_model
 from ..options import Material, ParticleOptions, material_preset
-from .bounded import DEFAULT_PREPARE_SECONDS, StepClock
+from .bounded import DEFAULT_PREPARE_SECONDS, StepClock, StepShareExceeded
 from .meshio_in import check_or_repair, is_tet_file, load_surface, load_tet_mesh, unit_scale
 from .primitives import make_primitive, parse_primitive_spec
 from .simplify import simplified_tet_surfaces
-from .tetra import TetMesh, regular_tet_edge, tetrahedralize
+from .tetra import BACKENDS, TetMesh, regular_tet_edge, tetrahedralize
 from .topology import dihedral_angles_deg, signed_volumes
 from .validate import MeshError, validate_surface
 
@@ -128,17 +128,59 @@ def _cache_root() -> Path:
     return runtime.cache_dir()
 
 
+#: Share of the time left that TetGen gets before the fTetWild fallback takes over.
+TETGEN_TIME_SHARE = 0.2
+
+
+def _mesh_with_fallback(mesh, kwargs: dict, clock, backend: str, notes: list | None, fallback_on_refusal: bool):
+    """``tetrahedralize`` under ``clock``; with TetGen, when it crashes, hangs past
+    :data:`TETGEN_TIME_SHARE` of the time left (TetGen loops on some unions of many shells,
+    e.g. the 33-piece beetle) or (``fallback_on_refusal``) refuses the surface, the surface is
+    meshed with fTetWild (``wildmeshing``) in the time left, and ``notes`` gets a line."""
+    if clock is None:
+        return tetrahedralize(mesh, **kwargs)
+    step = f"tetrahedralize ({backend})"
+    if backend != "tetgen" or notes is None or "wildmeshing" not in BACKENDS:
+        return clock.run(step, tetrahedralize, mesh, **kwargs)
+    left = clock.remaining()
+    try:
+        return clock.run_within(step, None if left is None else TETGEN_TIME_SHARE * left, tetrahedralize, mesh,
+                                **kwargs)
+    except StepShareExceeded as exc:
+        reason = f"TetGen ran past its share of the time bound ({TETGEN_TIME_SHARE * left:.1f} s)"
+        cause = exc
+    except MeshError as exc:
+        if "ran out of time" in str(exc):
+            raise
+        crashed = "crashed" in str(exc)
+        if not (crashed or fallback_on_refusal):
+            raise
+        reason = "TetGen crashed" if crashed else f"TetGen refused the surface ({exc})"
+        cause = exc
+    fallback = dict(kwargs, backend="wildmeshing", relax_quality=False)
+    try:
+        tm = clock.run("tetrahedralize (wildmeshing fallback)", tetrahedralize, mesh, **fallback)
+    except MeshError as exc:
+        raise MeshError(f"{exc} (after: {reason})") from cause
+    notes.append(f"meshed with fTetWild (wildmeshing) instead: {reason}")
+    return tm
+
+
 def _cached_tetrahedralize(mesh, *, backend, target, max_volume, min_dihedral, use_cache, clock=None,
-                           relax_quality=False):
-    """Returns (TetMesh, cache_hit); the mesher runs under ``clock``'s bound when given."""
+                           relax_quality=False, notes=None, fallback_on_refusal=True):
+    """Returns (TetMesh, cache_hit); the mesher runs under ``clock``'s bound when given, with
+    the fTetWild fallback of :func:`_mesh_with_fallback` when ``notes`` is a list."""
     key = _cache_key(mesh, backend, target, max_volume, min_dihedral, relax_quality)
     path = _cache_root() / "tets" / f"{key}.npz"
     if use_cache and path.exists():
         try:
             with np.load(path) as data:
                 meta = data["meta"]
+                used = str(data["backend"]) if "backend" in data.files else backend
+                if used != backend and notes is not None:
+                    notes.append(f"meshed with fTetWild ({used}) instead of {backend} (cached)")
                 return TetMesh(
-                    vertices=data["vertices"], tets=data["tets"], backend=backend,
+                    vertices=data["vertices"], tets=data["tets"], backend=used,
                     max_volume=None if np.isnan(meta[0]) else float(meta[0]), surface_volume=float(meta[1]),
                     volume_error=float(meta[2]), min_dihedral_deg=float(meta[3]), sliver_count=int(meta[4]),
                     runs=0, seconds=0.0,
@@ -147,14 +189,14 @@ def _cached_tetrahedralize(mesh, *, backend, target, max_volume, min_dihedral, u
             pass  # a corrupt or old entry: re-mesh and overwrite it
     kwargs = dict(target_tets=target, max_volume=max_volume, backend=backend, min_dihedral_deg=min_dihedral,
                   relax_quality=relax_quality)
-    tm = (clock.run(f"tetrahedralize ({backend})", tetrahedralize, mesh, **kwargs) if clock is not None
-          else tetrahedralize(mesh, **kwargs))
+    tm = _mesh_with_fallback(mesh, kwargs, clock, backend, notes, fallback_on_refusal)
     if use_cache:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
         meta = np.array([np.nan if tm.max_volume is None else tm.max_volume, tm.surface_volume,
                          tm.volume_error, tm.min_dihedral_deg, tm.sliver_count])
-        np.savez(tmp, vertices=tm.vertices, tets=tm.tets, meta=meta)
+        extra = {} if tm.backend == backend else {"backend": np.array(tm.backend)}
+        np.savez(tmp, vertices=tm.vertices, tets=tm.tets, meta=meta, **extra)
         os.replace(tmp, path)  # atomic: a parallel run never reads half a file
     return tm, False
 
@@ -177,7 +219,10 @@ def _mesh_simplified(surface, count: int, clock: StepClock, kwargs: dict):
     cache_hit, report line or None); (surface, None, False, ...) when no copy applies or the
     mesher refused them all (the caller then meshes the full surface)."""
     copies = simplified_tet_surfaces(surface, count, clock)
-    kwargs = dict(kwargs, relax_quality=True)  # a copy's count matters more than its last degree
+    # A copy's count matters more than its last degree; a TetGen refusal of a copy is first
+    # answered by cleaning the copy (faster than the fTetWild fallback), so only the second
+    # try falls back.
+    kwargs = dict(kwargs, relax_quality=True, fallback_on_refusal=False)
     best, failed, tets, started = None, None, None, False
     while True:
         try:
@@ -194,7 +239,8 @@ def _mesh_simplified(surface, count: int, clock: StepClock, kwargs: dict):
             # TetGen still refuses, a coarser copy is tried.
             copy = _cleaned_copy(copy, clock)
             try:
-                candidate, hit = _cached_tetrahedralize(copy, **kwargs) if copy is not None else (None, False)
+                candidate, hit = (_cached_tetrahedralize(copy, **dict(kwargs, fallback_on_refusal=True))
+                                  if copy is not None else (None, False))
             except MeshError as again:
                 if "ran out of time" in str(again):
                     raise
@@ -274,6 +320,7 @@ def prepare_body(
         timings["mesh"] = 0.0
     else:
         target = None if max_volume is not None else particles.target_particles
+        mesher_notes: list[str] = []
         def edge_for(volume):
             return PRIMITIVE_EDGE_FACTOR * regular_tet_edge(volume / (target or max(volume / max_volume, 1.0)))
         clock = StepClock(name=Path(str(source)).name if not isinstance(source, trimesh.Trimesh) else "mesh",
@@ -285,7 +332,8 @@ def prepare_body(
         timings["load"] = time.perf_counter() - t0
         t1 = time.perf_counter()
         kwargs = dict(backend=backend, target=target, max_volume=max_volume,
-                      min_dihedral=particles.min_dihedral_deg, use_cache=use_cache, clock=clock)
+                      min_dihedral=particles.min_dihedral_deg, use_cache=use_cache, clock=clock,
+                      notes=mesher_notes)
         tet_surface, tm, cache_hit = surface, None, False
         if simplify and not is_primitive:
             # The tets' spacing: the target count, or the count a volume bound asks for.
@@ -295,6 +343,7 @@ def prepare_body(
                 repair_steps.append(step)
         if tm is None:
             tm, cache_hit = _cached_tetrahedralize(surface, **kwargs)
+        repair_steps.extend(mesher_notes)
         timings["mesh"] = time.perf_counter() - t1
         timings.update({f"step: {k}": v for k, v in clock.step_seconds.items()})
     t2 = time.perf_counter()

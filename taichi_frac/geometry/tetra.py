@@ -135,6 +135,29 @@ _TETGEN_OVERSHOOT = 2.0
 _TETGEN_RELAXED_QUALITY = ((2.0, 5.0), (4.0, 0.0))
 
 
+#: Volume-bound calibration runs under each relaxed quality bound.
+_RELAXED_CALIBRATION_RUNS = 4
+
+
+def _next_bound(seen: list, target: int) -> float:
+    """The volume bound for ``target`` tets from the (bound, count) runs ``seen``. A count is
+    the surface's floor plus volume / (k bound): with two runs that line in 1/bound is fitted
+    (the floor alone can be 2/3 of the target on a coarse copy, where a proportional step
+    barely moves the count); with one, or where the fit says the floor is above the target,
+    a proportional step. None where the fitted floor is above the target."""
+    (b1, n1) = seen[-1]
+    if len(seen) >= 2:
+        b0, n0 = seen[-2]
+        if b0 != b1 and n0 != n1:
+            slope = (n0 - n1) / (1.0 / b0 - 1.0 / b1)
+            floor = n1 - slope / b1
+            if floor >= target and n1 > target:
+                return None  # this quality bound cannot reach the target
+            if slope > 0 and floor < target:
+                return min(max(slope / (target - floor), b1 / 8.0), b1 * 8.0)
+    return b1 * n1 / target
+
+
 def register_backend(name: str, function) -> None:
     """Add a mesher: ``function(vertices (V,3), faces (F,3), max_volume or None,
     min_dihedral_deg) -> (vertices (V',3), tets (T,4))``."""
@@ -206,12 +229,26 @@ def tetrahedralize(
         if relax_quality and backend == "tetgen" and len(t) > (1.0 + count_tolerance) * target_tets:
             # The quality bound forces small tets along short surface features or thin parts
             # whatever the volume bound: trade quality for the count, reported as the min
-            # dihedral angle and the sliver count.
+            # dihedral angle and the sliver count. A looser bound frees the count from the
+            # surface, so the volume bound is re-calibrated under it (proportional steps):
+            # without that the bound fitted under the strict quality undershoots (-21 % on
+            # overlapping shells).
+            def miss_of(tets):
+                return abs(len(tets) / target_tets - 1.0)
+
             for quality in _TETGEN_RELAXED_QUALITY:
-                v2, t2 = mesh_once(bound, quality)
-                if len(t2) < len(t):
-                    v, t = v2, t2
-                if len(t) <= (1.0 + count_tolerance) * target_tets:
+                quality_bound, seen = bound, []
+                for _ in range(_RELAXED_CALIBRATION_RUNS):
+                    v2, t2 = mesh_once(quality_bound, quality)
+                    if miss_of(t2) < miss_of(t):
+                        v, t, bound = v2, t2, quality_bound
+                    if miss_of(t2) <= tolerance:
+                        break
+                    seen.append((quality_bound, len(t2)))
+                    quality_bound = _next_bound(seen, target_tets)
+                    if quality_bound is None:
+                        break
+                if miss_of(t) <= tolerance:
                     break
     tet_volume = signed_volumes(v, t)
     dihedral = dihedral_angles_deg(v, t).min(axis=1)

@@ -20,13 +20,56 @@ class MeshError(ValueError):
     (with counts) and what to do."""
 
 
+class _HalfEdges:
+    """The 3F half-edges of a face set grouped by undirected edge with one 1-D sort (no
+    Python loop, no row-wise ``np.unique``): the undirected key (lo * base + hi) and the
+    half-edge index are packed into one int64 where they fit, so a plain ``np.sort``
+    replaces an argsort. ``order``: half-edge indices (face = index // 3) by edge;
+    ``start``/``counts``: each undirected edge's first position in ``order`` and its uses."""
+
+    def __init__(self, faces: np.ndarray):
+        faces = np.asarray(faces, dtype=np.int64)
+        self.directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+        lo = np.minimum(self.directed[:, 0], self.directed[:, 1])
+        hi = np.maximum(self.directed[:, 0], self.directed[:, 1])
+        n = len(lo)
+        self.base = int(hi.max()) + 1 if n else 1
+        key = lo * self.base + hi
+        shift = max(int(n - 1).bit_length(), 1)
+        if n and int(key.max()) < (1 << (62 - shift)):
+            packed = np.sort((key << shift) | np.arange(n, dtype=np.int64))
+            self.order = packed & ((1 << shift) - 1)
+            skey = packed >> shift
+        else:
+            self.order = np.argsort(key, kind="stable")
+            skey = key[self.order]
+        boundary = np.empty(n, dtype=bool)
+        boundary[:1] = True
+        np.not_equal(skey[1:], skey[:-1], out=boundary[1:])
+        self.start = np.flatnonzero(boundary)
+        self.counts = np.diff(np.append(self.start, n))
+        self.keys = skey[self.start]
+
+    def edges(self, which=None) -> np.ndarray:
+        keys = self.keys if which is None else self.keys[which]
+        return np.stack([keys // self.base, keys % self.base], axis=1)
+
+    def face_pairs(self) -> np.ndarray:
+        """(M,2) the two faces of each edge that exactly two faces use."""
+        first = self.start[self.counts == 2]
+        return np.stack([self.order[first] // 3, self.order[first + 1] // 3], axis=1)
+
+    def same_direction(self) -> int:
+        """Edges of two uses that both faces run the same way (inconsistent winding)."""
+        first = self.start[self.counts == 2]
+        forward = self.directed[:, 0] < self.directed[:, 1]
+        return int(np.sum(forward[self.order[first]] == forward[self.order[first + 1]]))
+
+
 def _edges(faces: np.ndarray):
-    """Unique undirected edges (E,2) and how many faces use each (E,). Edges are packed into
-    one int64 each, so that a million faces take a 1-D sort instead of a row sort."""
-    e = np.sort(np.asarray(faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    base = int(e.max()) + 1 if len(e) else 1
-    unique, counts = np.unique(e[:, 0] * base + e[:, 1], return_counts=True)
-    return np.stack([unique // base, unique % base], axis=1), counts
+    """Unique undirected edges (E,2) and how many faces use each (E,)."""
+    half = _HalfEdges(faces)
+    return half.edges(), half.counts
 
 
 def count_loops(edges: np.ndarray) -> int:
@@ -42,28 +85,39 @@ def count_loops(edges: np.ndarray) -> int:
 def degenerate_faces(mesh: trimesh.Trimesh) -> np.ndarray:
     """Indices of faces with (near) zero area: below 1e-12 of the bounding-box diagonal squared,
     or with a repeated vertex index."""
-    f = mesh.faces
+    return _degenerate_and_volume(mesh)[0]
+
+
+def _degenerate_and_volume(mesh: trimesh.Trimesh):
+    """(degenerate face indices, enclosed volume) from one pass over the corners: twice a
+    face's area is |(b - a) x (c - a)| and its signed volume a . ((b - a) x (c - a)) / 6."""
+    f = np.asarray(mesh.faces, dtype=np.int64)
+    v = np.asarray(mesh.vertices, dtype=np.float64)
     repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
-    scale = float(np.linalg.norm(mesh.extents)) if len(mesh.vertices) else 1.0
-    tiny = mesh.area_faces <= 1e-12 * scale**2
-    return np.nonzero(repeated | tiny)[0]
+    scale = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))) if len(v) else 1.0
+    a = v[f[:, 0]]
+    e1 = v[f[:, 1]] - a
+    e2 = v[f[:, 2]] - a
+    n = np.empty_like(a)
+    n[:, 0] = e1[:, 1] * e2[:, 2] - e1[:, 2] * e2[:, 1]
+    n[:, 1] = e1[:, 2] * e2[:, 0] - e1[:, 0] * e2[:, 2]
+    n[:, 2] = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    area = 0.5 * np.sqrt(np.einsum("ij,ij->i", n, n))
+    volume = float(np.einsum("ij,ij->", a, n)) / 6.0
+    return np.nonzero(repeated | (area <= 1e-12 * scale**2))[0], volume
 
 
 def shell_labels(faces: np.ndarray) -> tuple[int, np.ndarray]:
     """Shells of a face set: faces joined across edges that exactly two faces share. A
     non-manifold edge (a fin on a box, parts glued along an edge) separates shells, so
     each can be closed on its own. Returns (count, label (F,) int)."""
-    faces = np.asarray(faces, dtype=np.int64)
-    count = len(faces)
+    return _shell_labels(len(faces), _HalfEdges(faces) if len(faces) else None)
+
+
+def _shell_labels(count: int, half) -> tuple[int, np.ndarray]:
     if count == 0:
         return 0, np.zeros(0, dtype=np.int64)
-    e = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    base = int(e.max()) + 1
-    _, edge_id, uses = np.unique(e[:, 0] * base + e[:, 1], return_inverse=True, return_counts=True)
-    owner = np.repeat(np.arange(count), 3)
-    manifold = uses[edge_id] == 2
-    order = np.argsort(edge_id[manifold], kind="stable")
-    pairs = owner[manifold][order].reshape(-1, 2)  # the two faces of each manifold edge
+    pairs = half.face_pairs()  # the two faces of each manifold edge
     graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
     n, label = csgraph.connected_components(graph, directed=False)
     return int(n), label
@@ -90,12 +144,13 @@ def validate_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, allow_multipl
     if len(mesh.faces) == 0 or len(mesh.vertices) == 0:
         raise MeshError(f"{label} is empty: {len(mesh.vertices)} vertices, {len(mesh.faces)} faces; "
                         "check the file exports geometry (not only a camera, light or point cloud)")
-    bad = degenerate_faces(mesh)
+    bad, volume = _degenerate_and_volume(mesh)
     if len(bad):
         raise MeshError(f"{label} has {len(bad)} degenerate faces (zero area or a repeated vertex) out of "
                         f"{len(mesh.faces)}, e.g. face {int(bad[0])}; {REPAIR_HINT}")
-    edges, counts = _edges(mesh.faces)
-    open_edges = edges[counts == 1]
+    half = _HalfEdges(mesh.faces)
+    counts = half.counts
+    open_edges = half.edges(counts == 1)
     nonmanifold = int(np.sum(counts > 2))
     if len(open_edges):
         loops = count_loops(open_edges)
@@ -106,10 +161,9 @@ def validate_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, allow_multipl
                         f"{REPAIR_HINT}")
     # Closed and manifold: consistent winding means every directed edge is used once (a
     # flipped face traverses an edge in the same direction as its neighbour).
-    directed = np.asarray(mesh.faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    _, dcounts = np.unique(directed[:, 0] * (int(directed.max()) + 1) + directed[:, 1], return_counts=True)
-    if np.any(dcounts > 1):
-        raise MeshError(f"{label} has inconsistent winding: {int(np.sum(dcounts > 1))} edges are traversed in "
+    flipped = half.same_direction()
+    if flipped:
+        raise MeshError(f"{label} has inconsistent winding: {flipped} edges are traversed in "
                         "the same direction by both of their faces (some faces are flipped); "
                         f"{REPAIR_HINT} (trimesh.repair.fix_winding also fixes this)")
     if check_self_intersection:
@@ -118,13 +172,12 @@ def validate_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, allow_multipl
             n_faces = len(np.unique(hits))
             raise MeshError(f"{label} self-intersects: {len(hits)} crossing face pairs ({n_faces} faces), e.g. "
                             f"faces {int(hits[0, 0])} and {int(hits[0, 1])}; {REPAIR_HINT}")
-    shells, shell_of_face = shell_labels(mesh.faces)
+    shells, shell_of_face = _shell_labels(len(mesh.faces), half)
     if shells > 1 and not allow_multiple_shells:
         parts = sorted(np.bincount(shell_of_face).tolist(), reverse=True)
         raise MeshError(f"{label} has {shells} disconnected shells (faces per shell: "
                         f"{', '.join(map(str, parts[:8]))}{', ...' if len(parts) > 8 else ''}); "
                         "make one scene object per shell, or pass repair=True to unite overlapping shells")
-    volume = float(mesh.volume)
     if volume <= 0:
         raise MeshError(f"{label} is inverted: enclosed volume {volume:.6g} m^3 is negative (normals point "
                         "inward); flip the faces (trimesh: mesh.invert()) or pass repair=True")
