@@ -16,7 +16,7 @@ from taichi_frac.geometry.tetra import tetrahedralize
 from taichi_frac.model import build_body_model, contact_patches
 from test_dynamics_support import box_model, fresh_world, ring_model, rotation, single_tet_model
 
-#: Rest heights within this of exact [m] (the issue's bound on the two-level contact).
+#: Rest heights within this of exact [m] (the bound surface contact is held to).
 REST_TOLERANCE = 0.5e-3
 
 

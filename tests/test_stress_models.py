@@ -71,7 +71,7 @@ def test_above_the_tangent_plane_the_gradient_is_the_clamped_fields():
 
 
 def test_default_body_stress_is_exact_on_the_cubes_tet_centroids():
-    """The issue's cube: 0.2 m, a shear + normal load at the top centre; the default model's
+    """The benchmark's cube: 0.2 m, a shear + normal load at the top centre; the default model's
     interior stress on the tet centroids against the exact stress of the same load."""
     vertices, tets = box_mesh((0.2, 0.2, 0.2), (8, 8, 8))
     vertices = vertices - [0.1, 0.0, 0.0]

@@ -5,7 +5,7 @@ generated stress cases (a 1.3M-face noisy sphere, a sphere with 1,000 random hol
 overlapping closed shells), scaled to 0.3 m across: faces in, particles out against the
 target, the volume and extents the solid keeps, the preparation's time (repair on), then a
 1-second drop onto the ground at 10 m/s with fracture (ms/frame, fragments, mass kept).
-A second table times the checks alone on the 1.3M-face sphere (the issue's 5 s bound).
+A second table times the checks alone on the 1.3M-face sphere (the bound: 5 s for a million faces).
 Writes docs/benchmarks/meshes.md (``--out``: elsewhere).
 """
 

@@ -1,4 +1,4 @@
-"""Checks a surface mesh must pass before any meshing work (the issue's bad-input list).
+"""Checks a surface mesh must pass before any meshing work.
 
 Each failure raises :class:`MeshError` whose message names the file, the problem, the
 numbers and what to do, e.g. ``'teapot.obj' is not closed: 4 boundary loops, 52 open
