@@ -26,7 +26,7 @@ def _command(*args: str) -> list[str]:
 
 def _env() -> dict:
     env = dict(os.environ)
-    env.pop("TI_LOG_LEVEL", None)  # (the test session's; a user's would be reported by Taichi)
+    env.pop("TI_LOG_LEVEL", None)  # (the one conftest.py sets; a user's would be reported by Taichi)
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     return env
 

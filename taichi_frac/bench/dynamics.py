@@ -251,43 +251,15 @@ def _with_contact(scene, single: bool, surface: bool):
         scene.simulation, single_scale=single, surface_contact=surface))
 
 
-def _surface_depth(model, state) -> float:
-    """[m] deepest vertex of ``model``'s surface below z = 0 at the pose in ``state`` (row 0)."""
-    from ..geometry.rotation import quaternion_matrix
-
-    z = (model.vertices @ quaternion_matrix(state["orientation"][0]).T + state["position"][0])[:, 2]
-    return max(0.0, -float(z.min()))
-
-
 def _ring_drop(ctx: BenchContext, single: bool, surface: bool) -> dict:
-    """The report's single-ring drop (``grouping.drop_scene``): rest height, rebound,
-    first-impact impulse and the deepest point of the true surface below the ground."""
-    from ..simulation import Simulation
+    """The report's single-ring drop (``grouping.measure_drop`` on ``grouping.drop_scene``):
+    rest height, rebound, first-impact impulse and the deepest point of the true surface
+    below the ground."""
     from . import grouping
 
     scene = _with_contact(grouping.drop_scene(1 if single else 4), single, surface)
-    sim = Simulation(scene, output=False, world=ctx.world())
-    body = sim.world.body_ids[0]
-    model = sim.records[body].model
-    seen = dict(impulse=None, bounced=False, landed=False, peak=-np.inf, depth=0.0)
-
-    def frame_done(frame, total, t, fragments, fps):
-        rows = sim.world.impacts()
-        if seen["impulse"] is None and len(rows["body"]):
-            seen["impulse"] = float(np.linalg.norm(rows["impulse"].sum(axis=0)))
-        state = sim.world.body_state([body])
-        if seen["impulse"] is not None and state["linear_velocity"][0][2] > 0:
-            seen["bounced"] = True
-        if seen["bounced"] and not seen["landed"]:
-            seen["peak"] = max(seen["peak"], state["position"][0][2])
-            seen["landed"] = state["linear_velocity"][0][2] < 0 and seen["peak"] > state["position"][0][2]
-        seen["depth"] = max(seen["depth"], _surface_depth(model, state))
-
-    sim.progress = frame_done
-    sim.run()
-    rest = float(sim.world.body_state([body])["position"][0][2])
-    return dict(rest=rest, rebound=float(seen["peak"] - rest) if seen["bounced"] else 0.0,
-                impulse=seen["impulse"] or 0.0, depth=seen["depth"])
+    drop = grouping.measure_drop(ctx, scene)
+    return dict(rest=drop.rest_height, rebound=drop.rebound, impulse=drop.first_impulse, depth=drop.surface_depth)
 
 
 def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) -> dict:
@@ -301,6 +273,7 @@ def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) ->
     from ..dynamics import DynamicsOptions
     from ..geometry.tetra import tetrahedralize
     from ..model import build_body_model
+    from . import grouping
 
     mesh = tetrahedralize(trimesh.creation.box((0.1, 0.1, 0.1)), target_tets=5000)
     model = build_body_model(mesh.vertices, mesh.tets, 2400.0, boundary_group_size=1 if single else 4)
@@ -321,7 +294,7 @@ def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) ->
     depth = 0.0
     for _ in range(15 if on_edge else 50):
         world.advance(0.02, 10)
-        depth = max(depth, _surface_depth(model, world.body_state([body])))
+        depth = max(depth, grouping.surface_depth(model, world.body_state([body])))
     return dict(rest=float(world.body_state([body])["position"][0][2]), depth=depth)
 
 

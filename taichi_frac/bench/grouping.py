@@ -53,16 +53,27 @@ class DropResult:
     rebound: float
     first_impulse: float
     penetration: float
+    surface_depth: float  # [m] deepest vertex of the true surface below the ground
+
+
+def surface_depth(model, state) -> float:
+    """[m] deepest vertex of ``model``'s surface below z = 0 at the pose in ``state`` (row 0)."""
+    from ..geometry.rotation import quaternion_matrix
+
+    z = (model.vertices @ quaternion_matrix(state["orientation"][0]).T + state["position"][0])[:, 2]
+    return max(0.0, -float(z.min()))
 
 
 def measure_drop(ctx: BenchContext, scene) -> DropResult:
-    """Run the drop frame by frame and measure rest height, rebound, first impulse and
-    the deepest collision sphere below the ground (sampled at every frame end)."""
+    """Run the drop frame by frame and measure rest height, rebound, first impulse, the
+    deepest collision sphere and the deepest surface vertex below the ground (sampled at
+    every frame end)."""
     from ..simulation import Simulation
 
     sim = Simulation(scene, output=False, world=ctx.world())
     body = sim.world.body_ids[0]
-    seen = dict(first_impulse=None, bounced=False, peak=-np.inf, penetration=0.0)
+    model = sim.records[body].model
+    seen = dict(first_impulse=None, bounced=False, peak=-np.inf, penetration=0.0, depth=0.0)
 
     def frame_done(frame, total, t, fragments, fps):
         rows = sim.world.impacts()
@@ -75,17 +86,18 @@ def measure_drop(ctx: BenchContext, scene) -> DropResult:
             seen["peak"] = max(seen["peak"], state["position"][0][2])
             seen["landed"] = state["linear_velocity"][0][2] < 0 and seen["peak"] > state["position"][0][2]
         seen["penetration"] = max(seen["penetration"], deepest_below_ground(sim.world, [body]))
+        seen["depth"] = max(seen["depth"], surface_depth(model, state))
 
     sim.progress = frame_done
     sim.run()
     rest = float(sim.world.body_state([body])["position"][0][2])
-    model = sim.records[body].model
     n = model.boundary_group_size
     return DropResult(
         group_size=n, collision_particles=model.boundary_particle_count,
         mean_radius=float(model.boundary_radius.mean()), rest_height=rest,
         rebound=float(seen["peak"] - rest) if seen["bounced"] else 0.0,
-        first_impulse=seen["first_impulse"] or 0.0, penetration=max(seen["penetration"], 0.0))
+        first_impulse=seen["first_impulse"] or 0.0, penetration=max(seen["penetration"], 0.0),
+        surface_depth=seen["depth"])
 
 
 def rings_scene(group_size: int):
