@@ -13,7 +13,7 @@ Layers:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -79,6 +79,9 @@ class BodyModel:
             normal until its outermost point lies on the true surface (so the coarse layer
             does not stand proud of the body), no further than keeps it inside the body
             behind it. None: collide at boundary_position. Use ``collision_position``.
+        neighbor_lists: the SPH neighbour lists of the physics particles, by smoothing
+            length h [m] -> (offsets (T+1,) int64, indices int32), CSR, built when a breakable
+            body is prepared and kept with the model (``fracture/neighbors.py``).
     """
 
     vertices: np.ndarray
@@ -109,6 +112,8 @@ class BodyModel:
     boundary_contact_position: np.ndarray | None = None
     particle_spacing: float | None = None
     root: BodyModel | None = None
+    # (not an argument: a model made from another by dataclasses.replace starts empty)
+    neighbor_lists: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def collision_position(self) -> np.ndarray:

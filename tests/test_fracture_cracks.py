@@ -248,12 +248,12 @@ def test_local_first_analysis_matches_the_full_field(strength):
 
 
 def test_neighbor_rows_of_a_piece_are_its_restricted_lists_rows():
-    """cracks.neighbor_rows: the rows of a piece's SPH neighbour lists, read from its
+    """neighbors.neighbor_rows: the rows of a piece's SPH neighbour lists, read from its
     root's lists without restricting them over the whole piece, equal those rows of the
     whole restriction (same neighbours, same order); a local analysis of the piece then
     finds the same cracks as a full-field one."""
-    from taichi_frac.fracture.cracks import (model_neighbor_lists, neighbor_rows, restrict_neighbor_lists,
-                                            smoothing_length)
+    from taichi_frac.fracture.neighbors import (model_neighbor_lists, neighbor_rows, restrict_neighbor_lists,
+                                                smoothing_length)
     from taichi_frac.model import build_fragment_model
 
     root = ring_model()
@@ -284,7 +284,7 @@ def test_fused_stress_kernel_equals_the_three_kernels(corrected):
     Its principal stresses (the largest in closed form, and with ``decompose`` all three
     and their directions) against ``largest_principal_stress`` and ``principal_stresses``
     on the separate stress."""
-    from taichi_frac.fracture.cracks import model_neighbor_lists, neighbor_rows, smoothing_length
+    from taichi_frac.fracture.neighbors import model_neighbor_lists, neighbor_rows, smoothing_length
     from taichi_frac.fracture.field import load_rows, point_loads_displacement
     from taichi_frac.fracture.fused import stress_at
     from taichi_frac.fracture.stress import stress_from_gradient

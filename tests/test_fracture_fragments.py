@@ -125,7 +125,7 @@ def test_fragment_model_restricted_from_parent_matches_a_fresh_build(ring_split)
     parent's, and its collision centres are those contact_sphere_centres computes for
     every group afresh. The SPH neighbour lists restricted from the root's are those a
     grid search over the fragment's particles finds at the root's h."""
-    from taichi_frac.fracture.cracks import model_neighbor_lists, smoothing_length
+    from taichi_frac.fracture.neighbors import model_neighbor_lists, smoothing_length
     from taichi_frac.fracture.sph import neighbor_lists
     from taichi_frac.model import build_body_model, contact_sphere_centres
 

@@ -1,7 +1,9 @@
 """Controllable cracks at an impact (BRIEF.md steps 8-9, and the decisions of section 3).
 
 Everything here is in the body frame of the struck body (``BodyModel``): the stress field
-of a contact never needs the body's world pose.
+of a contact never needs the body's world pose. What the analysis returns (``CrackPlane``,
+``RingCrack``, ``ImpactAnalysis``) is defined in ``crack_types.py`` (and importable from
+here); the SPH neighbour lists it reads are the model's (``neighbors.py``).
 
 Decisions (the paper leaves them open; docs/method.md explains them for artists):
 
@@ -59,121 +61,23 @@ Decisions (the paper leaves them open; docs/method.md explains them for artists)
 from __future__ import annotations
 
 import functools
-import weakref
-from dataclasses import dataclass
 
 import numpy as np
 
 from ..geometry import rows
 from ..model import BodyModel
 from ..options import FractureOptions, Material
+from .crack_types import CrackPlane, ImpactAnalysis, RingCrack
 from .fem import elastic_body_of, fem_response
 from .field import load_rows
 from .fused import stress_at as _stress_at
 from .halfspace import halfspace_stress_rows
-from .sph import neighbor_lists
+from .neighbors import model_neighbor_lists, neighbor_rows, smoothing_length
 from .stress import largest_principal_stress, principal_stresses
 
 # Analysis points are sought within this many smoothing lengths (kernel support radii,
 # fracture/sph.py) of the contact point.
 ANALYSIS_RADIUS_FACTOR = 2.0
-
-
-@dataclass(frozen=True)
-class CrackPlane:
-    """One planar crack, body frame.
-
-    Attributes:
-        point: (3,) [m] a point of the plane (the analysis point).
-        normal: (3,) unit normal (the largest principal stress direction).
-        extent: [m] radius of the crack disc about ``point``.
-        peak_stress: [Pa] the group's largest principal stress.
-        impact_index: which contact of the analysis produced it.
-        group_index: which neighbour group (0 .. crack_count - 1).
-    """
-
-    point: np.ndarray
-    normal: np.ndarray
-    extent: float
-    peak_stress: float
-    impact_index: int = 0
-    group_index: int = 0
-
-
-@dataclass(frozen=True)
-class RingCrack:
-    """One concentric crack, body frame: the sphere of ``radius`` [m] about ``point`` (3,)
-    [m], the analysis point (``FractureOptions.ring_crack_count``). It cuts every bond whose
-    two tet centroids lie on either side of the sphere. ``peak_stress`` [Pa]: the analysis
-    point's largest principal stress; ``impact_index``: which contact; ``ring_index``:
-    1 (innermost) .. ring_crack_count."""
-
-    point: np.ndarray
-    radius: float
-    peak_stress: float
-    impact_index: int = 0
-    ring_index: int = 1
-
-
-@dataclass(frozen=True, eq=False)
-class ImpactAnalysis:
-    """The stress analysis of one body's contacts in one step, body frame. K analysed
-    contacts (those over ``impact_force_threshold``), n = crack_count groups, T particles.
-
-    Attributes:
-        contact_point: (K,3) [m]; normal_in: (K,3) unit, into the body; force: (K,3) [N] on
-            the body.
-        analysis_particle: (K,) int, each contact's analysis point (largest principal stress
-            within 2 h of the contact point).
-        analysis_point: (K,3) [m] its position.
-        smoothing_length: h [m], the SPH kernel's support radius (fracture/sph.py).
-        contact_radius: (K,) [m] regularisation radius used for each contact.
-        particle_stress: (T,3,3) [Pa] full-field stress (every neighbour); zeros if K = 0.
-        particle_principal_stress: (T,) [Pa] its largest principal value.
-        field_particles: None when the stress was computed at every particle; else (L,)
-            the particles it was computed at (those within reach of a contact, see
-            ``analyze_impact(full_field=False)``), the other rows of the two arrays above
-            being NaN.
-        group_neighbor_count: (K,n) neighbours in each group.
-        group_stress: (K,n,3,3) [Pa] each group's stress at its analysis point (a local
-            analysis: NaN, and counts 0, for contacts that do not pass the Rankine test).
-        group_principal_values: (K,n,3) [Pa] descending.
-        group_principal_directions: (K,n,3,3) unit columns matching the values.
-        cracks: the crack planes (union over contacts), in (contact, group) order, each
-            contact's ``RingCrack``s (if ``ring_crack_count``) after its planes.
-        tensile_strength: [Pa] the Rankine threshold used.
-    """
-
-    contact_point: np.ndarray
-    normal_in: np.ndarray
-    force: np.ndarray
-    analysis_particle: np.ndarray
-    analysis_point: np.ndarray
-    smoothing_length: float
-    contact_radius: np.ndarray
-    particle_stress: np.ndarray
-    particle_principal_stress: np.ndarray
-    group_neighbor_count: np.ndarray
-    group_stress: np.ndarray
-    group_principal_values: np.ndarray
-    group_principal_directions: np.ndarray
-    cracks: tuple
-    tensile_strength: float
-    field_particles: np.ndarray | None = None
-
-    @property
-    def any_crack(self) -> bool:
-        return len(self.cracks) > 0
-
-    @property
-    def peak_principal_stress(self) -> float:
-        """[Pa] largest principal stress seen anywhere (full field and every group)."""
-        peaks = [0.0]
-        if self.particle_principal_stress.size:
-            peaks.append(float(np.nanmax(self.particle_principal_stress)))
-        if np.any(np.isfinite(self.group_principal_values)):
-            peaks.append(float(np.nanmax(self.group_principal_values[..., 0])))
-        return max(peaks)
 
 
 def tangent_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -215,79 +119,6 @@ def _as_rows(a, name: str) -> np.ndarray:
     return a
 
 
-_NEIGHBORS: "weakref.WeakKeyDictionary[BodyModel, dict]" = weakref.WeakKeyDictionary()
-
-
-def model_neighbor_lists(model: BodyModel, h: float):
-    """The full-field SPH neighbour lists (CSR offsets int64, indices int32) of a body model's
-    physics particles within ``h`` [m]. They are fixed in the body frame, so they are
-    built once per model and h and kept while the model lives (a ring struck again, or
-    several rings built from one model, reuse them: 9 ms a build for a 5,550-particle
-    ring, about half of an analysis). A fragment's are its root's restricted to its
-    particles (``BodyModel.root``, ``source_tet``): the same pairs, the distances being
-    the root's, ~1 ms instead of a grid search."""
-    per_model = _NEIGHBORS.setdefault(model, {})
-    if h not in per_model:
-        if model.root is not None:
-            per_model[h] = restrict_neighbor_lists(*model_neighbor_lists(model.root, h), model.source_tet,
-                                                   model.root.tet_count)
-        else:
-            offsets, indices = neighbor_lists(model.particle_position, h)
-            # int32 indices: what the gradient kernel takes (an int64 copy converted every
-            # analysis cost ~0.1 ms for a ring's 130k pairs).
-            per_model[h] = (np.asarray(offsets, dtype=np.int64), np.asarray(indices, dtype=np.int32))
-    return per_model[h]
-
-
-def restrict_neighbor_lists(offsets, indices, subset, count):
-    """CSR neighbour lists of the points ``subset`` (S,) (ascending indices of ``count``
-    points) from lists over all of them: row s keeps the neighbours of point subset[s] that
-    are in the subset, renumbered to positions in it (still ascending)."""
-    subset = np.asarray(subset, dtype=np.int64)
-    local = np.full(count, -1, dtype=np.int32)
-    local[subset] = np.arange(len(subset), dtype=np.int32)
-    return _gather_rows(offsets, indices, subset, local)
-
-
-def neighbor_rows(model: BodyModel, h: float, query: np.ndarray):
-    """CSR lists (offsets (Q+1,) int64, indices int32) of the SPH neighbours of the
-    particles ``query`` (Q,) only: row q is :func:`model_neighbor_lists`' row
-    ``query[q]``, the same neighbours in the same order. A piece whose own lists are not
-    built yet reads its root's rows and maps them to its particles, so a local analysis
-    of a new piece (a few hundred rows) does not restrict its root's lists over the whole
-    piece first (2.5 ms on a ring's big piece)."""
-    query = np.asarray(query, dtype=np.int64)
-    if h in _NEIGHBORS.get(model, {}) or model.root is None:
-        return _gather_rows(*model_neighbor_lists(model, h), query)
-    local = np.full(model.root.tet_count, -1, dtype=np.int32)
-    local[model.source_tet] = np.arange(model.tet_count, dtype=np.int32)
-    return _gather_rows(*model_neighbor_lists(model.root, h), model.source_tet[query].astype(np.int64), local)
-
-
-def _gather_rows(offsets, indices, rows, renumber=None):
-    """CSR lists (offsets int64, indices int32) of the rows ``rows`` (R,) of the CSR lists
-    ``offsets``, ``indices``, in that order; with ``renumber`` (int32, -1 = drop), each
-    neighbour j becomes renumber[j] and the dropped ones leave their row."""
-    begin = offsets[rows]
-    lengths = offsets[rows + 1] - begin
-    starts = np.cumsum(lengths) - lengths
-    found = indices[np.arange(int(lengths.sum())) + np.repeat(begin - starts, lengths)]
-    out_offsets = np.zeros(len(rows) + 1, dtype=np.int64)
-    if renumber is None:
-        np.cumsum(lengths, out=out_offsets[1:])
-        return out_offsets, np.asarray(found, dtype=np.int32)
-    found = renumber[found]
-    keep = found >= 0
-    np.cumsum(np.bincount(np.repeat(np.arange(len(rows)), lengths)[keep], minlength=len(rows)), out=out_offsets[1:])
-    return out_offsets, found[keep]
-
-
-def smoothing_length(model: BodyModel, options: FractureOptions) -> float:
-    """h [m] = ``options.smoothing_length_factor`` x the model's particle spacing (a
-    fragment's is its root's, so its particles keep their neighbours)."""
-    return float(options.smoothing_length_factor) * model.spacing
-
-
 def analyze_impact(
     model: BodyModel,
     contact_point_body,
@@ -316,172 +147,233 @@ def analyze_impact(
     the whole field: analyse again with ``full_field=True`` (the simulation does when it
     writes a cache, whose per-face stress reads it).
     """
-    points = np.ascontiguousarray(model.particle_position, dtype=np.float64)
-    volumes = np.ascontiguousarray(model.tet_volume, dtype=np.float64)
-    t_count = model.tet_count
-    n_groups = options.crack_count
-    contact = _as_rows(contact_point_body, "contact_point_body")
-    normal = _as_rows(normal_in_body, "normal_in_body")
-    force = _as_rows(force_body, "force_body")
-    if not (len(contact) == len(normal) == len(force)):
-        raise ValueError("contact points, normals and forces must have the same length")
-    normal = normal / np.linalg.norm(normal, axis=1, keepdims=True)
-    keep = np.linalg.norm(force, axis=1) >= options.impact_force_threshold
-    keep &= np.linalg.norm(force, axis=1) > 0.0
-    contact, normal, force = contact[keep], normal[keep], force[keep]
-    k_count = len(contact)
+    contact, normal, force = _analysed_contacts(contact_point_body, normal_in_body, force_body,
+                                                options.impact_force_threshold)
     h = smoothing_length(model, options)  # support radius
+    points = np.ascontiguousarray(model.particle_position, dtype=np.float64)
+    d2, nearest, radius = _load_patches(model, points, contact, options)
+    if len(contact) == 0:
+        return _no_contact(model, points, contact, normal, force, nearest, radius, h, material, options)
 
-    # Load-patch radius: given, or the radius of the particle nearest the contact.
-    offset = points[None, :, :] - contact[:, None, :]
-    d2 = np.einsum("ktx,ktx->kt", offset, offset)  # (K,T)
-    nearest = np.argmin(d2, axis=1) if k_count else np.zeros(0, dtype=np.int64)
-    if options.contact_radius is not None:
-        radius = np.full(k_count, options.contact_radius)
-    else:
-        radius = model.particle_radius[nearest].astype(np.float64)
-    analysis = nearest
-
-    empty = ImpactAnalysis(
-        contact_point=contact, normal_in=normal, force=force, analysis_particle=analysis,
-        analysis_point=points[analysis], smoothing_length=h, contact_radius=radius,
-        particle_stress=np.zeros((t_count, 3, 3)), particle_principal_stress=np.zeros(t_count),
-        group_neighbor_count=np.zeros((0, n_groups), dtype=np.int64),
-        group_stress=np.zeros((0, n_groups, 3, 3)), group_principal_values=np.zeros((0, n_groups, 3)),
-        group_principal_directions=np.zeros((0, n_groups, 3, 3)), cracks=(),
-        tensile_strength=material.tensile_strength,
-    )
-    if k_count == 0:
-        return empty
-
-    # Analysis point of each contact: the particle of largest principal stress within
-    # ANALYSIS_RADIUS_FACTOR h of it (right under a point load the stress is compressive;
-    # the tension that cracks brittle solids peaks beside the load, BRIEF.md section 2).
-    in_reach = d2 <= (ANALYSIS_RADIUS_FACTOR * h) ** 2
-    in_reach[np.arange(k_count), nearest] = True
-
-    lists = {}  # the neighbour rows in hand: "local" (rows of ``local``) or "all"
-    loads = load_rows(contact, normal, force, radius)
-    model_kind = options.stress_model
-    if model_kind == "fem" and elastic_body_of(model, material) is None:
-        model_kind = "halfspace"  # a piece whose stiffness cannot be factorised (fem.elastic_body_of)
-    if model_kind == "fem":
-        # The body's own tension peak can lie far from the contact (a struck ring bends and
-        # is stretched on the far side of its tube): each contact's analysis point is sought
-        # among every particle nearer to it than to the step's other contacts.
-        in_reach = d2 <= d2.min(axis=0, keepdims=True)
-    solved = {}  # "fem": the whole body's (displacement, stress), solved once
-
-    def field(query):
-        """Steps 5-7 at particles ``query`` (None: all): the stress and largest principal
-        stress of ``options.stress_model``, and the displacement (T,3) the SPH sums of the
-        groups read (None where it is not computed yet)."""
-        q_ids = np.arange(t_count) if query is None else query
-        if model_kind == "halfspace":
-            _grad, stress, peak = halfspace_stress_rows(points, loads, q_ids, material.young_modulus,
-                                                        material.poisson_ratio)
-            return None, stress, peak
-        if model_kind == "fem":
-            if not solved:
-                body = elastic_body_of(model, material)
-                nodal, tet_stress = fem_response(body, contact, normal, force, radius)
-                solved["field"] = (nodal[model.tets].mean(axis=1), tet_stress,
-                                   largest_principal_stress(tet_stress))
-            displacement, stress, peak = solved["field"]
-            return displacement, stress[q_ids], peak[q_ids]
-        if query is None:
-            lists["all"] = model_neighbor_lists(model, h)
-            q_off, q_idx = lists["all"]
-            where = q_ids
-        else:
-            lists["local"] = q_off, q_idx = neighbor_rows(model, h, query)
-            where = np.unique(np.concatenate([query, q_idx]))
-        displacement = np.zeros((t_count, 3))
-        stress, peak = _stress_at(points, volumes, displacement, loads, where, q_ids, q_off, q_idx, h,
-                                  options.corrected_gradient, material)
-        return displacement, stress, peak
-
-    def neighbours_of(i):
-        """Particle i's SPH neighbours (from the lists in hand when the field built them)."""
-        if "all" in lists:
-            offsets, indices = lists["all"]
-        elif "local" in lists:
-            offsets, indices = lists["local"]
-            i = int(np.searchsorted(local, i))
-        else:
-            offsets, indices = neighbor_rows(model, h, np.array([i]))
-            i = 0
-        return indices[offsets[i]:offsets[i + 1]]
-
+    field = _StressField(model, points, material, options, contact, normal, force, radius, h)
+    in_reach = _analysis_reach(d2, nearest, h, field.kind)
     # (FEM solves the whole body at once: its field is always the full one.)
-    local = None if full_field or model_kind == "fem" else np.nonzero(in_reach.any(axis=0))[0]
-    displacement, stress, peak = field(local)
+    local = None if full_field or field.kind == "fem" else np.nonzero(in_reach.any(axis=0))[0]
+    displacement, stress, peak = field.at(local)
     if local is None:
         particle_peak = peak
     else:
-        particle_peak = np.full(t_count, np.nan)
+        particle_peak = np.full(model.tet_count, np.nan)
         particle_peak[local] = peak
+    # Analysis point of each contact: the particle of largest principal stress within its
+    # reach (right under a point load the stress is compressive; the tension that cracks
+    # brittle solids peaks beside the load, BRIEF.md section 2).
     analysis = np.argmax(np.where(in_reach, particle_peak[None, :], -np.inf), axis=1)
     # Step 8 (Rankine): the physical (full-neighbourhood) stress at each analysis point
     # decides whether its contact cracks (the local field holds it exactly).
     cracking = particle_peak[analysis] > material.tensile_strength
     if local is not None and options.crack_length is None and np.any(cracking):
         local = None  # a crack whose extent reads the whole field
-        displacement, stress, particle_peak = field(None)
+        displacement, stress, particle_peak = field.at(None)
     if local is not None:
-        partial = np.full((t_count, 3, 3), np.nan)
+        partial = np.full((model.tet_count, 3, 3), np.nan)
         partial[local] = stress
         stress = partial
 
-    # Step 9: each contact's neighbours in n azimuthal sectors, one stress per sector. Only
-    # the crack directions read them, so a local analysis (the simulation's) computes them
-    # only for the contacts that pass the Rankine test; the others' are NaN (most impacts
-    # crack nothing: in the glass scene 390 of 461 analyses, each saving three launches).
-    grouped = np.arange(k_count) if full_field else np.nonzero(cracking)[0]
+    # Step 9, computed for the contacts that pass the Rankine test only in a local analysis
+    # (the simulation's): only the crack directions read the groups, and most impacts crack
+    # nothing (in the glass scene 390 of 461 analyses, each saving three launches).
+    grouped = np.arange(len(contact)) if full_field else np.nonzero(cracking)[0]
+    groups = _group_stresses(field, grouped, analysis, normal, displacement, stress, options)
+    cracks = _crack_shapes(points, analysis, cracking, groups, particle_peak, h, material, options)
+    counts, group_stress, g_values, g_dirs = groups
+    return ImpactAnalysis(
+        contact_point=contact, normal_in=normal, force=force, analysis_particle=analysis,
+        analysis_point=points[analysis].copy(), smoothing_length=h, contact_radius=radius,
+        particle_stress=stress, particle_principal_stress=particle_peak,
+        group_neighbor_count=counts, group_stress=group_stress, group_principal_values=g_values,
+        group_principal_directions=g_dirs, cracks=cracks,
+        tensile_strength=material.tensile_strength, field_particles=local,
+    )
+
+
+def _analysed_contacts(contact_point_body, normal_in_body, force_body, force_threshold: float):
+    """(K,3) contact points, unit normals and forces of the contacts at or over
+    ``force_threshold`` [N] (and not zero)."""
+    contact = _as_rows(contact_point_body, "contact_point_body")
+    normal = _as_rows(normal_in_body, "normal_in_body")
+    force = _as_rows(force_body, "force_body")
+    if not (len(contact) == len(normal) == len(force)):
+        raise ValueError("contact points, normals and forces must have the same length")
+    normal = normal / np.linalg.norm(normal, axis=1, keepdims=True)
+    keep = np.linalg.norm(force, axis=1) >= force_threshold
+    keep &= np.linalg.norm(force, axis=1) > 0.0
+    return contact[keep], normal[keep], force[keep]
+
+
+def _load_patches(model: BodyModel, points: np.ndarray, contact: np.ndarray, options: FractureOptions):
+    """Squared distances (K,T) [m^2] from each contact to every particle, the nearest
+    particle (K,), and each load patch's radius (K,) [m]: ``options.contact_radius``, or
+    the radius of the particle nearest the contact."""
+    offset = points[None, :, :] - contact[:, None, :]
+    d2 = np.einsum("ktx,ktx->kt", offset, offset)  # (K,T)
+    nearest = np.argmin(d2, axis=1) if len(contact) else np.zeros(0, dtype=np.int64)
+    if options.contact_radius is not None:
+        radius = np.full(len(contact), options.contact_radius)
+    else:
+        radius = model.particle_radius[nearest].astype(np.float64)
+    return d2, nearest, radius
+
+
+def _no_contact(model, points, contact, normal, force, nearest, radius, h, material, options) -> ImpactAnalysis:
+    """The analysis of a step whose contacts are all under the force threshold."""
+    t_count, n_groups = model.tet_count, options.crack_count
+    return ImpactAnalysis(
+        contact_point=contact, normal_in=normal, force=force, analysis_particle=nearest,
+        analysis_point=points[nearest], smoothing_length=h, contact_radius=radius,
+        particle_stress=np.zeros((t_count, 3, 3)), particle_principal_stress=np.zeros(t_count),
+        group_neighbor_count=np.zeros((0, n_groups), dtype=np.int64),
+        group_stress=np.zeros((0, n_groups, 3, 3)), group_principal_values=np.zeros((0, n_groups, 3)),
+        group_principal_directions=np.zeros((0, n_groups, 3, 3)), cracks=(),
+        tensile_strength=material.tensile_strength,
+    )
+
+
+def _analysis_reach(d2: np.ndarray, nearest: np.ndarray, h: float, stress_model: str) -> np.ndarray:
+    """(K,T) bool: the particles where each contact's analysis point is sought. Within
+    ANALYSIS_RADIUS_FACTOR h of the contact (and its nearest particle); under "fem" every
+    particle nearer to it than to the step's other contacts: the body's own tension peak
+    can lie far from the contact (a struck ring bends and is stretched on the far side of
+    its tube)."""
+    if stress_model == "fem":
+        return d2 <= d2.min(axis=0, keepdims=True)
+    in_reach = d2 <= (ANALYSIS_RADIUS_FACTOR * h) ** 2
+    in_reach[np.arange(len(d2)), nearest] = True
+    return in_reach
+
+
+class _StressField:
+    """Steps 5-7 of one step's contacts in one body: the stress of ``options.stress_model``
+    at chosen particles. Keeps the SPH neighbour rows it read (the groups' neighbourhoods
+    come from them) and, under "fem", the whole body's solution (solved once)."""
+
+    def __init__(self, model: BodyModel, points: np.ndarray, material: Material, options: FractureOptions,
+                 contact, normal, force, radius, h: float):
+        self.model, self.points, self.material, self.options, self.h = model, points, material, options, h
+        self.volumes = np.ascontiguousarray(model.tet_volume, dtype=np.float64)
+        self.contact, self.normal, self.force, self.radius = contact, normal, force, radius
+        self.loads = load_rows(contact, normal, force, radius)
+        kind = options.stress_model
+        if kind == "fem" and elastic_body_of(model, material) is None:
+            kind = "halfspace"  # a piece whose stiffness cannot be factorised (fem.elastic_body_of)
+        self.kind = kind
+        self._all_rows = None  # (offsets, indices) of every particle, once read
+        self._local_rows = None  # (query, offsets, indices) of the last local evaluation
+        self._fem = None  # (displacement (T,3), stress (T,3,3), peak (T,)) of the whole body
+
+    def at(self, query):
+        """The stress (Q,3,3) [Pa] and largest principal stress (Q,) [Pa] at particles
+        ``query`` (None: all), and the displacement (T,3) [m] the groups' SPH sums read
+        (None where it is not computed yet)."""
+        model, material = self.model, self.material
+        q_ids = np.arange(model.tet_count) if query is None else query
+        if self.kind == "halfspace":
+            _grad, stress, peak = halfspace_stress_rows(self.points, self.loads, q_ids, material.young_modulus,
+                                                        material.poisson_ratio)
+            return None, stress, peak
+        if self.kind == "fem":
+            if self._fem is None:
+                body = elastic_body_of(model, material)
+                nodal, tet_stress = fem_response(body, self.contact, self.normal, self.force, self.radius)
+                self._fem = (nodal[model.tets].mean(axis=1), tet_stress, largest_principal_stress(tet_stress))
+            displacement, stress, peak = self._fem
+            return displacement, stress[q_ids], peak[q_ids]
+        if query is None:
+            self._all_rows = q_off, q_idx = model_neighbor_lists(model, self.h)
+            where = q_ids
+        else:
+            q_off, q_idx = neighbor_rows(model, self.h, query)
+            self._local_rows = query, q_off, q_idx
+            where = np.unique(np.concatenate([query, q_idx]))
+        displacement = np.zeros((model.tet_count, 3))
+        stress, peak = _stress_at(self.points, self.volumes, displacement, self.loads, where, q_ids, q_off, q_idx,
+                                  self.h, self.options.corrected_gradient, material)
+        return displacement, stress, peak
+
+    def neighbours_of(self, i: int) -> np.ndarray:
+        """Particle i's SPH neighbours (from the rows in hand when the field read them)."""
+        if self._all_rows is not None:
+            offsets, indices = self._all_rows
+        elif self._local_rows is not None:
+            query, offsets, indices = self._local_rows
+            i = int(np.searchsorted(query, i))
+        else:
+            offsets, indices = neighbor_rows(self.model, self.h, np.array([i]))
+            i = 0
+        return indices[offsets[i]:offsets[i + 1]]
+
+
+def _group_stresses(field: _StressField, grouped: np.ndarray, analysis: np.ndarray, normal: np.ndarray,
+                    displacement, stress: np.ndarray, options: FractureOptions):
+    """Step 9 for the contacts ``grouped``: each one's analysis-point neighbours in n =
+    ``crack_count`` azimuthal sectors, one stress per sector. Returns the neighbour counts
+    (K,n), stresses (K,n,3,3) [Pa], principal values (K,n,3) [Pa] and directions
+    (K,n,3,3); NaN (and counts 0) for the contacts not grouped."""
+    k_count, n_groups = len(analysis), options.crack_count
+    points = field.points
     counts = np.zeros((k_count, n_groups), dtype=np.int64)
     group_stress = np.full((k_count, n_groups, 3, 3), np.nan)
     g_values = np.full((k_count, n_groups, 3), np.nan)
     g_dirs = np.full((k_count, n_groups, 3, 3), np.nan)
-    if len(grouped):
-        group_rows, query = [], []
-        for k in grouped:
-            i = int(analysis[k])
-            nbrs = neighbours_of(i)
-            sector = group_neighbors(points, nbrs, points[i], normal[k], n_groups,
-                                     start_angle(options.seed, int(k)))
-            order = np.argsort(sector, kind="stable")
-            counts[k] = np.bincount(sector, minlength=n_groups)
-            group_rows.append(nbrs[order])
-            query.extend([i] * n_groups)
-        group_offsets = np.zeros(len(grouped) * n_groups + 1, dtype=np.int64)
-        np.cumsum(counts[grouped].reshape(-1), out=group_offsets[1:])
-        group_indices = np.concatenate(group_rows)
-        query = np.asarray(query, dtype=np.int32)
-        if n_groups == 1 and model_kind != "sph":
-            # One group is the whole neighbourhood: the physical answer, the model's own stress.
-            stress_g = stress[query]
-            values_g, dirs_g = principal_stresses(stress_g)
-        else:
-            # n > 1: the plain kernel sum (BRIEF.md eq. 7) of the model's displacement. The
-            # Bonet-Lok correction reproduces a smooth field's gradient from any
-            # non-degenerate subset, so corrected sectors would give n noisy copies of one
-            # direction; the plain sum over a one-sided sector leans toward the sector, which
-            # is what fans the n cracks out (module docstring).
-            group_corrected = options.corrected_gradient if n_groups == 1 else False
-            where = None if displacement is not None else np.unique(np.concatenate([query, group_indices]))
-            if displacement is None:
-                displacement = np.zeros((t_count, 3))
-            stress_g, _, values_g, dirs_g = _stress_at(points, volumes, displacement, loads, where, query,
-                                                       group_offsets, group_indices, h, group_corrected, material,
-                                                       decompose=True)
-        group_stress[grouped] = stress_g.reshape(len(grouped), n_groups, 3, 3)
-        g_values[grouped] = np.asarray(values_g).reshape(len(grouped), n_groups, 3)
-        g_dirs[grouped] = np.asarray(dirs_g).reshape(len(grouped), n_groups, 3, 3)
+    if len(grouped) == 0:
+        return counts, group_stress, g_values, g_dirs
+    group_rows, query = [], []
+    for k in grouped:
+        i = int(analysis[k])
+        nbrs = field.neighbours_of(i)
+        sector = group_neighbors(points, nbrs, points[i], normal[k], n_groups, start_angle(options.seed, int(k)))
+        order = np.argsort(sector, kind="stable")
+        counts[k] = np.bincount(sector, minlength=n_groups)
+        group_rows.append(nbrs[order])
+        query.extend([i] * n_groups)
+    group_offsets = np.zeros(len(grouped) * n_groups + 1, dtype=np.int64)
+    np.cumsum(counts[grouped].reshape(-1), out=group_offsets[1:])
+    group_indices = np.concatenate(group_rows)
+    query = np.asarray(query, dtype=np.int32)
+    if n_groups == 1 and field.kind != "sph":
+        # One group is the whole neighbourhood: the physical answer, the model's own stress.
+        stress_g = stress[query]
+        values_g, dirs_g = principal_stresses(stress_g)
+    else:
+        # n > 1: the plain kernel sum (BRIEF.md eq. 7) of the model's displacement. The
+        # Bonet-Lok correction reproduces a smooth field's gradient from any non-degenerate
+        # subset, so corrected sectors would give n noisy copies of one direction; the plain
+        # sum over a one-sided sector leans toward the sector, which is what fans the n
+        # cracks out (module docstring).
+        group_corrected = options.corrected_gradient if n_groups == 1 else False
+        where = None if displacement is not None else np.unique(np.concatenate([query, group_indices]))
+        if displacement is None:
+            displacement = np.zeros((len(points), 3))
+        stress_g, _, values_g, dirs_g = _stress_at(points, field.volumes, displacement, field.loads, where, query,
+                                                   group_offsets, group_indices, field.h, group_corrected,
+                                                   field.material, decompose=True)
+    group_stress[grouped] = stress_g.reshape(len(grouped), n_groups, 3, 3)
+    g_values[grouped] = np.asarray(values_g).reshape(len(grouped), n_groups, 3)
+    g_dirs[grouped] = np.asarray(dirs_g).reshape(len(grouped), n_groups, 3, 3)
+    return counts, group_stress, g_values, g_dirs
 
-    # Step 8 (Rankine) and the extent of each crack.
+
+def _crack_shapes(points, analysis, cracking, groups, particle_peak, h: float, material: Material,
+                  options: FractureOptions) -> tuple:
+    """Step 8's cracks: each cracking contact's planes (one per non-empty group, normal =
+    the group's largest principal direction, extent ``crack_length`` or the reach of the
+    over-strength particles near the plane), then its ring cracks, in (contact, group)
+    order."""
+    counts, _stress, g_values, g_dirs = groups
+    n_groups = options.crack_count
     over = particle_peak > material.tensile_strength
     cracks = []
-    for k in range(k_count):
+    for k in range(len(analysis)):
         origin = points[analysis[k]]
         if not cracking[k]:
             continue
@@ -507,15 +399,7 @@ def analyze_impact(
             cracks.extend(RingCrack(point=origin.copy(), radius=longest * j / (rings + 1),
                                     peak_stress=float(particle_peak[analysis[k]]), impact_index=k, ring_index=j)
                           for j in range(1, rings + 1))
-
-    return ImpactAnalysis(
-        contact_point=contact, normal_in=normal, force=force, analysis_particle=analysis,
-        analysis_point=points[analysis].copy(), smoothing_length=h, contact_radius=radius,
-        particle_stress=stress, particle_principal_stress=particle_peak,
-        group_neighbor_count=counts, group_stress=group_stress, group_principal_values=g_values,
-        group_principal_directions=g_dirs, cracks=tuple(cracks),
-        tensile_strength=material.tensile_strength, field_particles=local,
-    )
+    return tuple(cracks)
 
 
 def cut_bonds(model: BodyModel, cracks) -> np.ndarray:

@@ -36,7 +36,8 @@ from ..geometry.components import connected_tets
 from ..geometry.rotation import quaternion_matrix
 from ..model import BodyModel, build_fragment_models
 from ..options import FractureOptions, Material, ParticleOptions
-from .cracks import ImpactAnalysis, cut_bonds
+from .crack_types import ImpactAnalysis
+from .cracks import cut_bonds
 
 
 @dataclass(frozen=True, eq=False)

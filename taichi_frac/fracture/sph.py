@@ -95,20 +95,29 @@ def kernel_values(r, smoothing_length):
 # --- neighbour lists on a uniform grid ---------------------------------------------------
 
 @ti.kernel
-def _count_neighbors(
+def _walk_neighbors(
     # Model:
     points: ti.types.ndarray(dtype=ti.f64, ndim=2),  # (N,3) [m]
     sorted_points: ti.types.ndarray(dtype=ti.i32, ndim=1),  # (N,) point ids by cell, stable
     cell_start: ti.types.ndarray(dtype=ti.i32, ndim=1),  # (C+1,) CSR over cells
     cell_of: ti.types.ndarray(dtype=ti.i32, ndim=2),  # (N,3) integer cell coords
     dims: ti.types.vector(3, ti.i32), radius: ti.f64,
+    fill: ti.i32,  # 0: count each row; 1: fill the rows of ``offsets``
+    offsets: ti.types.ndarray(dtype=ti.i32, ndim=1),  # (N+1,) when filling
     # Data out:
-    count_out: ti.types.ndarray(dtype=ti.i32, ndim=1),  # (N,)
+    count_out: ti.types.ndarray(dtype=ti.i32, ndim=1),  # (N,) when counting
+    indices_out: ti.types.ndarray(dtype=ti.i32, ndim=1),  # (M,) when filling
 ):
+    """The pairs closer than ``radius`` over the 27 cells around each point: counted per
+    row (``fill`` 0), then written into the rows, each sorted by index (``fill`` 1). One
+    walk for both passes, so the two agree pair for pair."""
     r2 = radius * radius
     for i in range(points.shape[0]):
         xi = _vec3(points[i, 0], points[i, 1], points[i, 2])
-        count = 0
+        begin = 0
+        if fill != 0:
+            begin = offsets[i]
+        slot = begin
         # Plain loops over the 27 cells, not ti.static: unrolled, the 27 copies cost
         # Taichi's front end ~0.25 s per kernel in every new process.
         for dz, dy, dx in ti.ndrange((-1, 2), (-1, 2), (-1, 2)):
@@ -121,50 +130,21 @@ def _count_neighbors(
                     j = sorted_points[s]
                     d = _vec3(points[j, 0], points[j, 1], points[j, 2]) - xi
                     if j != i and d.dot(d) < r2:
-                        count += 1
-        count_out[i] = count
-
-
-@ti.kernel
-def _fill_neighbors(
-    # Model:
-    points: ti.types.ndarray(dtype=ti.f64, ndim=2),
-    sorted_points: ti.types.ndarray(dtype=ti.i32, ndim=1),
-    cell_start: ti.types.ndarray(dtype=ti.i32, ndim=1),
-    cell_of: ti.types.ndarray(dtype=ti.i32, ndim=2),
-    dims: ti.types.vector(3, ti.i32), radius: ti.f64,
-    offsets: ti.types.ndarray(dtype=ti.i32, ndim=1),  # (N+1,)
-    # Data out:
-    indices_out: ti.types.ndarray(dtype=ti.i32, ndim=1),  # (M,)
-):
-    r2 = radius * radius
-    for i in range(points.shape[0]):
-        xi = _vec3(points[i, 0], points[i, 1], points[i, 2])
-        slot = offsets[i]
-        # Plain loops over the 27 cells, not ti.static: unrolled, the 27 copies cost
-        # Taichi's front end ~0.25 s per kernel in every new process.
-        for dz, dy, dx in ti.ndrange((-1, 2), (-1, 2), (-1, 2)):
-            cx = cell_of[i, 0] + dx
-            cy = cell_of[i, 1] + dy
-            cz = cell_of[i, 2] + dz
-            if 0 <= cx < dims[0] and 0 <= cy < dims[1] and 0 <= cz < dims[2]:
-                cell = (cz * dims[1] + cy) * dims[0] + cx
-                for s in range(cell_start[cell], cell_start[cell + 1]):
-                    j = sorted_points[s]
-                    d = _vec3(points[j, 0], points[j, 1], points[j, 2]) - xi
-                    if j != i and d.dot(d) < r2:
-                        indices_out[slot] = j
+                        if fill != 0:
+                            indices_out[slot] = j
                         slot += 1
-        # Insertion sort of the row by index: rows are short (~30), and sorted rows make
-        # every later sum independent of the grid layout.
-        begin = offsets[i]
-        for a in range(begin + 1, slot):
-            value = indices_out[a]
-            b = a - 1
-            while b >= begin and indices_out[b] > value:
-                indices_out[b + 1] = indices_out[b]
-                b -= 1
-            indices_out[b + 1] = value
+        if fill == 0:
+            count_out[i] = slot
+        else:
+            # Insertion sort of the row by index: rows are short (~30), and sorted rows make
+            # every later sum independent of the grid layout.
+            for a in range(begin + 1, slot):
+                value = indices_out[a]
+                b = a - 1
+                while b >= begin and indices_out[b] > value:
+                    indices_out[b + 1] = indices_out[b]
+                    b -= 1
+                indices_out[b + 1] = value
 
 
 def neighbor_lists(points, radius):
@@ -172,7 +152,7 @@ def neighbor_lists(points, radius):
 
     Particles are binned into cells at least ``radius`` wide; the cell order is a stable
     numpy argsort of the cell keys (O(N log N), vectorised, deterministic); the pair search
-    over the 27 surrounding cells -- the O(N k) part -- runs in two f64 Taichi kernels
+    over the 27 surrounding cells -- the O(N k) part -- runs in one f64 Taichi kernel, twice
     (count, then fill; each row is sorted by index). A per-impact call, so the small host
     part is not in any per-substep loop.
 
@@ -213,7 +193,8 @@ def neighbor_lists(points, radius):
     cell_of32 = np.ascontiguousarray(cell_of, dtype=np.int32)
     dims_v = ti.types.vector(3, ti.i32)(*[int(d) for d in dims])
     row_count = np.zeros(n, np.int32)
-    _count_neighbors(pts, sorted_points, cell_start, cell_of32, dims_v, radius, row_count)
+    unused = np.zeros(1, np.int32)
+    _walk_neighbors(pts, sorted_points, cell_start, cell_of32, dims_v, radius, 0, unused, row_count, unused)
     total = int(row_count.sum(dtype=np.int64))
     if total >= 2**31:
         raise ValueError(f"{total} neighbour pairs overflow int32: use a smaller radius")
@@ -221,8 +202,7 @@ def neighbor_lists(points, radius):
     np.cumsum(row_count, out=offsets[1:])
     indices = np.zeros(total, np.int32)
     if total:
-        _fill_neighbors(pts, sorted_points, cell_start, cell_of32, dims_v, radius, offsets,
-                        indices)
+        _walk_neighbors(pts, sorted_points, cell_start, cell_of32, dims_v, radius, 1, offsets, row_count, indices)
     return offsets, indices
 
 

@@ -291,7 +291,7 @@ def _separating_cracks(model, bonds, labels, cracks):
     """For each crack: (sites (N,3) [m], cut (N,) bool): where bonds cross its plane and
     which of them it cuts; empty when it separates no two pieces (a ring crack: (None, its
     cuts between pieces))."""
-    from ..fracture.cracks import CrackPlane, RingCrack
+    from ..fracture.crack_types import CrackPlane, RingCrack
 
     x = model.particle_position
     a, b = x[bonds[:, 0]], x[bonds[:, 1]]
@@ -342,7 +342,7 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     of the render solid: the caller falls back to its tets' boundary); stats a dict of counts
     (slabs, parts, unassigned parts, pieces without a part).
     """
-    from ..fracture.cracks import CrackPlane
+    from ..fracture.crack_types import CrackPlane
 
     spacing = render.spacing
     roughness_scale = 4.0 * spacing if roughness_scale is None else float(roughness_scale)

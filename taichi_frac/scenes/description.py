@@ -204,7 +204,8 @@ class SceneObject:
         from ..geometry.prepare import prepare_body
 
         return prepare_body(self.source, scale=self.scale, units=self.units, material=self.material,
-                            particles=self.particles, repair=self.repair, backend=backend, use_cache=use_cache)
+                            particles=self.particles, repair=self.repair, backend=backend, use_cache=use_cache,
+                            smoothing_length_factor=self.fracture.smoothing_length_factor if self.breakable else None)
 
 
 COLLIDER_TYPES = ("ground", "box")
