@@ -85,36 +85,35 @@ def test_checkpoint_restore_puts_bodies_back_exactly():
         world.restore(snap, [a])
 
 
-def test_advance_runs_a_substep_again_when_the_watch_asks():
-    """advance(watch=...) calls before(k) and after(k) around every substep and runs a
-    substep again when after() says so; restored to the state before it, the substep run
-    twice gives the frame a plain advance gives, bit for bit."""
-
-    class Watch:
-        def __init__(self, world):
-            self.world, self.calls, self.snap = world, [], None
-
-        def before(self, k):
-            self.calls.append(("before", k))
-            self.snap = self.world.checkpoint()
-
-        def after(self, k):
-            self.calls.append(("after", k))
-            if k == 1 and self.calls.count(("after", 1)) == 1:
-                self.world.restore(self.snap, self.world.body_ids)
-                return True
-            return False
-
-    results = []
-    for watched in (False, True):
+def test_a_substep_run_again_after_a_restore_gives_the_plain_advance():
+    """The caller drives the frame (begin_frame, substep k, end_frame) and may run a
+    substep again after restoring the bodies to a checkpoint taken before it (the
+    simulation does after a fracture); the substep run twice gives the frame a plain
+    advance gives, bit for bit, and the frame's statistics are advance's."""
+    results, calls = [], []
+    for driven in (False, True):
         world = fresh_world()
         world.add_ground(0.0)
         model = sphere_model(0.05)
         body = world.add_body(model, (0, 0, 0.0498), (1, 0, 0, 0), (0.4, 0, -0.5), (0, 3.0, 0))  # on the ground
-        watch = Watch(world) if watched else None
-        world.advance(0.02, 4, watch=watch)
+        if not driven:
+            world.advance(0.02, 4)
+            plain_substeps = world.stats.substeps
+        else:
+            count = world.begin_frame(0.02, 4)
+            for k in range(count):
+                calls.append(("before", k))
+                snap = world.checkpoint()
+                world.substep(0.02 / count, k)
+                calls.append(("after", k))
+                if k == 1:
+                    world.restore(snap, world.body_ids)
+                    world.substep(0.02 / count, k)
+                    calls.append(("after", k))
+            world.end_frame()
         results.append(world.body_state([body]))
-    assert watch.calls[:6] == [("before", 0), ("after", 0), ("before", 1), ("after", 1), ("after", 1), ("before", 2)]
-    assert len(watch.calls) == 2 * world.stats.substeps + 1
+    assert calls[:6] == [("before", 0), ("after", 0), ("before", 1), ("after", 1), ("after", 1), ("before", 2)]
+    assert len(calls) == 2 * world.stats.substeps + 1
+    assert world.stats.substeps == plain_substeps
     for key in ("position", "orientation", "linear_velocity", "angular_velocity"):
         np.testing.assert_array_equal(results[0][key], results[1][key], err_msg=key)

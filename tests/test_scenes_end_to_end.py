@@ -134,13 +134,13 @@ def test_scene_without_breakable_bodies_never_enters_fracture(world):
 
 
 def test_strongest_impact_per_body_pair_matches_a_plain_loop():
-    from taichi_frac.simulation import _strongest_per_pair
+    from taichi_frac.fracture.stage import strongest_per_pair
 
     rng = np.random.default_rng(0)
     k = 300
     impacts = dict(body=rng.integers(0, 6, k), other=rng.integers(-2, 6, k), force=rng.normal(size=(k, 3)))
     breakable = np.array([0, 2, 3, 5])
-    result = _strongest_per_pair(impacts, breakable)
+    result = strongest_per_pair(impacts, breakable)
     force = np.linalg.norm(impacts["force"], axis=1)
     for b in breakable:
         best = {}

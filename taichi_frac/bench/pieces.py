@@ -76,7 +76,7 @@ def _mesh_case(ctx: BenchContext):
     from ..geometry.piece_surface import cut_render_solid, render_solid_from_surface
     from ..geometry.prepare import prepare_body
     from ..options import FractureOptions, ParticleOptions, material_preset
-    from ..simulation import BodyRecord
+    from ..fracture.stage import BodyRecord
 
     material = material_preset("porcelain")
     particles = ParticleOptions(target_particles=3000 if ctx.quick else 5000)

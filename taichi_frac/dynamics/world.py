@@ -659,36 +659,40 @@ class World:
 
     # ---------------------------------------------------------------- stepping
 
-    def advance(self, frame_dt: float, substeps: int = 10, watch=None) -> None:
-        """Advance one frame of ``frame_dt`` [s] in at least ``substeps`` substeps; more are
-        taken when a body that may touch something during the frame would otherwise move
-        further than ``substep_motion_fraction`` of its mean collision-particle radius in one
+    def advance(self, frame_dt: float, substeps: int = 10) -> None:
+        """Advance one frame of ``frame_dt`` [s]: :meth:`begin_frame`, every
+        :meth:`substep`, :meth:`end_frame`. A caller that acts between substeps (the
+        simulation's fracture inside a frame) runs those three itself."""
+        count = self.begin_frame(frame_dt, substeps)
+        for k in range(count):
+            self.substep(frame_dt / count, k)
+        self.end_frame()
+
+    def begin_frame(self, frame_dt: float, substeps: int = 10) -> int:
+        """Start a frame of ``frame_dt`` [s]; returns how many substeps it takes (0 when every
+        body sleeps), each ``frame_dt / count`` long. At least ``substeps``; more are taken
+        when a body that may touch something during the frame would otherwise move further
+        than ``substep_motion_fraction`` of its mean collision-particle radius in one
         substep, up to ``max_substeps``. (Tunnelling is prevented by the speculative
         contacts at any substep length; the refinement keeps contacts accurate and the grid
-        cells small.)
-
-        ``watch``: an object with ``before(k)`` and ``after(k) -> bool``, called around
-        each substep k; when ``after`` returns True the substep is run again (once, with
-        ``after`` called again): the simulation's fracture inside a frame, which restores
-        the bodies to their state before the substep and puts a broken body's pieces in
-        its place."""
-        t_frame = time.perf_counter()
+        cells small.) Resets the frame's contact and impact counters; the caller then runs
+        :meth:`substep` k = 0 .. count - 1 (a substep may be run again after a
+        :meth:`restore`) and :meth:`end_frame`."""
+        self._frame_started = time.perf_counter()
         opt = self.options
-        self._impact_rows = None  # (read live while the frame runs: a watch's fracture stage)
+        self._impact_rows = None  # (read live while the frame runs: a fracture inside the frame)
         count = int(_begin_advance(self.fields, opt.contact_margin, frame_dt, int(substeps),
                                    opt.substep_motion_fraction))
-        if count > 0:  # someone is awake
-            if count > opt.max_substeps:
-                self.stats.substep_limit_hits += 1
-                count = opt.max_substeps
-            dt = frame_dt / count
-            for k in range(count):
-                if watch is not None:
-                    watch.before(k)
-                self._substep(dt, k)
-                if watch is not None and watch.after(k):
-                    self._substep(dt, k)
-                    watch.after(k)
+        if count > opt.max_substeps:  # (0 when no one is awake)
+            self.stats.substep_limit_hits += 1
+            count = opt.max_substeps
+        self._frame_substeps = count
+        return count
+
+    def end_frame(self) -> None:
+        """End the frame :meth:`begin_frame` started: read its counters into ``stats`` and fix
+        :meth:`impact_count` to the frame's rows."""
+        count = self._frame_substeps
         self.stats.substeps = count
         self.stats.total_substeps += count
         self.stats.frames += 1
@@ -702,9 +706,11 @@ class World:
         if overflow:
             print(f"taichi-frac dynamics: {overflow} contacts lost in this frame: more than "
                   f"max_contacts={self.capacity.max_contacts} in a substep; raise WorldCapacity(max_contacts=...)")
-        self.stats.last_frame_seconds = time.perf_counter() - t_frame
+        self.stats.last_frame_seconds = time.perf_counter() - self._frame_started
 
-    def _substep(self, dt: float, index: int) -> None:
+    def substep(self, dt: float, index: int) -> None:
+        """Substep ``index`` (of the frame :meth:`begin_frame` started) of ``dt`` [s]:
+        collision, then contact response and integration."""
         opt = self.options
         if self._params_of is not opt:
             self._write_params(opt)
