@@ -100,6 +100,12 @@ class Simulation:
             ``obj.prepare()``: a memo kept by a process that runs many variants of one scene
             (a sweep's worker), so those that change no geometry reuse the model and its SPH
             neighbour lists. The model must not be changed by the caller between runs.
+
+    Attributes (for benches and tests): ``world``; ``records`` (body id -> BodyRecord, every
+    body that lived); ``fracture_stage`` (``fracture.stage.FractureStage``, None without
+    fracture); ``recorder`` (``io.recorder.CacheRecorder``, None without a cache);
+    ``fracture_events``, ``mass_dropped``, ``resimulated_substeps``, ``render_cuts``,
+    ``times`` (StageTimes).
     """
 
     def __init__(self, scene, *, output=None, arch: str | None = None, progress=None,
@@ -117,7 +123,7 @@ class Simulation:
         self.records: dict[int, BodyRecord] = {}
         self.resimulated_substeps = 0
         self.prepare_reports = []
-        self.fracture: FractureStage | None = None  # (fracture enabled)
+        self.fracture_stage: FractureStage | None = None  # (fracture enabled)
         self.recorder = None  # io.recorder.CacheRecorder (a cache is written)
         if output is None:
             output = scene.output_path
@@ -232,7 +238,7 @@ class Simulation:
             boundary_particles=sum(r.model.boundary_particle_count for r in self.records.values() if r.breakable),
         )
         if self.fracture_enabled:
-            self.fracture = FractureStage(
+            self.fracture_stage = FractureStage(
                 self.world, self.records, ground_heights=[c.height for c in scene.colliders if c.type == "ground"],
                 # The pieces' peak stress reads the whole field: only the cache draws it.
                 field_stress=self.recorder is not None, skip_repeats=sim.resimulate_fractures, times=self.times)
@@ -272,16 +278,16 @@ class Simulation:
         """Advance the World one frame, the fracture stage after it or, with
         ``resimulate_fractures``, after each substep."""
         t = time.perf_counter()
-        if self.fracture is not None and self.scene.simulation.resimulate_fractures:
+        if self.fracture_stage is not None and self.scene.simulation.resimulate_fractures:
             fracture_seconds = self._substeps_with_fracture(frame)
             # (the stage's time is counted as analysis and split, not dynamics)
             self.times.dynamics += time.perf_counter() - t - fracture_seconds
             return
         self.world.advance(self.frame_dt, self.scene.simulation.substeps)
         self.times.dynamics += time.perf_counter() - t
-        if self.fracture is not None:
-            self.fracture.begin_frame()
-            self._record(self.fracture.run(frame))
+        if self.fracture_stage is not None:
+            self.fracture_stage.begin_frame()
+            self._record(self.fracture_stage.run(frame))
 
     def _substeps_with_fracture(self, frame: int) -> float:
         """One frame with the fracture stage after every substep that recorded impacts. When
@@ -291,7 +297,7 @@ class Simulation:
         breaks). Impacts of the re-run are analysed too (pieces may break again), without a
         third run. Keeping the state before every substep is one small launch on the device
         (``World.checkpoint``). Returns the seconds spent in the stage."""
-        world, stage = self.world, self.fracture
+        world, stage = self.world, self.fracture_stage
         count = world.begin_frame(self.frame_dt, self.scene.simulation.substeps)
         stage.begin_frame()
         seconds = 0.0
@@ -336,12 +342,12 @@ class Simulation:
     @property
     def fracture_events(self) -> int:
         """Bodies split so far."""
-        return 0 if self.fracture is None else self.fracture.fracture_events
+        return 0 if self.fracture_stage is None else self.fracture_stage.fracture_events
 
     @property
     def mass_dropped(self) -> float:
         """[kg] mass removed by the "drop" small-fragment policy so far."""
-        return 0.0 if self.fracture is None else self.fracture.mass_dropped
+        return 0.0 if self.fracture_stage is None else self.fracture_stage.mass_dropped
 
     @property
     def render_cuts(self) -> list[tuple[float, dict]]:

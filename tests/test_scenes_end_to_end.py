@@ -156,16 +156,16 @@ def test_the_whole_stress_field_is_computed_only_for_the_cache(world, tmp_path, 
     """A scene pays only for what it uses: the pieces' peak stress (the cache's per-face
     stress) needs the whole field of a cracking impact's analysis; without a cache that
     analysis is skipped, and the run is otherwise the same (same fragments, same poses)."""
-    import taichi_frac.fracture.cracks as cracks
+    import taichi_frac.fracture.stage as stage
 
     calls = []
-    real = cracks.analyze_impact
+    real = stage.analyze_impact
 
     def counting(*args, **kwargs):
         calls.append(kwargs.get("full_field", True))
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(cracks, "analyze_impact", counting)
+    monkeypatch.setattr(stage, "analyze_impact", counting)  # (the fracture stage's analyses)
     runs = {}
     for label, output in (("cache", tmp_path / "ring.usdc"), ("none", False)):
         calls.clear()
