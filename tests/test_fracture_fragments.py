@@ -308,3 +308,37 @@ def test_connected_tets_match_scipy(cut_fraction):
     expected_count, expected = connected_components(graph, directed=False)
     count, labels = connected_tets(model.tet_count, model.bonds, cut)
     assert count == expected_count and np.array_equal(labels, expected)
+
+
+def test_a_piece_born_in_the_ground_is_lifted_to_the_allowed_penetration(ring_split):
+    """fracture.stage.lift_out_of_ground: a piece whose lowest collision sphere starts 4 mm
+    below the highest ground plane is moved straight up until that sphere reaches the
+    allowed penetration (the fraction x its mean boundary radius, hand-computed below);
+    velocities and orientation are untouched; a piece above the ground, or a scene with
+    no ground, is left where it is."""
+    import dataclasses
+
+    from taichi_frac.fracture.stage import lift_out_of_ground
+
+    piece = ring_split[4][0]
+    m = piece.model
+    rot = quaternion_matrix(piece.orientation)
+
+    def lowest(p):
+        return float(np.min(p.position[2] + m.collision_position @ rot[2] - m.boundary_radius))
+
+    grounds = [-0.5, 0.1]  # the higher plane is the one that counts
+    def moved(dz):
+        return dataclasses.replace(piece, position=piece.position + np.array([0.0, 0.0, dz]))
+
+    sunk = moved(grounds[1] - 0.004 - lowest(piece))
+    assert lowest(sunk) == pytest.approx(grounds[1] - 0.004, abs=1e-12)
+    lifted = lift_out_of_ground(sunk, grounds, 0.01)
+    allowed = 0.01 * float(m.boundary_radius.mean())
+    assert lowest(lifted) == pytest.approx(grounds[1] - allowed, abs=1e-12)
+    np.testing.assert_array_equal(lifted.position[:2], sunk.position[:2])
+    np.testing.assert_array_equal(lifted.linear_velocity, sunk.linear_velocity)
+    np.testing.assert_array_equal(lifted.orientation, sunk.orientation)
+    above = moved(grounds[1] + 0.01 - lowest(piece))
+    assert lift_out_of_ground(above, grounds, 0.01) is above
+    assert lift_out_of_ground(sunk, [], 0.01) is sunk
