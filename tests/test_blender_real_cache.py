@@ -25,7 +25,7 @@ from taichi_frac.simulation import Simulation
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "scripts"))
 import build_addon  # noqa: E402
-from test_blender_import import blender_python, run_in_blender  # noqa: E402
+from support.blender import blender_python, run_in_blender  # noqa: E402
 
 pytestmark = pytest.mark.blender
 

@@ -156,7 +156,7 @@ def test_contact_sheet_shows_every_variant(finished, tmp_path):
     sheet is a grid of the tiles (checked pixel for pixel against each thumbnail)."""
     from PIL import Image
 
-    from test_blender_import import blender_python
+    from support.blender import blender_python
     from taichi_frac.sweep.sheet import contact_sheet
 
     python = blender_python()
