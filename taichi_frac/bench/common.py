@@ -28,8 +28,6 @@ REPO = _PACKAGE_PARENT if (_PACKAGE_PARENT / "pyproject.toml").is_file() else Pa
 REPORT_WORLD = dict(max_bodies=4096, max_boundary_particles=200_000, max_contacts=400_000, max_static_boxes=8)
 
 
-
-
 class Progress:
     """Progress lines on stderr: elapsed wall time and a message; ``frames(label)`` gives a
     Simulation progress callback that prints about every 25 % of a run."""
