@@ -12,13 +12,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
 
 import numpy as np
 
 os.environ.setdefault("TI_LOG_LEVEL", "error")
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
 
 from taichi_frac import runtime  # noqa: E402
 
@@ -45,8 +43,7 @@ def main() -> None:
     args = parser.parse_args()
     runtime.init(args.arch)
 
-    from _fracture_ring import ring_model
-
+    from taichi_frac.bench.fracture_ring import ring_model
     from taichi_frac.fracture.cracks import analyze_impact
     from taichi_frac.fracture.fragments import make_fragments, split_body
     from taichi_frac.options import FractureOptions, Material, ParticleOptions

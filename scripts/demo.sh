@@ -5,4 +5,4 @@ cd "$(dirname "$0")/.."
 source scripts/_setup.sh
 setup_main
 mkdir -p out
-exec .venv/bin/taichi-frac run scenes/single_ring.toml -o out/single_ring.usdc "$@"
+exec .venv/bin/taichi-frac run single_ring -o out/single_ring.usdc "$@"

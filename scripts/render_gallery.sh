@@ -19,10 +19,10 @@ run() {
   if [ "${REUSE_CACHES:-0}" = 1 ] && [ -f "$cache" ]; then echo "reusing $cache"; return; fi
   $frac run "$@" -q -o "$cache"
 }
-run "$OUT/ring_n1.usdc" scenes/single_ring.toml --frames 60
-run "$OUT/ring_n5.usdc" scenes/single_ring.toml --frames 60 --set ring.fracture.crack_count=5
-run "$OUT/glass_walls.usdc" scenes/glass_walls.toml --frames 50
-run "$OUT/thirteen_rings.usdc" scenes/thirteen_rings.toml
+run "$OUT/ring_n1.usdc" single_ring --frames 60
+run "$OUT/ring_n5.usdc" single_ring --frames 60 --set ring.fracture.crack_count=5
+run "$OUT/glass_walls.usdc" glass_walls --frames 50
+run "$OUT/thirteen_rings.usdc" thirteen_rings
 
 $frac render "$OUT/ring_n1.usdc" --frames 60 -o "$OUT/ring_n1"
 $frac render "$OUT/ring_n5.usdc" --frames 60 -o "$OUT/ring_n5"

@@ -16,7 +16,6 @@ import re
 import signal
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -31,9 +30,9 @@ from taichi_frac.io.cache import CacheWriter, NonFiniteError, check_cache
 from taichi_frac.io.output import OutputError, OutputLock
 from taichi_frac.options import OptionError, SimulationOptions
 from taichi_frac.scenes import load_scene
+from taichi_frac.scenes import BUILTIN_SCENE_DIR as SCENES
 from taichi_frac.simulation import NonFinitePoseError, Simulation
 
-SCENES = Path(__file__).resolve().parents[1] / "scenes"
 RING = str(SCENES / "single_ring.toml")
 
 SMALL_SCENE = """

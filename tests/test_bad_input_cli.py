@@ -16,8 +16,10 @@ from pathlib import Path
 
 import pytest
 
+from taichi_frac.scenes import BUILTIN_SCENE_DIR as SCENES
+
 ROOT = Path(__file__).resolve().parents[1]
-RING = str(ROOT / "scenes" / "single_ring.toml")
+RING = str(SCENES / "single_ring.toml")
 
 
 def _command(*args: str) -> list[str]:

@@ -2,7 +2,7 @@
 and PNG plots are written, and their numbers come from the run (particle counts equal the
 models'), never typed in. No wall-clock time is asserted.
 
-Runs on the dynamics tests' session World (tests/test_dynamics_support.py), so no kernel
+Runs on the dynamics tests' session World (tests/support/dynamics.py), so no kernel
 compiles for it beyond what the suite compiles anyway.
 """
 
@@ -18,7 +18,7 @@ from taichi_frac.bench import grouping, report, scaling, sph, stability, tables
 from taichi_frac.bench.common import BenchContext, Progress
 from taichi_frac.options import FractureOptions, ParticleOptions
 from taichi_frac.scenes import Collider, Scene, SceneObject, SimulationSettings
-from test_dynamics_support import fresh_world
+from support.dynamics import fresh_world
 
 PNG = b"\x89PNG\r\n\x1a\n"
 

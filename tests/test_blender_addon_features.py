@@ -20,7 +20,7 @@ sys.path.insert(0, str(ROOT / "tests" / "blender"))
 sys.path.insert(0, str(ROOT / "scripts"))
 import build_addon  # noqa: E402
 import variants  # noqa: E402
-from test_blender_import import blender_python, run_in_blender  # noqa: E402
+from support.blender import blender_python, run_in_blender  # noqa: E402
 from variants import Piece  # noqa: E402
 
 pytestmark = pytest.mark.blender

@@ -33,7 +33,7 @@ def test_zip_layout_and_manifest(tmp_path):
     assert manifest["id"] == "taichi_frac_blender" and manifest["type"] == "add-on"
     assert path.name == f"taichi_frac_blender-{manifest['version']}.zip"
     # Slotted actions (Action.slots, ActionKeyframeStrip.channelbag) came in Blender 4.4; the
-    # Blender tests run on 4.4.0 too (TAICHI_FRAC_BLENDER_PYTHON, see test_blender_import.py).
+    # Blender tests run on 4.4.0 too (TAICHI_FRAC_BLENDER_PYTHON, see tests/support/blender.py).
     assert tuple(int(p) for p in manifest["blender_version_min"].split(".")) >= (4, 4, 0)
     assert len(manifest["tagline"]) <= 64 and not manifest["tagline"].endswith((".", "!", "?"))
     assert all(lic.startswith("SPDX:") for lic in manifest["license"])

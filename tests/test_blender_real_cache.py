@@ -19,12 +19,13 @@ from pxr import Usd, UsdGeom
 
 from taichi_frac.io import schema
 from taichi_frac.scenes import load_scene
+from taichi_frac.scenes import BUILTIN_SCENE_DIR as SCENES
 from taichi_frac.simulation import Simulation
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "scripts"))
 import build_addon  # noqa: E402
-from test_blender_import import blender_python, run_in_blender  # noqa: E402
+from support.blender import blender_python, run_in_blender  # noqa: E402
 
 pytestmark = pytest.mark.blender
 
@@ -41,7 +42,7 @@ def test_real_cache_imports_as_pxr_reads_it(case, tmp_path, scene_world):
     blender_python()  # skip/fail as the import test does when .venv-blender is missing
     name, overrides, frames = CASES[case]
     cache = tmp_path / f"{case}.usdc"
-    scene = load_scene(ROOT / "scenes" / name, overrides)
+    scene = load_scene(SCENES / name, overrides)
     sim = Simulation(scene, output=cache, frames=max(frames), world=scene_world)
     summary = sim.run()
     assert summary.fractures >= 1 and summary.fragments >= 4  # pieces born mid-run

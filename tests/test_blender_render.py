@@ -15,7 +15,7 @@ from taichi_frac.cli import main
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "blender"))
 import write_synthetic  # noqa: E402
-from test_blender_import import blender_python  # noqa: E402
+from support.blender import blender_python  # noqa: E402
 
 pytestmark = pytest.mark.blender
 
@@ -77,7 +77,7 @@ def test_default_framing_leaves_out_a_far_shard(tmp_path):
     import json
 
     from taichi_frac.io import CacheWriter
-    from test_blender_import import run_in_blender
+    from support.blender import run_in_blender
 
     blender_python()
     cache = tmp_path / "scatter.usdc"

@@ -5,7 +5,6 @@ frames done."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 from pxr import Usd
@@ -14,9 +13,9 @@ from taichi_frac.cli import main
 from taichi_frac.io import schema
 from taichi_frac.io.cache import check_cache
 from taichi_frac.scenes import load_scene
+from taichi_frac.scenes import BUILTIN_SCENE_DIR as SCENES
 from taichi_frac.simulation import Simulation
 
-SCENES = Path(__file__).resolve().parents[1] / "scenes"
 
 
 @pytest.fixture

@@ -14,7 +14,8 @@ import trimesh
 
 from taichi_frac.geometry.tetra import tetrahedralize
 from taichi_frac.model import build_body_model, contact_patches
-from test_dynamics_support import box_model, fresh_world, ring_model, rotation, single_tet_model
+from taichi_frac.bench.bodies import box_model, ring_model, single_tet_model
+from support.dynamics import fresh_world, rotation
 
 #: Rest heights within this of exact [m] (the bound surface contact is held to).
 REST_TOLERANCE = 0.5e-3

@@ -7,7 +7,8 @@ import pytest
 
 from taichi_frac.dynamics import CapacityError
 from taichi_frac.dynamics.state import MAX_CLUSTERS
-from test_dynamics_support import fresh_world, single_tet_model, with_spheres
+from taichi_frac.bench.bodies import single_tet_model
+from support.dynamics import fresh_world, with_spheres
 
 
 def reference_clusters(offsets: np.ndarray, radii: np.ndarray, count: int) -> np.ndarray:

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from test_dynamics_support import (box_model, fresh_world, kinetic_energy, lowest_point, ring_model,
-                                   single_tet_model, sphere_model, with_spheres)
+from taichi_frac.bench.bodies import box_model, ring_model, single_tet_model, sphere_model
+from support.dynamics import fresh_world, kinetic_energy, lowest_point, with_spheres
 
 G = 9.81
 

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from test_dynamics_support import box_model, fresh_world, rotation, sphere_model
+from taichi_frac.bench.bodies import box_model, sphere_model
+from support.dynamics import fresh_world, rotation
 
 G = 9.81
 

@@ -4,7 +4,7 @@ ring's fragment counts against crack_count."""
 import numpy as np
 import pytest
 
-from _fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL, ring_model
+from taichi_frac.bench.fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL, ring_model
 from taichi_frac.fracture.cracks import (CrackPlane, RingCrack, analyze_impact, cut_bonds, group_neighbors,
                                         tangent_frame)
 from taichi_frac.fracture.fragments import split_body
@@ -53,7 +53,7 @@ def test_many_planes_cut_what_each_cuts_alone(plane_count):
     """cut_bonds with many crack planes at once (their sides packed as the bits of one
     integer per particle up to 62 planes, compared plane by plane above) cuts exactly the
     union of what each plane cuts alone, on the ring's bonds."""
-    from _fracture_ring import ring_model
+    from taichi_frac.bench.fracture_ring import ring_model
 
     model = ring_model()
     rng = np.random.default_rng(plane_count)

@@ -4,12 +4,11 @@ a one-tet fragment, refracture with composed source_tet."""
 import numpy as np
 import pytest
 
-from _fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL, ring_model
+from taichi_frac.bench.fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL, corner_cracks, ring_model
 from taichi_frac.fracture.cracks import CrackPlane, analyze_impact
 from taichi_frac.fracture.fragments import make_fragments, split_body
 from taichi_frac.geometry.rotation import quaternion_matrix
 from taichi_frac.geometry.mass import tet_mass_properties
-from taichi_frac.geometry.topology import TET_FACES
 from taichi_frac.options import FractureOptions, Material, ParticleOptions
 
 MATERIAL = Material(name="ring", density=2400.0, young_modulus=70e9, poisson_ratio=0.2, tensile_strength=1.0e6)
@@ -205,22 +204,6 @@ def test_pieces_built_together_are_the_pieces_built_alone():
                     assert a is b or a == b, f.name
     with pytest.raises(ValueError, match="overlap"):
         build_fragment_models(model, [np.arange(10), np.arange(5, 20)])
-
-
-def corner_cracks(model, tet):
-    """Crack discs on the faces of ``tet`` shared with neighbours: isolates it (and maybe a
-    few tets beside it)."""
-    cracks = []
-    p = model.vertices[model.tets[tet]]
-    for k in range(4):
-        if model.tet_neighbor[tet, k] < 0:
-            continue
-        face = p[TET_FACES[k]]
-        n = np.cross(face[1] - face[0], face[2] - face[0])
-        centre = face.mean(axis=0)
-        reach = np.linalg.norm(face - centre, axis=1).max()
-        cracks.append(CrackPlane(point=centre, normal=n / np.linalg.norm(n), extent=0.5 * reach, peak_stress=2e6))
-    return cracks
 
 
 @pytest.mark.parametrize("policy", ["merge", "debris", "drop"])

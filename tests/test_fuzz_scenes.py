@@ -11,14 +11,13 @@ import copy
 import math
 import random
 import tomllib
-from pathlib import Path
 
 import pytest
 
 from taichi_frac.options import FLOAT32_MAX, OptionError
 from taichi_frac.scenes import Scene, apply_overrides, load_scene, scene_from_dict
+from taichi_frac.scenes import BUILTIN_SCENE_DIR as SCENES
 
-SCENES = Path(__file__).resolve().parents[1] / "scenes"
 SEED = 20261201
 
 NASTY_VALUES = [

@@ -14,6 +14,7 @@ from taichi_frac.geometry.piece_checks import crack_deviation, edge_counts, insi
 from taichi_frac.geometry.piece_surface import cut_render_solid, piece_mesh, render_solid_from_surface
 from taichi_frac.geometry.prepare import prepare_body
 from taichi_frac.options import FractureOptions, ParticleOptions, material_preset
+from taichi_frac.scenes import BUILTIN_SCENE_DIR as SCENES
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_MESHES = REPO.parent / "shared" / "meshes"
@@ -216,7 +217,7 @@ def _scene_body(path, name):
 
 
 def test_single_ring_struck_from_below():
-    model, report, material, fracture = _scene_body(REPO / "scenes" / "single_ring.toml", "ring")
+    model, report, material, fracture = _scene_body(SCENES / "single_ring.toml", "ring")
     # One fixed crack set: the SPH stress's at 6 MPa (pieces of a few hundred tets). The
     # halfspace stress's five cracks cut pieces of a few tens of tets, whose flat faces miss
     # their tets' staircase by 3.25 % of volume.
@@ -229,7 +230,7 @@ def test_single_ring_struck_from_below():
 def test_glass_wall_struck_by_the_ball():
     from taichi_frac.scenes import load_scene
 
-    scene = load_scene(REPO / "scenes" / "glass_walls.toml")
+    scene = load_scene(SCENES / "glass_walls.toml")
     obj = next(o for o in scene.objects if o.breakable)
     model, report = obj.prepare()
     centre = np.argmin(np.linalg.norm(model.particle_position, axis=1))

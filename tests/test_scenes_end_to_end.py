@@ -11,7 +11,6 @@ Each asserts physical invariants against independent references:
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,9 +18,9 @@ import pytest
 from taichi_frac.geometry.mass import tet_mass_properties
 from taichi_frac.io.cache import check_cache
 from taichi_frac.scenes import load_scene
+from taichi_frac.scenes import BUILTIN_SCENE_DIR as SCENES
 from taichi_frac.simulation import Simulation
 
-SCENES = Path(__file__).resolve().parents[1] / "scenes"
 
 
 @pytest.fixture(scope="module")

@@ -11,8 +11,8 @@ from scipy.spatial.transform import Rotation
 
 from taichi_frac.options import FractureOptions, MATERIAL_PRESETS, OptionError, ParticleOptions, SimulationOptions
 from taichi_frac.scenes import Collider, Scene, SceneObject, euler_deg_to_quaternion, load_scene
-
-SCENES = Path(__file__).resolve().parents[1] / "scenes"
+from taichi_frac.scenes import BUILTIN_SCENE_DIR as SCENES
+from taichi_frac.scenes import builtin_scenes, find_scene
 
 
 @pytest.fixture(autouse=True)
@@ -43,7 +43,7 @@ def test_single_ring_scene_matches_the_paper():
     assert ring.position[2] == pytest.approx(1.0)
     assert ring.particles.target_particles == 5000
     assert scene.colliders[0].type == "ground" and scene.colliders[0].height == 0.0
-    assert scene.output_path == SCENES / "single_ring.usdc"
+    assert scene.output_path == Path.cwd() / "single_ring.usdc"  # a built-in scene writes here, not in the package
     model, report = ring.prepare()
     assert abs(report.physics_particles / 5044 - 1) < 0.1  # Table 1: 5,044
 
@@ -216,3 +216,36 @@ def test_bad_scene_errors_name_file_key_and_range(tmp_path, text, message):
 def test_missing_scene_file(tmp_path):
     with pytest.raises(FileNotFoundError, match="does not exist"):
         load_scene(tmp_path / "nope.toml")
+
+
+# --- built-in scenes: by name from any folder --------------------------------------------------
+
+def test_built_in_scenes_load_by_name_from_any_folder(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert builtin_scenes() == ["glass_walls", "single_ring", "thirteen_rings"]
+    for name in builtin_scenes():
+        assert find_scene(name) == SCENES / f"{name}.toml" == find_scene(f"{name}.toml")
+        # the cache goes into the working folder, never into the installed package
+        assert load_scene(name).output_path == tmp_path / f"{name}.usdc"
+    assert load_scene("single_ring", ["output.path=drops/a.usdc"]).output_path == tmp_path / "drops" / "a.usdc"
+    assert load_scene("single_ring", ["output.path=none"]).output_path == tmp_path / "single_ring.usdc"
+    assert load_scene("single_ring").objects == load_scene(SCENES / "single_ring.toml").objects
+
+
+def test_a_scene_file_wins_over_a_built_in_name_and_keeps_its_own_folder(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "single_ring.toml").write_text(MINIMAL)
+    scene = load_scene("single_ring.toml")
+    assert scene.name == "drop" and scene.output_path == tmp_path / "drop.usdc"
+    copy = tmp_path / "mine" / "ring.toml"
+    copy.parent.mkdir()
+    copy.write_text((SCENES / "single_ring.toml").read_text())
+    assert load_scene(copy).output_path == copy.parent / "single_ring.usdc"
+
+
+def test_an_unknown_scene_name_lists_the_built_in_scenes(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(FileNotFoundError, match="'single_rings' does not exist.*glass_walls, single_ring, thirteen_rings"):
+        load_scene("single_rings")
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        load_scene("elsewhere/single_ring.toml")  # a folder: a path, never a built-in name

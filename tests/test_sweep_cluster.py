@@ -23,11 +23,12 @@ import pytest
 from pxr import Sdf
 
 from taichi_frac.io import schema
+from taichi_frac.scenes import BUILTIN_SCENE_DIR as SCENES
 from taichi_frac.sweep import results, sweep
 from taichi_frac.sweep.worker import file_sha256
 
 REPO = Path(__file__).resolve().parents[1]
-SCENE = REPO / "scenes" / "single_ring.toml"
+SCENE = SCENES / "single_ring.toml"
 VARY = ["ring.fracture.crack_count=1,3", "ring.fracture.seed=0:2"]
 FIXED = ["ring.position=[0,0,0.15]", "ring.linear_velocity=[0,0,-4.4]"]
 FRAMES = 6
@@ -155,7 +156,7 @@ def test_contact_sheet_shows_every_variant(finished, tmp_path):
     sheet is a grid of the tiles (checked pixel for pixel against each thumbnail)."""
     from PIL import Image
 
-    from test_blender_import import blender_python
+    from support.blender import blender_python
     from taichi_frac.sweep.sheet import contact_sheet
 
     python = blender_python()

@@ -9,6 +9,8 @@
 - ``dynamics``: the ``bench dynamics`` table (the 13-ring scene two- vs single-scale,
   the drop error at n = 4 against n = 1, a fragment pile);
 - ``report``: runs the parts and writes ``docs/benchmarks.md``, its plots and a summary.
+- ``bodies``, ``fracture_ring``: the bodies and impacts the report shares with the test
+  suite, defined once so both describe the same set-ups.
 
 Each part's ``run(ctx) -> Section`` measures, prints progress through ``ctx.progress`` and
 returns its markdown (every number in it comes from the run) and the plots it wrote.

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import datetime
 import functools
-import importlib
 import os
 import platform
 import subprocess
@@ -16,26 +15,17 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[2]
-SCENES = REPO / "scenes"
+from ..scenes import BUILTIN_SCENE_DIR as SCENES
+
+_PACKAGE_PARENT = Path(__file__).resolve().parents[2]
+#: Where the report's files go by default: the checkout (its docs/ and out/) when the package
+#: runs from one, else the current folder (an installed package).
+REPO = _PACKAGE_PARENT if (_PACKAGE_PARENT / "pyproject.toml").is_file() else Path.cwd()
 
 #: Capacities of the report's one World: the largest scene of Tables 1-2 (13 breakable
 #: rings: up to 13 + 256 x 13 bodies, ~50,000 collision particles with room for fragments)
 #: and the 1,000-body pile fit; the same sizes as tests/test_scenes_end_to_end.py.
 REPORT_WORLD = dict(max_bodies=4096, max_boundary_particles=200_000, max_contacts=400_000, max_static_boxes=8)
-
-
-def tests_module(name: str):
-    """Import a shared set-up module of the test suite (``tests/_fracture_ring.py``,
-    ``tests/test_dynamics_support.py``, ...) so the report measures exactly the bodies the
-    tests check, instead of a copy of them. The bench runs from a checkout of the repo."""
-    folder = REPO / "tests"
-    if not (folder / f"{name}.py").exists():
-        raise FileNotFoundError(f"{folder / name}.py not found: taichi-frac bench runs from a checkout of the "
-                                "repository (it reuses the tests' set-up code)")
-    if str(folder) not in sys.path:
-        sys.path.insert(0, str(folder))
-    return importlib.import_module(name)
 
 
 class Progress:
@@ -189,7 +179,7 @@ def machine_info() -> dict:
                                 text=True, timeout=10).stdout.strip()
         # Only what the measurements run (the report rewrites docs/ and README.md itself).
         dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
-                                "taichi_frac", "scenes", "pyproject.toml"], cwd=REPO,
+                                "taichi_frac", "pyproject.toml"], cwd=REPO,
                                capture_output=True, text=True, timeout=10).stdout.strip()
         commit += " (with uncommitted changes)" if dirty else ""
     except (OSError, subprocess.SubprocessError):

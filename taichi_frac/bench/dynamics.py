@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from .common import SCENES, BenchContext, deepest_below_ground, md_table, ms_pair
+from .common import BenchContext, deepest_below_ground, md_table, ms_pair
 
 #: Motion per substep [particle radii] of the table's coarse-stepping row. Measured with
 #: the rings unbreakable (worst collision-sphere depth below the floor during a 3 s run):
@@ -217,8 +217,8 @@ def _print_contact(ctx: BenchContext, scene, args, t0: float) -> int:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--scene", default=str(SCENES / "thirteen_rings.toml"),
-                   help="the rings scene (default scenes/thirteen_rings.toml)")
+    p.add_argument("--scene", default="thirteen_rings",
+                   help="the rings scene: a scene file or a built-in scene (default thirteen_rings)")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a scene value, e.g. --set simulation.substeps=4 (repeatable)")
     p.add_argument("--fragments", type=int, default=216, help="fragments in the pile (default 216)")

@@ -2,7 +2,7 @@
 stress.py), plain and corrected (Bonet-Lok) SPH gradient.
 
 Block: the unit cube x, y in [-1/2, 1/2], z in [0, 1]: a lattice of n^3 cells jittered by
-+-0.2 spacing (``jittered_block`` of tests/_fracture_ring.py, the block the stress test
++-0.2 spacing (``fracture_ring.jittered_block``, the block the stress test
 checks; volumes = spacing^3), and blocks of tetgen tet centroids (what a real body gives;
 volumes = tet volumes). Load: force (2e4, -1e4, -1e5) N at the centre of the top face,
 E = 70 GPa, nu = 0.2, default h = 2 x spacing and contact radius = the nearest particle's.
@@ -16,7 +16,7 @@ and Hooke law -- over a set of particles S:
     S = far: >= 0.25 m from the load (fixed region, shows convergence with resolution).
 Times: best of ``repeat`` runs after a warm-up (kernels compiled). Then one impact's
 analysis (field + neighbours + gradient + stress + principal) on the ~5,000-particle ring
-of tests/_fracture_ring.py (torus R 0.1 m, r 0.025 m, tetgen), 1e4 N at the outer equator.
+of ``fracture_ring`` (torus R 0.1 m, r 0.025 m, tetgen), 1e4 N at the outer equator.
 
 ``benchmarks/bench_stress.py`` is the command-line front of this module.
 """
@@ -27,7 +27,9 @@ import time
 
 import numpy as np
 
-from .common import BenchContext, Section, md_table, pyplot, tests_module
+from . import fracture_ring
+from .common import BenchContext, Section, md_table, pyplot
+from .fracture_ring import jittered_block
 
 E, NU = 70.0e9, 0.2
 FORCE = np.array([2e4, -1e4, -1e5])
@@ -35,12 +37,6 @@ TOP = np.array([0.0, 0.0, 1.0])
 DOWN = np.array([0.0, 0.0, -1.0])
 LATTICE_SIZES = (10, 17, 27, 43)
 TET_TARGETS = (5000, 20000)
-
-
-def jittered_block(per_side, jitter=0.2, seed=0):
-    """The stress test's block (tests/_fracture_ring.py), so the report and the test's
-    tolerance describe one block by construction."""
-    return tests_module("_fracture_ring").jittered_block(per_side, jitter, seed)
 
 
 def tet_particles(mesh, target):
@@ -124,10 +120,9 @@ def ring_impact(repeat=3):
     principal stress [Pa], correction fallbacks)."""
     from ..fracture import contact_field
 
-    ring = tests_module("_fracture_ring")
-    model = ring.ring_model()
+    model = fracture_ring.ring_model()
     pts, vol = model.particle_position, model.tet_volume
-    args = (pts, vol, ring.RING_CONTACT, ring.RING_NORMAL, ring.RING_FORCE, E, NU)
+    args = (pts, vol, fracture_ring.RING_CONTACT, fracture_ring.RING_NORMAL, fracture_ring.RING_FORCE, E, NU)
     contact_field(*args)  # warm-up
     t, f = best_time(lambda: contact_field(*args), repeat)
     return len(pts), t, float(f.principal_stress.max()), int(f.correction_fallback.sum())
@@ -158,7 +153,7 @@ def run(ctx: BenchContext, sizes=None, tet_targets=None, repeat=None, ring=True)
         f"nu = {NU}. Error: relative L2 error of the SPH stress against the exact stress of the same "
         "displacement field (its complex-step gradient), over the **interior** (>= 2h from the load, >= h from "
         "every face), **+surface** (>= 2h from the load) and **far** (>= 0.25 m from the load) particles. "
-        "Lattice: `jittered_block` of `tests/_fracture_ring.py` (the stress test's block); tets: tetgen "
+        "Lattice: `jittered_block` of `taichi_frac/bench/fracture_ring.py` (the stress test's block); tets: tetgen "
         f"centroids. Times: best of {repeat} after a warm-up.",
         "",
         table(rows),

@@ -1,8 +1,8 @@
 """Part 4: stability, the hard cases of the dynamics and of the fracture.
 
-Each case is set up as the tests set it up (the bodies come from the tests' shared set-up
-modules, ``tests/test_dynamics_support.py``, ``tests/_fracture_ring.py`` and the one-tet
-isolation of ``tests/test_fracture_fragments.py``) and then simulated on the report's World,
+Each case is set up as the tests set it up (the bodies come from the set-up modules the
+tests share with the report, ``bodies`` and ``fracture_ring``, the one-tet isolation
+included) and then simulated on the report's World,
 sampling every frame end: the largest body speed, the deepest collision sphere inside the
 ground or a static box, and any NaN. A fracture case analyses the impact, splits the ring
 and drops every resulting piece onto the ground for a second, so its row says whether the
@@ -24,8 +24,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry.rotation import quaternion_matrix
-
-from .common import BenchContext, Section, md_table, tests_module
+from . import fracture_ring as ring
+from .bodies import box_model, single_tet_model, sphere_model
+from .common import BenchContext, Section, md_table
 
 G = 9.81
 
@@ -145,10 +146,9 @@ def _bound(world, speeds_heights):
 # ------------------------------------------------------------------ dynamics
 
 def case_deep_overlap(ctx, frames=100):
-    s = tests_module("test_dynamics_support")
     world = _world(ctx)
     world.add_ground(0.0)
-    sphere = s.sphere_model(0.05)
+    sphere = sphere_model(0.05)
     a = world.add_body(sphere, (1.0, 0, 0.3))
     b = world.add_body(sphere, (1.01, 0, 0.3))
     t = Tracker(world)
@@ -161,10 +161,9 @@ def case_deep_overlap(ctx, frames=100):
 
 
 def case_mass_ratio(ctx, frames=100):
-    s = tests_module("test_dynamics_support")
     world = _world(ctx)
     world.add_ground(0.0)
-    small, big = s.box_model(0.02, 0.02, 0.02, pieces=30, density=2400.0), s.box_model(0.2, 0.2, 0.2, pieces=300)
+    small, big = box_model(0.02, 0.02, 0.02, pieces=30, density=2400.0), box_model(0.2, 0.2, 0.2, pieces=300)
     b = world.add_body(big, (0, 0, 0.11))
     a = world.add_body(small, (0, 0, 0.24))
     t = Tracker(world)
@@ -185,10 +184,9 @@ def case_mass_ratio(ctx, frames=100):
 
 
 def case_single_tet(ctx, frames=100):
-    s = tests_module("test_dynamics_support")
     world = _world(ctx)
     world.add_ground(0.0)
-    tet = s.single_tet_model()
+    tet = single_tet_model()
     body = world.add_body(tet, (0, 0, 0.2), (0.9, 0.3, 0.2, 0.1))
     t = Tracker(world)
     t.run(frames)
@@ -198,7 +196,6 @@ def case_single_tet(ctx, frames=100):
 
 
 def case_pile(ctx, frames=25, bodies=1000):
-    s = tests_module("test_dynamics_support")
     world = _world(ctx)
     world.add_ground(0.0)
     boxes = []
@@ -206,7 +203,7 @@ def case_pile(ctx, frames=25, bodies=1000):
         for c, h in (((sign * 0.3, 0, 0.3), (0.02, 0.32, 0.3)), ((0, sign * 0.3, 0.3), (0.32, 0.02, 0.3))):
             world.add_static_box(c, h)
             boxes.append((c, h, (1, 0, 0, 0)))
-    tet = s.single_tet_model(0.04)
+    tet = single_tet_model(0.04)
     side = round(bodies ** (1 / 3))
     grid = np.stack(np.meshgrid(*(np.arange(side) * 0.05 - 0.025 * (side - 1),) * 2, np.arange(side) * 0.05 + 0.1,
                                 indexing="ij"), -1).reshape(-1, 3)
@@ -223,9 +220,8 @@ def case_pile(ctx, frames=25, bodies=1000):
 
 
 def case_fast_sphere(ctx):
-    s = tests_module("test_dynamics_support")
     world = _world(ctx, max_substeps=5000)
-    model = s.sphere_model(0.01, subdivisions=1, pieces=20)
+    model = sphere_model(0.01, subdivisions=1, pieces=20)
     half = (0.01, 0.2, 0.2)
     world.add_static_box((0.1, 0, 0), half, friction=0.2, restitution=0.2)
     body = world.add_body(model, (0, 0, 0), (1, 0, 0, 0), (100.0, 0, 0), (0, 0, 0))
@@ -294,7 +290,6 @@ def fracture_cases(ctx, frames=50, model=None):
     from ..fracture.fragments import split_body
     from ..options import FractureOptions
 
-    ring = tests_module("_fracture_ring")
     model = model if model is not None else ring.ring_model()
     contact, normal, force = ring.RING_CONTACT, ring.RING_NORMAL, ring.RING_FORCE
     unit = normal
@@ -318,10 +313,9 @@ def fracture_cases(ctx, frames=50, model=None):
     for nu in (0.0, 0.49):
         out.append(_fracture_case(ctx, f"Poisson ratio {nu:g} (1e4 N)", model, contact, normal, force,
                                   _ring_material(nu), opts, frames))
-    fragments = tests_module("test_fracture_fragments")
     tet = int(model.surface_particles[0])
     one_opts = FractureOptions(min_fragment_particles=1)
-    split = split_body(model, fragments.corner_cracks(model, tet), one_opts)
+    split = split_body(model, ring.corner_cracks(model, tet), one_opts)
     from ..fracture.fragments import make_fragments
     from ..options import ParticleOptions
 

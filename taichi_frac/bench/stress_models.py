@@ -82,9 +82,9 @@ def ring_model(target):
     """The single ring's BodyModel at about ``target`` tets, and its world orientation (3,3)."""
     from ..geometry.rotation import quaternion_matrix
     from ..scenes import load_scene
-    from .common import REPO
+    from .common import SCENES
 
-    scene = load_scene(REPO / "scenes" / "single_ring.toml", [f"ring.particles.target_particles={target}"])
+    scene = load_scene(SCENES / "single_ring.toml", [f"ring.particles.target_particles={target}"])
     obj = scene.objects[0]
     model, _ = obj.prepare()
     return model, quaternion_matrix(obj.orientation), obj
@@ -152,13 +152,13 @@ def scene_rows(ctx: BenchContext, frames=None, rings=True):
     """Rows (scene, model, fragments, ms per frame mean) for the single ring's controls and
     the 13 rings, every breakable object switched to each model."""
     from ..scenes import load_scene
-    from .common import REPO
+    from .common import SCENES
     from .tables import run_scene
 
     from ..simulation import Simulation
 
     for kind in MODELS:  # compile each model's kernels outside the timed runs
-        scene = load_scene(REPO / "scenes" / "single_ring.toml", ["simulation.duration=0.8", "ring.fracture.crack_count=2",
+        scene = load_scene(SCENES / "single_ring.toml", ["simulation.duration=0.8", "ring.fracture.crack_count=2",
                                                                   f"ring.fracture.stress_model={kind}"])
         Simulation(scene, output=False, world=ctx.world()).run()
     rows = []
@@ -167,10 +167,10 @@ def scene_rows(ctx: BenchContext, frames=None, rings=True):
     if rings:
         cases.append(("13 rings", "thirteen_rings", []))
     for label, name, overrides in cases:
-        base = load_scene(REPO / "scenes" / f"{name}.toml", overrides)
+        base = load_scene(SCENES / f"{name}.toml", overrides)
         for kind in MODELS:
             switch = [f"{o.name}.fracture.stress_model={kind}" for o in base.breakable_objects]
-            scene = load_scene(REPO / "scenes" / f"{name}.toml", overrides + switch)
+            scene = load_scene(SCENES / f"{name}.toml", overrides + switch)
             _, summary, _ = run_scene(ctx, scene, f"{label}, {kind}", frames=frames)
             rows.append((label, kind, summary.fragments, summary.ms_per_frame["mean"],
                          1e3 * summary.stage_seconds["fracture_analysis"] / max(summary.frames, 1)))

@@ -12,7 +12,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "run", help=HELP, description=HELP + ". Ctrl-C stops cleanly and keeps a valid cache of the frames done.",
     )
-    p.add_argument("scene", help="scene file, e.g. scenes/single_ring.toml")
+    p.add_argument("scene", help="scene file (.toml), or a built-in scene: single_ring, thirteen_rings, glass_walls")
     p.add_argument("-o", "--output", help="cache file (.usdc/.usda); default: the scene's [output] path")
     p.add_argument("--arch", choices=["cpu", "cuda", "vulkan", "metal", "gpu"],
                    help="Taichi backend (default: the scene's simulation.arch, cpu)")

@@ -14,7 +14,7 @@ def register(subparsers) -> None:
         "the sweep writes DIR/sweep.csv, DIR/sweep.json and the contact sheet DIR/sheet.png. Variants already "
         "done are skipped, so running the same command again after Ctrl-C does the rest.",
     )
-    p.add_argument("scene", help="scene file, e.g. scenes/single_ring.toml")
+    p.add_argument("scene", help="scene file (.toml), or a built-in scene: single_ring, thirteen_rings, glass_walls")
     p.add_argument("--vary", action="append", default=[], metavar="KEY=VALUES", required=True,
                    help="a scene key (as --set's) and its values: START:STOP integers (0:32 is 0..31), "
                         "V1,V2,... a list, LOW..HIGH a range (with --samples); repeatable: the sweep runs "

@@ -153,14 +153,52 @@ def scene_from_dict(data: dict, *, where: str = "scene", base_dir: str | os.Path
         raise OptionError(msg if msg.startswith(where) else f"{where}: {msg}") from None
 
 
+#: The scenes shipped with the package, loaded by name from any folder (``taichi-frac run
+#: single_ring``): the paper's porcelain ring, its thirteen rings and the glass walls.
+BUILTIN_SCENE_DIR = Path(__file__).resolve().parent / "builtin"
+
+
+def builtin_scenes() -> list[str]:
+    """Names of the built-in scenes (``single_ring``, ...), sorted."""
+    return sorted(p.stem for p in BUILTIN_SCENE_DIR.glob("*.toml"))
+
+
+def find_scene(scene: str | os.PathLike) -> Path:
+    """The scene file ``scene`` names: a path to a TOML file, or a built-in scene's name
+    (``single_ring`` or ``single_ring.toml``, no folder), found wherever the package is
+    installed. A file that exists wins over a built-in name. Raises FileNotFoundError that
+    lists the built-in scenes."""
+    path = Path(scene)
+    if path.exists():
+        return path
+    name = path.name.removesuffix(".toml")
+    if path.parent == Path(".") and name in builtin_scenes():
+        return BUILTIN_SCENE_DIR / f"{name}.toml"
+    raise FileNotFoundError(f"scene file {str(scene)!r} does not exist; give a scene file (.toml) or a built-in "
+                            f"scene: {', '.join(builtin_scenes())}")
+
+
+def _output_in_working_folder(data: dict, default_name: str) -> dict:
+    """A built-in scene's relative output path, resolved against the current folder: its
+    cache belongs beside the user's work, not inside the installed package."""
+    output = data.get("output", {})
+    if not isinstance(output, dict):
+        return data  # scene_from_dict names the bad type
+    name = data.get("name", default_name)
+    relative = output.get("path", f"{name}.usdc")
+    if not isinstance(relative, str) or Path(relative).is_absolute():
+        return data
+    return {**data, "output": {**output, "path": str(Path.cwd() / relative)}}
+
+
 def load_scene(path: str | os.PathLike, overrides=()) -> Scene:
-    """Read a scene TOML file, with optional ``KEY=VALUE`` overrides (see apply_overrides).
-    Raises OptionError (bad content) or FileNotFoundError."""
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"scene file {str(path)!r} does not exist")
+    """Read a scene TOML file (a path, or a built-in scene's name: :func:`find_scene`), with
+    optional ``KEY=VALUE`` overrides (see apply_overrides). A built-in scene writes its cache
+    into the current folder. Raises OptionError (bad content) or FileNotFoundError."""
+    path = find_scene(path)
     if path.is_dir():
-        raise OptionError(f"{str(path)!r} is a folder: give a scene file (.toml), e.g. scenes/single_ring.toml")
+        raise OptionError(f"{str(path)!r} is a folder: give a scene file (.toml) or a built-in scene: "
+                          f"{', '.join(builtin_scenes())}")
     try:
         raw = path.read_bytes()
     except OSError as exc:
@@ -177,6 +215,8 @@ def load_scene(path: str | os.PathLike, overrides=()) -> Scene:
         raise OptionError(f"{path.name}: not valid TOML: {exc}") from None
     if overrides:
         data = apply_overrides(data, overrides, where=path.name)
+    if path.resolve().parent == BUILTIN_SCENE_DIR:
+        data = _output_in_working_folder(data, path.stem)
     return scene_from_dict(data, where=path.name, base_dir=path.parent, source_path=path.resolve())
 
 

@@ -76,7 +76,9 @@ def sweep(scene, vary, output, *, samples: int | None = None, seed: int = 0, ove
     """Run the variants of ``scene`` on Dask; see ``taichi_frac.sweep`` for the arguments."""
     started = time.perf_counter()
     log = log or (lambda message: print(message, file=sys.stderr, flush=True))
-    scene_path = Path(scene).resolve()
+    from ..scenes import find_scene
+
+    scene_path = find_scene(scene).resolve()
     if not scene_path.is_file():
         raise FileNotFoundError(f"scene file {str(scene)!r} does not exist")
     if workers is not None and workers < 1:

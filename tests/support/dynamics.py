@@ -1,52 +1,17 @@
-"""Shared fixtures for the dynamics and collision tests (no tests here).
+"""Shared fixtures for the dynamics and collision tests.
 
 One World for the whole session: its kernels compile once (Taichi compilation dominates the
 run time); each test calls ``fresh_world()`` which clears bodies and statics and restores
-the options. Bodies are tet meshes made with tetgen directly (independent of
-taichi_frac.geometry) and cached.
+the options. The bodies come from ``taichi_frac.bench.bodies``, which the report's
+stability table simulates too.
 """
 
 import dataclasses
 import functools
 
 import numpy as np
-import tetgen
-import trimesh
 
 from taichi_frac.dynamics import DynamicsOptions, World, WorldCapacity
-from taichi_frac.model import build_body_model
-
-DENSITY = 2400.0
-
-
-def tet_model(mesh: trimesh.Trimesh, max_volume: float, density: float = DENSITY, group: int = 4):
-    gen = tetgen.TetGen(np.asarray(mesh.vertices), np.asarray(mesh.faces))
-    vertices, tets = gen.tetrahedralize(order=1, mindihedral=10, minratio=1.5, maxvolume=max_volume)[:2]
-    return build_body_model(vertices, tets, density, boundary_group_size=group)
-
-
-@functools.lru_cache(maxsize=None)
-def box_model(ex: float, ey: float, ez: float, pieces: int = 400, density: float = DENSITY):
-    mesh = trimesh.creation.box((ex, ey, ez))
-    return tet_model(mesh, mesh.volume / pieces, density)
-
-
-@functools.lru_cache(maxsize=None)
-def sphere_model(radius: float, subdivisions: int = 2, pieces: int = 300, density: float = DENSITY):
-    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
-    return tet_model(mesh, mesh.volume / pieces, density)
-
-
-@functools.lru_cache(maxsize=None)
-def ring_model(pieces: int = 1500, major: float = 0.1, minor: float = 0.025):
-    mesh = trimesh.creation.torus(major, minor, major_sections=40, minor_sections=12)
-    return tet_model(mesh, mesh.volume / pieces)
-
-
-@functools.lru_cache(maxsize=None)
-def single_tet_model(edge: float = 0.05):
-    vertices = np.array([[0, 0, 0], [edge, 0, 0], [0, edge, 0], [0, 0, edge]], dtype=float)
-    return build_body_model(vertices, np.array([[0, 1, 2, 3]]), DENSITY, boundary_group_size=4)
 
 
 @functools.lru_cache(maxsize=None)

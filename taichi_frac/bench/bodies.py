@@ -1,0 +1,50 @@
+"""The bodies the dynamics tests check and the report's stability table simulates, defined
+once so both describe the same bodies: tet meshes made with tetgen directly (independent of
+``taichi_frac.geometry``), cached per process. Density [kg/m^3], lengths [m]."""
+
+import functools
+
+import numpy as np
+
+from ..model import build_body_model
+
+DENSITY = 2400.0
+
+
+def tet_model(mesh, max_volume: float, density: float = DENSITY, group: int = 4):
+    """The BodyModel of a closed trimesh ``mesh``, tets of at most ``max_volume`` [m^3]."""
+    import tetgen
+
+    gen = tetgen.TetGen(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+    vertices, tets = gen.tetrahedralize(order=1, mindihedral=10, minratio=1.5, maxvolume=max_volume)[:2]
+    return build_body_model(vertices, tets, density, boundary_group_size=group)
+
+
+@functools.lru_cache(maxsize=None)
+def box_model(ex: float, ey: float, ez: float, pieces: int = 400, density: float = DENSITY):
+    import trimesh
+
+    mesh = trimesh.creation.box((ex, ey, ez))
+    return tet_model(mesh, mesh.volume / pieces, density)
+
+
+@functools.lru_cache(maxsize=None)
+def sphere_model(radius: float, subdivisions: int = 2, pieces: int = 300, density: float = DENSITY):
+    import trimesh
+
+    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+    return tet_model(mesh, mesh.volume / pieces, density)
+
+
+@functools.lru_cache(maxsize=None)
+def ring_model(pieces: int = 1500, major: float = 0.1, minor: float = 0.025):
+    import trimesh
+
+    mesh = trimesh.creation.torus(major, minor, major_sections=40, minor_sections=12)
+    return tet_model(mesh, mesh.volume / pieces)
+
+
+@functools.lru_cache(maxsize=None)
+def single_tet_model(edge: float = 0.05):
+    vertices = np.array([[0, 0, 0], [edge, 0, 0], [0, edge, 0], [0, 0, edge]], dtype=float)
+    return build_body_model(vertices, np.array([[0, 1, 2, 3]]), DENSITY, boundary_group_size=4)
