@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import interrupts, runtime
-from .geometry.rotation import quaternion_matrix
+from .kinematics.quaternion import quaternion_matrix
 from .model import BodyModel
 from .options import LOOKS, FractureOptions, Material, OptionError, ParticleOptions
 

@@ -13,7 +13,8 @@ import pytest
 import trimesh
 
 from taichi_frac.geometry.tetra import tetrahedralize
-from taichi_frac.model import build_body_model, contact_patches
+from taichi_frac.geometry.contact_patches import contact_patches
+from taichi_frac.model import build_body_model
 from test_dynamics_support import box_model, fresh_world, ring_model, rotation, single_tet_model
 
 #: Rest heights within this of exact [m] (the bound surface contact is held to).

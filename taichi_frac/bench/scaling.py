@@ -40,7 +40,7 @@ def ring_layout_scene(rings: int, ring_particles: int = RING_PARTICLES, frames: 
                       seed: int = 0):
     """``rings`` porcelain rings on a square grid, tilted at random, falling onto the ground."""
     from ..options import FractureOptions, Material, ParticleOptions
-    from ..scenes import Collider, Scene, SceneObject, SimulationSettings
+    from ..scenes import Collider, Scene, SceneObject, SimulationOptions
 
     rng = np.random.default_rng(seed)
     side = math.ceil(math.sqrt(rings))
@@ -58,7 +58,7 @@ def ring_layout_scene(rings: int, ring_particles: int = RING_PARTICLES, frames: 
         ))
     return Scene(name=f"rings_{rings}x{ring_particles}", objects=objects,
                  colliders=[Collider.ground(0.0, friction=0.6, restitution=0.1)],
-                 simulation=SimulationSettings(fps=50, duration=frames / 50, substeps=10))
+                 simulation=SimulationOptions(fps=50, duration=frames / 50, substeps=10))
 
 
 def _reset_peak_rss() -> bool:

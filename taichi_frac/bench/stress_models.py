@@ -80,7 +80,7 @@ def cube_rows(side, target, models=MODELS, repeat=2):
 
 def ring_model(target):
     """The single ring's BodyModel at about ``target`` tets, and its world orientation (3,3)."""
-    from ..geometry.rotation import quaternion_matrix
+    from ..kinematics.quaternion import quaternion_matrix
     from ..scenes import load_scene
     from .common import REPO
 

@@ -146,7 +146,7 @@ class Particles:
         particle's entries (only the last store, ``cache_epoch``, is valid; add_body sets
         -1 on a reused slot). Writer: solver.store_impulses; read by the narrowphase when
         the same pair is made again.
-        Contact patches (``model.ContactPatches``): point_start, point_count (i32) the rows
+        Contact patches (``geometry.contact_patches.ContactPatches``): point_start, point_count (i32) the rows
             of ``surface_point`` holding sphere P's patch (count 0: the sphere is its own
             surface, the contacts are sphere contacts); patch_normal (vec3 body frame,
             unit outward, or zero where the patch faces every way). surface_point, shape

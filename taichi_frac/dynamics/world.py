@@ -16,7 +16,7 @@ import taichi as ti
 from .. import runtime
 from ..collision.grid import CELLS_PER_SPHERE, body_grid
 from ..collision import broadphase, narrowphase
-from ..geometry.rotation import quaternion_matrix
+from ..kinematics.quaternion import quaternion_matrix
 from ..model import BodyModel
 from . import impacts as impact_kernels
 from . import integrate, stages

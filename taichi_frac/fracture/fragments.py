@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry.components import connected_tets
-from ..geometry.rotation import quaternion_matrix
+from ..kinematics.quaternion import quaternion_matrix
 from ..model import BodyModel, build_fragment_models
 from ..options import FractureOptions, Material, ParticleOptions
 from .cracks import ImpactAnalysis, cut_bonds

@@ -8,7 +8,7 @@ from .description import (
     OutputSettings,
     Scene,
     SceneObject,
-    SimulationSettings,
+    SimulationOptions,
     euler_deg_to_quaternion,
 )
 from .loader import apply_overrides, load_scene, scene_from_dict
@@ -19,7 +19,7 @@ __all__ = [
     "OutputSettings",
     "Scene",
     "SceneObject",
-    "SimulationSettings",
+    "SimulationOptions",
     "euler_deg_to_quaternion",
     "load_scene",
     "scene_from_dict",
