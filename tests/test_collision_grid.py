@@ -63,7 +63,7 @@ def test_moving_ring_contacts_match_brute_force_with_the_speculative_reach():
         v, w = rng.normal(0.0, 1.5, 3), rng.normal(0.0, 8.0, 3)
         b = world.add_body(model, position, q, v, w)
         x = position + ring @ quaternion_matrix(q).T
-        start, count = world._body_range[b]
+        start, count = world.slots.body_range[b]
         centres.append(x)
         radii.append(r)
         owners.append(np.full(count, b))

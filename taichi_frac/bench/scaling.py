@@ -89,7 +89,7 @@ def measure_scene(scene, world, frames: int, fracture: bool) -> dict:
 
     sim = Simulation(scene, output=False, world=world, frames=frames, fracture=fracture)
     models = [r.model for r in sim.records.values()]
-    collision = sum(count for _, count in world._body_range.values())
+    collision = sum(count for _, count in world.slots.body_range.values())
     substeps0 = world.stats.total_substeps
     summary = sim.run()
     return dict(

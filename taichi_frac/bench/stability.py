@@ -54,7 +54,7 @@ class Tracker:
         self.ids = np.array(self.world.body_ids)
         index, self.owner = [], []
         for k, b in enumerate(self.ids):
-            start, count = self.world._body_range[int(b)]
+            start, count = self.world.slots.body_range[int(b)]
             index.append(np.arange(start, start + count))
             self.owner.append(np.full(count, k))
         index = np.concatenate(index)
