@@ -20,8 +20,9 @@ import numpy as np
 
 from .geometry import rows
 from .geometry.mass import MassProperties, tet_mass_properties
-from .geometry.collision_centres import collision_centres
-from .geometry.rays import face_bounds, first_hits
+from .geometry.collision_centres import CENTRE_REACH, contact_sphere_centres
+from .geometry.contact_patches import ContactPatches, contact_patches
+from .geometry.rays import near_faces
 from .geometry.surface_groups import group_surface_particles
 from .geometry.topology import (
     bonds_from_neighbors,
@@ -403,7 +404,7 @@ def _assemble(vertices, tets, vol, neighbor, tet_start, vertex_start, density, b
         crack = crack_face[face_tet, face_local]
         for k in np.unique(group_piece[slots]):
             mine = slots[group_piece[slots] == k]
-            redo[mine] = _near_faces(vertices, faces[crack & (face_piece == k)], b_pos[mine],
+            redo[mine] = near_faces(vertices, faces[crack & (face_piece == k)], b_pos[mine],
                                      CENTRE_REACH * b_radius[mine])
     which = np.nonzero(redo)[0]
     if len(which):
@@ -457,118 +458,3 @@ def _assemble(vertices, tets, vol, neighbor, tet_start, vertex_start, density, b
             root=root,
         ))
     return models
-
-
-#: A kept boundary group's collision centre is computed again when a crack face lies
-#: within this many of its radii of its centre: the centre moves inward by less than
-#: 2 radii (``contact_sphere_centres``: at most R - h, h > -R for a surface group's own
-#: faces) and the thickness ray looks a radius beyond that.
-CENTRE_REACH = 3.0
-
-
-def _near_faces(vertices, faces, points, reach) -> np.ndarray:
-    """(P,) bool: does any of ``faces`` (F,3) come within ``reach`` (P,) [m] of ``points``
-    (P,3) [m] (the nearest face centre's distance less the largest face's own radius; a
-    conservative test)."""
-    from scipy.spatial import cKDTree
-
-    if len(faces) == 0 or len(points) == 0:
-        return np.zeros(len(points), dtype=bool)
-    centre, radius = face_bounds(vertices[faces])
-    distance, _ = cKDTree(centre).query(points)
-    return distance < reach + float(radius.max())
-
-
-def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius, *,
-                           group_piece=None, face_piece=None):
-    """Collision centres of the boundary spheres (see ``BodyModel.boundary_contact_position``).
-
-    For each group: its outward normal n (area-weighted normals of its members' boundary
-    faces), the height h of the true surface above its centre along n (largest over those
-    faces' vertices), the radius rho its members' centroids span about the normal axis,
-    and the body's thickness t behind the centre along -n (``ray_exit_distance`` against
-    the boundary faces, looked at only as far as the limit can bind, s + R).
-    The centre moves inward by
-
-        s = min(R - h, sqrt(R^2 - rho^2) - h, t - R), at least 0:
-
-    toward putting the sphere's outermost point on the surface (R - h), but never so far
-    that its cross-section at the surface stops covering its members (so neighbouring
-    spheres leave no hole a small body could fall through, even on a coarse mesh), and
-    never so far that it pokes out behind (t - R).
-
-    ``group_piece`` (G,) and ``face_piece`` (F,): the piece of each group and face when
-    several bodies' groups are given at once (``_assemble``): each group then looks only
-    at its own piece's faces, and the smallest normal counted as one is relative to its
-    own piece's largest. None: one body. One kernel launch
-    (``geometry.collision_centres``); tests/test_model_two_scale.py checks it against
-    this formula in numpy.
-    """
-    if group_piece is None:
-        group_piece, face_piece = np.zeros(len(b_pos), dtype=np.int64), np.zeros(len(faces), dtype=np.int64)
-    return collision_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius,
-                             np.asarray(group_piece), np.asarray(face_piece))
-
-
-@dataclass(frozen=True, eq=False)
-class ContactPatches:
-    """The true surface behind each collision sphere, which the contacts are computed
-    from (``collision/surface.py``): the spheres find which parts of two bodies may touch,
-    the patches say where and how deep.
-
-    Attributes:
-        offsets: (N+1,) CSR offsets of each sphere's points in ``points``.
-        points: (P,3) [m] body frame: the vertices of the boundary triangles of the
-            sphere's member tets, each once per sphere (a triangle's support along any
-            direction is at a vertex, so these carry its triangles' whole extent).
-        normals: (N,3) unit outward normal of each patch (its triangles' area-weighted
-            normal), or zeros where the triangles face every way (their summed area normal
-            is under ``FLAT_ENOUGH`` of their area: a one-tet chip's closed surface).
-    """
-
-    offsets: np.ndarray
-    points: np.ndarray
-    normals: np.ndarray
-
-
-#: A patch has a normal when its triangles' summed area normal is at least this fraction of
-#: their total area (a patch spanning 45 degrees of a tube: 0.97; one folded over a cube's
-#: edge: 0.71; a closed tet: 0). A folded patch's mean normal is no face's: a chip landing
-#: beside the edge was pushed along it into the body.
-FLAT_ENOUGH = 0.9
-
-
-def contact_patches(model: BodyModel, member_offsets: np.ndarray, members: np.ndarray) -> ContactPatches:
-    """The contact patch of each group of surface particles (``member_offsets`` (N+1,) CSR
-    into ``members``, tet indices): the vertices of its members' boundary triangles, and
-    their outward normal (see ``ContactPatches``). Numpy, one pass over the faces."""
-    count = len(member_offsets) - 1
-    group_of_tet = np.full(model.tet_count, -1, dtype=np.int64)
-    group_of_tet[members] = np.repeat(np.arange(count), np.diff(member_offsets))
-    face_group = group_of_tet[model.surface_face_tet]
-    on = face_group >= 0
-    faces, face_group = model.surface_faces[on].astype(np.int64), face_group[on]
-    v_count = len(model.vertices)
-    keys = np.unique((face_group[:, None] * v_count + faces).reshape(-1))
-    offsets = np.zeros(count + 1, dtype=np.int64)
-    np.cumsum(np.bincount(keys // v_count, minlength=count), out=offsets[1:])
-    corners = model.vertices[faces]
-    area_normal = 0.5 * np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    summed = np.stack([np.bincount(face_group, weights=area_normal[:, k], minlength=count) for k in range(3)], 1)
-    area = np.bincount(face_group, weights=rows.norm(area_normal), minlength=count)
-    length = rows.norm(summed)
-    flat = length >= FLAT_ENOUGH * np.maximum(area, 1e-300)
-    normals = np.where(flat[:, None], summed / np.where(flat, length, 1.0)[:, None], 0.0)
-    return ContactPatches(offsets=offsets, points=model.vertices[keys % v_count], normals=normals)
-
-
-def ray_exit_distance(vertices, faces, origin, direction, reach):
-    """Distance [m] along each ray (origin (P,3) [m], unit direction (P,3)) to the first
-    boundary face (F,3) it crosses within ``reach`` (P,) [m]; inf when none does.
-
-    ``geometry.rays.first_hits``: one kernel, each ray testing only the faces whose
-    bounding sphere comes within its reach (Moller-Trumbore). The model build's own
-    thickness rays run inside ``geometry.collision_centres``' kernel (the same triangle
-    test); this is the general query, and the tests' reference for them.
-    """
-    return first_hits(vertices, faces, origin, direction, reach)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
+from typing import ClassVar
 
 
 class OptionError(ValueError):
@@ -315,33 +316,108 @@ class FractureOptions:
 
 
 @dataclass(frozen=True, kw_only=True)
-class SimulationOptions:
-    """Time stepping and the rigid-body solver.
+class RigidBodyOptions:
+    """The rigid-body solver settings a scene's ``[simulation]`` table and the World's
+    ``DynamicsOptions`` share (each class adds its own; each field is defined and checked
+    here once). Error messages name the subclass's table (``simulation.`` / ``dynamics.``).
+
+    Attributes:
+        solver_iterations: sequential-impulse sweeps over the contacts per substep.
+        gravity: (3,) [m/s^2], world Z up.
+        max_substeps: cap on substeps per frame after the substep refinement
+            (``substep_motion_fraction``); when hit, the World's
+            ``stats.substep_limit_hits`` counts it.
+        substep_motion_fraction: a substep is shortened until no body that may touch
+            something this frame moves further than this fraction of its mean collision
+            particle radius in one substep [-]. Tunnelling is prevented by speculative
+            contacts whatever the substep; this bounds how far a contact is extrapolated.
+        single_scale: collide with every surface particle instead of the boundary layer
+            (the paper's "single-scale" column; for measurement). For the World: the
+            default of ``add_body(single_scale=None)``.
+        surface_contact: bodies added while this is on collide through their true surface:
+            the collision spheres only find the pairs of surface patches that may touch,
+            and each contact's point, normal and depth come from the patches' triangles
+            (``collision/surface.py``), so a body rests on its surface, not on its
+            spheres (docs/guide/contact.md). Off: sphere contacts (the spheres stand proud
+            of a flat or gently curved surface by up to R - sqrt(R^2 - rho^2)). Read when
+            a body is added.
+        sleep_linear_speed: a body whose every point (|v| + |w| x bounding radius) is slower
+            than this ... [m/s]
+        sleep_angular_speed: ... and that turns slower than this [rad/s] ...
+        sleep_time: ... for this long goes to sleep [s] (velocity zeroed, no integration)
+            until woken, together with the bodies it touches (when they have all been
+            slow that long).
+        rolling_resistance: lever arm of the rolling resistance, as a fraction of the
+            contact's (smaller) collision-sphere radius [-]: a contact carrying normal
+            impulse j resists the bodies' relative turning with an angular impulse of at
+            most rolling_resistance x radius x j. It stands for the flat faces a body's
+            spheres round off: without it a chip of two spheres rolls on the floor like a
+            dumbbell for seconds, and each touch wakes the pile it rolls into. A body much
+            larger than its spheres (a whole ring, rolling resistance coefficient
+            ~rolling_resistance x sphere radius / body radius) is barely slowed. 0: off.
+    """
+
+    #: The table its error messages name.
+    OWNER: ClassVar[str] = "solver"
+
+    solver_iterations: int = 10
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    max_substeps: int = 200
+    substep_motion_fraction: float = 1.0
+    single_scale: bool = False
+    surface_contact: bool = False
+    sleep_linear_speed: float = 0.01
+    sleep_angular_speed: float = 1.0
+    sleep_time: float = 0.5
+    rolling_resistance: float = 0.1
+
+    def __post_init__(self):
+        owner = self.OWNER
+        check_range(owner, "solver_iterations", self.solver_iterations, 1, 1000)
+        if isinstance(self.gravity, (str, bytes)) or not hasattr(self.gravity, "__len__") or len(self.gravity) != 3:
+            raise OptionError(f"{owner}.gravity must have 3 components, got {self.gravity!r}")
+        for g in self.gravity:
+            check_range(owner, "gravity", g, -1000.0, 1000.0)
+        check_range(owner, "max_substeps", self.max_substeps, 1, 1_000_000)
+        check_range(owner, "substep_motion_fraction", self.substep_motion_fraction, 0.0, 10.0, low_open=True)
+        check_range(owner, "sleep_linear_speed", self.sleep_linear_speed, 0.0, None)
+        check_range(owner, "sleep_angular_speed", self.sleep_angular_speed, 0.0, None)
+        check_range(owner, "sleep_time", self.sleep_time, 0.0, None)
+        check_range(owner, "rolling_resistance", self.rolling_resistance, 0.0, 10.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class FrameTiming:
+    """The output frames and the substeps of each (checked by :class:`SimulationOptions`,
+    which holds them first, so a scene's ``[simulation]`` table lists them first).
 
     Attributes:
         fps: output frames per second [1/s].
         duration: simulated time [s].
         substeps: solver substeps per frame while any body may touch something (a frame of
-            free flight takes one exact step).
-        substep_motion_fraction: more substeps are added where a body that may touch
-            something would move further than this fraction of its mean collision-particle
-            radius in one substep [-]. Tunnelling is prevented by speculative contacts
-            whatever the substep; this bounds how far a contact is extrapolated.
-        max_substeps: upper bound on substeps per frame after that refinement.
-        solver_iterations: contact impulse iterations per substep.
-        gravity: (3,) [m/s^2], world Z up.
-        single_scale: collide with every surface particle instead of the boundary layer
-            (the paper's "single-scale" column; for measurement).
-        surface_contact: contacts from the true surface (patches of surface triangles
-            under each collision sphere) instead of the spheres themselves: bodies rest
-            on their surface (docs/guide/contact.md).
-        sleep_linear_speed: a body whose every point (|v| + |w| x bounding radius) is slower
-            than this ... [m/s]
-        sleep_angular_speed: ... and that turns slower than this [rad/s] ...
-        sleep_time: ... for this long goes to sleep [s], together with the bodies it
-            touches (when they have all been slow that long).
-        rolling_resistance: lever arm of the contacts' rolling resistance as a fraction of
-            the collision-sphere radius [-] (see ``DynamicsOptions``); 0: off.
+            free flight takes one exact step); ``max_substeps`` must be at least this, and
+            at most 100,000.
+    """
+
+    fps: float = 50.0
+    duration: float = 3.0
+    substeps: int = 10
+
+    @property
+    def frame_dt(self) -> float:
+        return 1.0 / self.fps
+
+    @property
+    def frame_count(self) -> int:
+        return int(round(self.duration * self.fps))
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimulationOptions(RigidBodyOptions, FrameTiming):
+    """Time stepping and the rigid-body solver: a scene's ``[simulation]`` table
+    (:class:`FrameTiming`'s and :class:`RigidBodyOptions`' fields, then these).
+
+    Attributes:
         resimulate_fractures: fracture inside the frame: each substep's impacts are
             analysed as they happen, and a substep in which a body breaks is simulated
             again with the pieces in the body's place, so the impact that broke it meets
@@ -352,19 +428,8 @@ class SimulationOptions:
         arch: Taichi backend: cpu, cuda, vulkan, metal or gpu.
     """
 
-    fps: float = 50.0
-    duration: float = 3.0
-    substeps: int = 10
-    substep_motion_fraction: float = 1.0
-    max_substeps: int = 200
-    solver_iterations: int = 10
-    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
-    single_scale: bool = False
-    surface_contact: bool = False
-    sleep_linear_speed: float = 0.01
-    sleep_angular_speed: float = 1.0
-    sleep_time: float = 0.5
-    rolling_resistance: float = 0.1
+    OWNER: ClassVar[str] = "simulation"
+
     resimulate_fractures: bool = False
     arch: str = "cpu"
 
@@ -372,29 +437,11 @@ class SimulationOptions:
         check_range("simulation", "fps", self.fps, 1.0, 10_000.0)
         check_range("simulation", "duration", self.duration, 0.0, 3600.0, low_open=True)
         check_range("simulation", "substeps", self.substeps, 1, 10_000)
-        check_range("simulation", "substep_motion_fraction", self.substep_motion_fraction, 0.0, 10.0,
-                    low_open=True)
+        super().__post_init__()
         check_range("simulation", "max_substeps", self.max_substeps, self.substeps, 100_000)
-        check_range("simulation", "solver_iterations", self.solver_iterations, 1, 1000)
-        if isinstance(self.gravity, (str, bytes)) or not hasattr(self.gravity, "__len__") or len(self.gravity) != 3:
-            raise OptionError(f"simulation.gravity must have 3 components, got {self.gravity!r}")
-        for g in self.gravity:
-            check_range("simulation", "gravity", g, -1000.0, 1000.0)
-        check_range("simulation", "sleep_linear_speed", self.sleep_linear_speed, 0.0, None)
-        check_range("simulation", "sleep_angular_speed", self.sleep_angular_speed, 0.0, None)
-        check_range("simulation", "sleep_time", self.sleep_time, 0.0, None)
-        check_range("simulation", "rolling_resistance", self.rolling_resistance, 0.0, 10.0)
         if self.arch not in ("cpu", "cuda", "vulkan", "metal", "gpu"):
             raise OptionError(f"simulation.arch = {self.arch!r}: use cpu, cuda, vulkan, metal or gpu")
         if self.frame_count < 1:
             raise OptionError(f"simulation.duration = {self.duration!r} s at fps = {self.fps!r} is "
                               f"{self.duration * self.fps:.3g} frames, which rounds to none: make the duration at "
                               f"least one frame ({1.0 / self.fps:.3g} s)")
-
-    @property
-    def frame_dt(self) -> float:
-        return 1.0 / self.fps
-
-    @property
-    def frame_count(self) -> int:
-        return int(round(self.duration * self.fps))

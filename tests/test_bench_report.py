@@ -17,7 +17,7 @@ import pytest
 from taichi_frac.bench import grouping, report, scaling, sph, stability, tables
 from taichi_frac.bench.common import BenchContext, Progress
 from taichi_frac.options import FractureOptions, ParticleOptions
-from taichi_frac.scenes import Collider, Scene, SceneObject, SimulationSettings
+from taichi_frac.scenes import Collider, Scene, SceneObject, SimulationOptions
 from support.dynamics import fresh_world
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -29,7 +29,7 @@ def tiny_ring_scene(group_size: int = 4, breakable: bool = True) -> Scene:
                        particles=ParticleOptions(target_particles=300, boundary_group_size=group_size),
                        fracture=FractureOptions(impact_force_threshold=2000.0))
     return Scene(name="tiny_ring", objects=[ring], colliders=[Collider.ground()],
-                 simulation=SimulationSettings(fps=50, duration=0.1, substeps=10))
+                 simulation=SimulationOptions(fps=50, duration=0.1, substeps=10))
 
 
 @pytest.fixture(scope="module")

@@ -46,7 +46,7 @@ def test_moving_ring_contacts_match_brute_force_with_the_speculative_reach():
     search with the speculative reach of narrowphase._speculative, written out here: the
     gap may close by the two points' approach speed along the normal x dt, plus
     (|w_a|^2 |arm_a| + |w_b|^2 |arm_b|) / 2 dt^2 + |g| dt^2."""
-    from taichi_frac.geometry.rotation import quaternion_matrix
+    from taichi_frac.kinematics.quaternion import quaternion_matrix
 
     g = 9.81
     world = fresh_world(gravity=(0.0, 0.0, -g))
@@ -64,7 +64,7 @@ def test_moving_ring_contacts_match_brute_force_with_the_speculative_reach():
         v, w = rng.normal(0.0, 1.5, 3), rng.normal(0.0, 8.0, 3)
         b = world.add_body(model, position, q, v, w)
         x = position + ring @ quaternion_matrix(q).T
-        start, count = world._body_range[b]
+        start, count = world.slots.body_range[b]
         centres.append(x)
         radii.append(r)
         owners.append(np.full(count, b))

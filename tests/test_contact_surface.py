@@ -13,7 +13,8 @@ import pytest
 import trimesh
 
 from taichi_frac.geometry.tetra import tetrahedralize
-from taichi_frac.model import build_body_model, contact_patches
+from taichi_frac.geometry.contact_patches import contact_patches
+from taichi_frac.model import build_body_model
 from taichi_frac.bench.bodies import box_model, ring_model, single_tet_model
 from support.dynamics import fresh_world, rotation
 

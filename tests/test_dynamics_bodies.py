@@ -48,7 +48,7 @@ def body_fields(world, ids):
     for name, f in vars(world.bodies).items():
         if hasattr(f, "to_numpy") and f.shape and f.shape[0] == world.capacity.max_bodies:
             out["bodies." + name] = f.to_numpy()[ids]
-    rows = np.concatenate([np.arange(s, s + n) for s, n in (world._body_range[b] for b in ids)])
+    rows = np.concatenate([np.arange(s, s + n) for s, n in (world.slots.body_range[b] for b in ids)])
     for name in ("body", "offset", "radius", "grid_sphere", "grid_slot"):
         out["particles." + name] = getattr(world.particles, name).to_numpy()[rows]
     return out
@@ -73,7 +73,7 @@ def test_a_batch_writes_what_one_at_a_time_writes():
 
 
 def test_cluster_spheres_match_numpy_and_enclose_their_members():
-    """The cluster spheres ``_write_bodies`` computes: as many as asked (fewer only when
+    """The cluster spheres ``body_fields.write_bodies`` computes: as many as asked (fewer only when
     centres coincide), the numpy reference's to f32 rounding, and each sphere of the
     body inside one of them (to that rounding)."""
     rng = np.random.default_rng(11)
@@ -111,13 +111,13 @@ def test_a_batch_that_does_not_fit_adds_nothing():
     with pytest.raises(CapacityError, match="max_boundary_particles"):
         world.add_bodies(models + [huge], *[[p[k] for p in poses] + [np.zeros(3) if k != 1 else np.array(
             [1.0, 0, 0, 0])] for k in range(4)])
-    assert world.body_ids == [] and world._particles_in_use == 0
+    assert world.body_ids == [] and world.slots.particles_in_use == 0
     bad = [[p[k] for p in poses] for k in range(4)]
     bad[1][-1] = np.array([1.0, 0.0, 0.0])  # a 3-component orientation: refused before any slot is taken
     with pytest.raises(ValueError, match="orientation_wxyz"):
         world.add_bodies(models, *bad)
-    assert world.body_ids == [] and world._particles_in_use == 0
+    assert world.body_ids == [] and world.slots.particles_in_use == 0
     ids = world.add_bodies(models, *[[p[k] for p in poses] for k in range(4)])
     assert ids == [0, 1, 2, 3]
     starts = np.cumsum([0] + [len(m.boundary_radius) for m in models])[:-1]
-    assert [world._body_range[b][0] for b in ids] == list(starts)
+    assert [world.slots.body_range[b][0] for b in ids] == list(starts)

@@ -7,7 +7,7 @@ import pytest
 from taichi_frac.bench.fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL, corner_cracks, ring_model
 from taichi_frac.fracture.cracks import CrackPlane, analyze_impact
 from taichi_frac.fracture.fragments import make_fragments, split_body
-from taichi_frac.geometry.rotation import quaternion_matrix
+from taichi_frac.kinematics.quaternion import quaternion_matrix
 from taichi_frac.geometry.mass import tet_mass_properties
 from taichi_frac.options import FractureOptions, Material, ParticleOptions
 
@@ -126,7 +126,8 @@ def test_fragment_model_restricted_from_parent_matches_a_fresh_build(ring_split)
     grid search over the fragment's particles finds at the root's h."""
     from taichi_frac.fracture.neighbors import model_neighbor_lists, smoothing_length
     from taichi_frac.fracture.sph import neighbor_lists
-    from taichi_frac.model import build_body_model, contact_sphere_centres
+    from taichi_frac.geometry.collision_centres import contact_sphere_centres
+    from taichi_frac.model import build_body_model
 
     model, opts, _, _, frags = ring_split
     h = smoothing_length(model, opts)

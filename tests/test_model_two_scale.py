@@ -8,7 +8,8 @@ import trimesh
 
 from taichi_frac.geometry import primitives
 from taichi_frac.geometry.tetra import tetrahedralize
-from taichi_frac.model import build_body_model, ray_exit_distance
+from taichi_frac.geometry.rays import ray_exit_distance
+from taichi_frac.model import build_body_model
 
 DENSITY = 2400.0
 
@@ -211,7 +212,7 @@ def test_grouping_walk_matches_a_python_reference(ring, group_size, keep):
 
 
 def numpy_collision_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius):
-    """``model.contact_sphere_centres``' formula written in numpy, one body (the kernel's
+    """``contact_sphere_centres``' formula written in numpy, one body (the kernel's
     reference; the rays through ``ray_exit_distance``)."""
     n_groups = len(b_pos)
     group_of_tet = np.full(len(centroids), -1)
@@ -249,7 +250,8 @@ def test_collision_centres_kernel_matches_numpy(ring):
     from taichi_frac.bench.fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL
     from taichi_frac.fracture.cracks import analyze_impact
     from taichi_frac.fracture.fragments import split_body
-    from taichi_frac.model import build_fragment_models, contact_sphere_centres
+    from taichi_frac.geometry.collision_centres import contact_sphere_centres
+    from taichi_frac.model import build_fragment_models
     from taichi_frac.options import FractureOptions, Material
 
     def arguments(m):

@@ -2,7 +2,6 @@
 dataclasses, and errors that name the file, the key and the allowed range."""
 
 import dataclasses
-import math
 from pathlib import Path
 
 import numpy as np

@@ -105,7 +105,7 @@ def _fragment_pile(ctx: BenchContext, scene, count: int, seconds: float) -> dict
         if frame % 25 == 0:
             ctx.progress(f"fragment pile: frame {frame}, {1e3 * np.mean(times):.1f} ms/frame so far")
     ms = np.array(times) * 1e3
-    return dict(avg=ms.mean(), max=ms.max(), particles=sum(world._body_range[b][1] for b in bodies),
+    return dict(avg=ms.mean(), max=ms.max(), particles=sum(world.slots.body_range[b][1] for b in bodies),
                 tets=fragment.tet_count, asleep=int(world.body_state(bodies)["sleeping"].sum()),
                 depth=deepest_below_ground(world, bodies), overflows=world.stats.total_contact_overflows)
 

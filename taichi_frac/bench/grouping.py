@@ -31,7 +31,7 @@ TILT = 0.1  # rad about x: lands almost flat, on one side first
 def drop_scene(group_size: int, particles: int = 5000, seconds: float = 3.0):
     """The single-ring drop, built with the scene API."""
     from ..options import ParticleOptions
-    from ..scenes import Collider, Scene, SceneObject, SimulationSettings
+    from ..scenes import Collider, Scene, SceneObject, SimulationOptions
 
     ring = SceneObject(
         name="ring", primitive=f"torus:major=0.1,minor={MINOR_RADIUS}", material="porcelain", breakable=False,
@@ -41,7 +41,7 @@ def drop_scene(group_size: int, particles: int = 5000, seconds: float = 3.0):
     )
     return Scene(name=f"ring_drop_n{group_size}", objects=[ring],
                  colliders=[Collider.ground(0.0, friction=0.5, restitution=0.5)],
-                 simulation=SimulationSettings(fps=50, duration=seconds, substeps=10))
+                 simulation=SimulationOptions(fps=50, duration=seconds, substeps=10))
 
 
 @dataclass
@@ -58,7 +58,7 @@ class DropResult:
 
 def surface_depth(model, state) -> float:
     """[m] deepest vertex of ``model``'s surface below z = 0 at the pose in ``state`` (row 0)."""
-    from ..geometry.rotation import quaternion_matrix
+    from ..kinematics.quaternion import quaternion_matrix
 
     z = (model.vertices @ quaternion_matrix(state["orientation"][0]).T + state["position"][0])[:, 2]
     return max(0.0, -float(z.min()))

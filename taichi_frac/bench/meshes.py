@@ -132,7 +132,7 @@ def _prepare_row(name, source, target: int, out: Path):
 
 def _drop(ctx: BenchContext, name: str, path, scale: float, target: int):
     from ..options import ParticleOptions
-    from ..scenes import Collider, Scene, SceneObject, SimulationSettings
+    from ..scenes import Collider, Scene, SceneObject, SimulationOptions
     from ..simulation import Simulation
 
     fps = 50
@@ -140,7 +140,7 @@ def _drop(ctx: BenchContext, name: str, path, scale: float, target: int):
     scene = Scene(name=f"drop {name}", objects=[SceneObject(
         name="solid", mesh=str(path), scale=scale, repair=True, position=(0.0, 0.0, height),
         linear_velocity=(0.0, 0.0, -DROP_SPEED), particles=ParticleOptions(target_particles=target))],
-        colliders=[Collider(type="ground")], simulation=SimulationSettings(fps=fps, duration=1.0))
+        colliders=[Collider(type="ground")], simulation=SimulationOptions(fps=fps, duration=1.0))
     sim = Simulation(scene, output=False, world=ctx.world(), arch=ctx.arch)
     summary = sim.run()
     lost = abs(summary.mass_final + summary.mass_dropped - summary.mass_initial) / summary.mass_initial

@@ -46,6 +46,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from ..kinematics.quaternion import quaternion_matrix
+
 #: pybullet's default time step [s]; a frame is split into steps no longer than this.
 PYBULLET_DEFAULT_TIME_STEP = 1.0 / 240.0
 
@@ -460,13 +462,8 @@ def simulate(bodies: list[RigidBodySpec], statics: list[StaticSpec], *, label: s
 
 
 def _rotation(q_xyzw) -> np.ndarray:
-    """(3,3) rotation matrix of a unit quaternion (x, y, z, w)."""
-    x, y, z, w = (float(v) for v in q_xyzw)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    """(3,3) rotation matrix of a unit quaternion in pybullet's order (x, y, z, w)."""
+    return quaternion_matrix(np.roll(np.asarray(q_xyzw, dtype=np.float64), 1))
 
 
 def run_rings(scene, collision: str = "vhacd", spheres=None, *, seconds: float | None = None,

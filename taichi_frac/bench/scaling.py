@@ -40,7 +40,7 @@ def ring_layout_scene(rings: int, ring_particles: int = RING_PARTICLES, frames: 
                       seed: int = 0):
     """``rings`` porcelain rings on a square grid, tilted at random, falling onto the ground."""
     from ..options import FractureOptions, Material, ParticleOptions
-    from ..scenes import Collider, Scene, SceneObject, SimulationSettings
+    from ..scenes import Collider, Scene, SceneObject, SimulationOptions
 
     rng = np.random.default_rng(seed)
     side = math.ceil(math.sqrt(rings))
@@ -58,7 +58,7 @@ def ring_layout_scene(rings: int, ring_particles: int = RING_PARTICLES, frames: 
         ))
     return Scene(name=f"rings_{rings}x{ring_particles}", objects=objects,
                  colliders=[Collider.ground(0.0, friction=0.6, restitution=0.1)],
-                 simulation=SimulationSettings(fps=50, duration=frames / 50, substeps=10))
+                 simulation=SimulationOptions(fps=50, duration=frames / 50, substeps=10))
 
 
 def _reset_peak_rss() -> bool:
@@ -89,7 +89,7 @@ def measure_scene(scene, world, frames: int, fracture: bool) -> dict:
 
     sim = Simulation(scene, output=False, world=world, frames=frames, fracture=fracture)
     models = [r.model for r in sim.records.values()]
-    collision = sum(count for _, count in world._body_range.values())
+    collision = sum(count for _, count in world.slots.body_range.values())
     substeps0 = world.stats.total_substeps
     summary = sim.run()
     return dict(

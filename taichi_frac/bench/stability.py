@@ -23,23 +23,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..geometry.rotation import quaternion_matrix
+from ..kinematics.quaternion import quaternion_matrix
 from . import fracture_ring as ring
 from .bodies import box_model, single_tet_model, sphere_model
 from .common import BenchContext, Section, md_table
 
 G = 9.81
-
-
-def _rotations(q: np.ndarray) -> np.ndarray:
-    """(K,4) wxyz -> (K,3,3), body -> world."""
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    w, x, y, z = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], 1)
 
 
 class Tracker:
@@ -50,7 +39,7 @@ class Tracker:
     def __init__(self, world, grounds=(0.0,), boxes=()):
         self.world = world
         self.grounds = list(grounds)
-        self.boxes = [(np.asarray(c, float), np.asarray(h, float), _rotations(np.asarray([q], float))[0])
+        self.boxes = [(np.asarray(c, float), np.asarray(h, float), quaternion_matrix(np.asarray([q], float))[0])
                       for c, h, q in boxes]
         self.max_speed = 0.0
         self.max_penetration = 0.0
@@ -66,7 +55,7 @@ class Tracker:
         self.ids = np.array(self.world.body_ids)
         index, self.owner = [], []
         for k, b in enumerate(self.ids):
-            start, count = self.world._body_range[int(b)]
+            start, count = self.world.slots.body_range[int(b)]
             index.append(np.arange(start, start + count))
             self.owner.append(np.full(count, k))
         index = np.concatenate(index)
@@ -81,7 +70,7 @@ class Tracker:
             self.nan = True
             return state
         self.max_speed = max(self.max_speed, float(np.linalg.norm(state["linear_velocity"], axis=1).max()))
-        rot = _rotations(state["orientation"])[self.owner]
+        rot = quaternion_matrix(state["orientation"])[self.owner]
         p = state["position"][self.owner] + np.einsum("kij,kj->ki", rot, self.offsets)
         depth = np.zeros(len(p))
         for h in self.grounds:

@@ -53,9 +53,12 @@ def cube_rows(side, target, models=MODELS, repeat=2):
     down = np.array([0.0, 0.0, -1.0])
     rows = []
     exact = None
+    result = None
     for model in models:
         if model == "fem":
             t_factor, body = best_time(lambda: elastic_body(vertices, mesh.tets, 2500.0, E, NU), 1)
+            if result is None:  # fem first: the contact radius the other models use
+                result = body_stress(vertices, mesh.tets, 2500.0, top, down, FORCE, E, NU, method="halfspace")
             radius = result.contact_radius
             t, (_, stress) = best_time(lambda: fem_response(body, top, down, FORCE, radius), repeat)
         else:
@@ -80,7 +83,7 @@ def cube_rows(side, target, models=MODELS, repeat=2):
 
 def ring_model(target):
     """The single ring's BodyModel at about ``target`` tets, and its world orientation (3,3)."""
-    from ..geometry.rotation import quaternion_matrix
+    from ..kinematics.quaternion import quaternion_matrix
     from ..scenes import load_scene
     from .common import SCENES
 

@@ -117,7 +117,7 @@ def run_scene(ctx: BenchContext, scene, label: str, *, fracture: bool = True, si
         physics=sum(m.tet_count for m in breakable), surface=sum(m.surface_particle_count for m in breakable),
         boundary=sum(m.boundary_particle_count for m in breakable),
         all_physics=sum(r.model.tet_count for r in sim.records.values()),
-        collision=sum(count for _, count in sim.world._body_range.values()),
+        collision=sum(count for _, count in sim.world.slots.body_range.values()),
     )
     substeps_before = sim.world.stats.total_substeps
     summary = sim.run()

@@ -21,8 +21,8 @@ order, as testing every pair gives (tested), and the run is the same.
 import taichi as ti
 
 from .. import runtime
-from ..dynamics.bounds import is_idle, motion_speed, near_static, pair_motion
-from ..dynamics.quaternion import quat_to_matrix
+from ..kinematics.bounds import is_idle, motion_speed, near_static, pair_motion
+from ..kinematics.quaternion import quat_to_matrix
 
 
 #: A body whose grown box covers more cells than this is tested against every body

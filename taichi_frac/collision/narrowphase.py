@@ -18,7 +18,7 @@ never carry an impulse.
 
 import taichi as ti
 
-from ..dynamics.bounds import is_idle, pair_motion
+from ..kinematics.bounds import is_idle, pair_motion
 from . import surface
 from .grid import CELLS_PER_SPHERE
 

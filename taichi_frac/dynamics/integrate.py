@@ -15,8 +15,8 @@ import taichi as ti
 
 from .. import runtime
 from ..collision import surface
-from .bounds import is_idle, motion_speed, near_statics
-from .quaternion import quat_integrate, quat_to_matrix
+from ..kinematics.bounds import is_idle, motion_speed, near_statics
+from ..kinematics.quaternion import quat_integrate, quat_to_matrix
 
 vec3 = ti.math.vec3
 mat3 = ti.math.mat3

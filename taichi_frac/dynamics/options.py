@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from typing import ClassVar
 
-from ..options import OptionError, SimulationOptions, check_range
+from ..options import RigidBodyOptions, check_range
 
 
 class CapacityError(RuntimeError):
@@ -52,23 +53,17 @@ class WorldCapacity:
 
 
 @dataclass(frozen=True, kw_only=True)
-class DynamicsOptions:
-    """The rigid-body solver's settings.
+class DynamicsOptions(RigidBodyOptions):
+    """The rigid-body solver's settings: those a scene's ``[simulation]`` table also holds
+    (:class:`~taichi_frac.options.RigidBodyOptions`: iterations, gravity, substep
+    refinement, contact mode, sleeping, rolling resistance) and the solver's own.
 
     Attributes:
-        solver_iterations: sequential-impulse sweeps over the contacts per substep.
         restitution_iterations: extra sweeps that only apply restitution (after the main
             sweeps, Box2D v3 style), so a bounce is the asked fraction of the approach.
-        gravity: (3,) [m/s^2].
-        max_substeps: cap on substeps per frame after the anti-tunnelling refinement; when
-            hit, ``stats.substep_limit_hits`` counts it.
         max_rotation_per_substep: a body's rotation over a substep is integrated in pieces
             of at most this angle [rad] (a fast-spinning body turns accurately without
             shortening the substep of every body).
-        substep_motion_fraction: a substep is shortened until no body that may touch
-            something this frame moves further than this fraction of its mean collision
-            particle radius in one substep [-] (accuracy of contacts; tunnelling is
-            prevented by speculative contacts whatever the substep).
         contact_margin: contact distance as a fraction of the mean radius of the two spheres
             [-], on top of the speculative distance (how far the two bodies can move in the
             substep); contacts are made this far before touching.
@@ -83,27 +78,6 @@ class DynamicsOptions:
             and at every point of a body (deeply overlapped bodies separate gently instead
             of exploding; a piece overlapped from all sides is not pumped faster).
         restitution_threshold: approach speeds below this do not bounce [m/s].
-        rolling_resistance: lever arm of the rolling resistance, as a fraction of the
-            contact's (smaller) collision-sphere radius [-]: a contact carrying normal
-            impulse j resists the bodies' relative turning with an angular impulse of at
-            most rolling_resistance x radius x j. It stands for the flat faces a body's
-            spheres round off: without it a chip of two spheres rolls on the floor like a
-            dumbbell for seconds, and each touch wakes the pile it rolls into. A body much
-            larger than its spheres (a whole ring, rolling resistance coefficient
-            ~rolling_resistance x sphere radius / body radius) is barely slowed. 0: off.
-        surface_contact: bodies added while this is on collide through their true surface:
-            the collision spheres only find the pairs of surface patches that may touch,
-            and each contact's point, normal and depth come from the patches' triangles
-            (``collision/surface.py``), so a body rests on its surface, not on its
-            spheres. Off: sphere contacts (the spheres stand proud of a flat or gently
-            curved surface by up to R - sqrt(R^2 - rho^2)). Read when a body is added.
-        single_scale: default of ``add_body(single_scale=None)``: collide with the physics
-            surface particles instead of the boundary layer.
-        sleep_linear_speed, sleep_angular_speed, sleep_time: a body whose every point is
-            slower than sleep_linear_speed [m/s] (|v| + |w| x bounding radius) and that turns
-            slower than sleep_angular_speed [rad/s], for sleep_time [s], sleeps (velocity
-            zeroed, no integration) until woken; bodies touching each other sleep
-            together, when every one of them has been slow that long.
         record_force_threshold: impact rows are kept when their force exceeds this [N].
         impact_speed: contacts approaching faster than this [m/s] are impacts, whose force
             is the Hertz peak of their impulse (see dynamics/impacts.py); slower ones are
@@ -113,63 +87,38 @@ class DynamicsOptions:
         stage_timing: synchronise the device after each stage so ``stats.seconds`` is exact.
     """
 
-    solver_iterations: int = 10
+    OWNER: ClassVar[str] = "dynamics"
+
     restitution_iterations: int = 4
-    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
-    max_substeps: int = 200
-    substep_motion_fraction: float = 1.0
     max_rotation_per_substep: float = 0.1
     contact_margin: float = 0.25
     position_correction_rate: float = 110.0
     allowed_penetration: float = 0.005
     max_correction_speed: float = 1.0
     restitution_threshold: float = 0.2
-    rolling_resistance: float = 0.1
-    surface_contact: bool = False
-    single_scale: bool = False
-    sleep_linear_speed: float = 0.01
-    sleep_angular_speed: float = 1.0
-    sleep_time: float = 0.5
     record_force_threshold: float = 0.0
     impact_speed: float = 0.05
     warm_start: float = 1.0
     stage_timing: bool = True
 
     def __post_init__(self):
-        check_range("dynamics", "solver_iterations", self.solver_iterations, 1, 1000)
+        super().__post_init__()
         check_range("dynamics", "restitution_iterations", self.restitution_iterations, 0, 1000)
-        if len(self.gravity) != 3:
-            raise OptionError(f"dynamics.gravity must have 3 components, got {self.gravity!r}")
-        check_range("dynamics", "max_substeps", self.max_substeps, 1, 1_000_000)
-        check_range("dynamics", "substep_motion_fraction", self.substep_motion_fraction, 0.0, 10.0, low_open=True)
         check_range("dynamics", "max_rotation_per_substep", self.max_rotation_per_substep, 0.0, 10.0, low_open=True)
         check_range("dynamics", "contact_margin", self.contact_margin, 0.0, 4.0)
         check_range("dynamics", "position_correction_rate", self.position_correction_rate, 0.0, 1e6)
         check_range("dynamics", "allowed_penetration", self.allowed_penetration, 0.0, 1.0)
         check_range("dynamics", "max_correction_speed", self.max_correction_speed, 0.0, None, low_open=True)
         check_range("dynamics", "restitution_threshold", self.restitution_threshold, 0.0, None)
-        check_range("dynamics", "rolling_resistance", self.rolling_resistance, 0.0, 10.0)
-        check_range("dynamics", "sleep_linear_speed", self.sleep_linear_speed, 0.0, None)
-        check_range("dynamics", "sleep_angular_speed", self.sleep_angular_speed, 0.0, None)
-        check_range("dynamics", "sleep_time", self.sleep_time, 0.0, None)
         check_range("dynamics", "record_force_threshold", self.record_force_threshold, 0.0, None)
         check_range("dynamics", "impact_speed", self.impact_speed, 0.0, None)
         check_range("dynamics", "warm_start", self.warm_start, 0.0, 1.0)
 
     @classmethod
-    def from_simulation(cls, sim: SimulationOptions, **overrides) -> "DynamicsOptions":
-        """The solver settings a scene's ``SimulationOptions`` implies (plus overrides)."""
-        values = dict(
-            solver_iterations=sim.solver_iterations,
-            gravity=tuple(sim.gravity),
-            max_substeps=sim.max_substeps,
-            substep_motion_fraction=sim.substep_motion_fraction,
-            single_scale=sim.single_scale,
-            surface_contact=sim.surface_contact,
-            sleep_linear_speed=sim.sleep_linear_speed,
-            sleep_angular_speed=sim.sleep_angular_speed,
-            sleep_time=sim.sleep_time,
-            rolling_resistance=sim.rolling_resistance,
-        )
+    def from_simulation(cls, sim: RigidBodyOptions, **overrides) -> "DynamicsOptions":
+        """The solver settings a scene's ``SimulationOptions`` implies (its
+        ``RigidBodyOptions`` fields), plus ``overrides``."""
+        values = {f.name: getattr(sim, f.name) for f in fields(RigidBodyOptions)}
+        values["gravity"] = tuple(sim.gravity)
         values.update(overrides)
         return cls(**values)

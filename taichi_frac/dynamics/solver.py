@@ -20,7 +20,6 @@ these sweeps include every other contact with its non-penetration target.
 
 import taichi as ti
 
-from .. import runtime
 from ..collision.narrowphase import GROUND
 
 vec3 = ti.math.vec3

@@ -23,45 +23,68 @@ MAX_CLUSTERS = 16
 
 
 @ti.data_oriented
-class Bodies:
-    """Per-body state, shape (max_bodies,). A slot with ``active == 0`` is free.
+class BodyMotion:
+    """The bodies' motion state, shape (capacity,): everything a step changes that a later
+    step reads, so a copy of it (``checkpoints.py``) is a checkpoint.
 
     Fields:
         position: vec3 [m] world position of the centre of mass. Writer: add_body, integrate.
         orientation: vec4 (w, x, y, z) unit, body -> world. Writer: add_body, integrate.
         linear_velocity: vec3 [m/s]. Writer: add_body, integrate_velocities, solver.
         angular_velocity: vec3 [rad/s], world frame. Writer: same.
-        pseudo_linear_velocity, pseudo_angular_velocity: vec3 split-impulse velocities
-            (penetration push-out, never kinetic energy). Writer: solver; cleared by integrate.
-        inverse_mass: [1/kg], 0 for fixed bodies. Writer: add_body.
-        inertia_body: mat3 [kg m^2] about the COM, body axes. Writer: add_body.
-        inverse_inertia_body: mat3 [1/(kg m^2)], body axes, 0 for fixed bodies. Writer: add_body.
-        solver_inverse_mass: [1/kg], this substep (0 when sleeping or fixed).
-            Writer: integrate_velocities.
-        solver_inverse_inertia: mat3 world-frame inverse inertia this substep (0 when
-            sleeping or fixed). Writer: integrate_velocities.
-        friction: Coulomb coefficient [-]. restitution: [-]. Writer: add_body.
-        contact_compliance: (1 - nu^2) / E [1/Pa], 0 for a rigid body; contact_radius [m],
-            the radius of the sphere it impacts like (Hertz peak force of impact rows, see
-            impacts.py). Writer: add_body.
-        active: i32 1 = slot in use. fixed: i32 1 = never moves. Writer: add_body/remove_body.
         sleeping: i32 1 = asleep. sleep_timer: [s] time spent slow. Writer: integrate, wake.
-        sleep_blocked: i32 1 = an awake body it touches has not been slow for sleep_time
-            (so it may not sleep this substep). Writer: integrate.sleep_together.
         wake_request: i32 set by the narrowphase when an awake moving body touches a
             sleeping one; applied at the start of the next substep's broadphase (body_cull).
-        touched: i32 1 = the body has a contact this substep (free-flying bodies are moved
-            by the exact ballistic step). Writer: prepare_contacts.
+    """
+
+    def __init__(self, capacity: int):
+        self.position = vec3.field(shape=capacity)
+        self.orientation = vec4.field(shape=capacity)
+        self.linear_velocity = vec3.field(shape=capacity)
+        self.angular_velocity = vec3.field(shape=capacity)
+        self.sleeping = ti.field(ti.i32, shape=capacity)
+        self.sleep_timer = ti.field(ti.f32, shape=capacity)
+        self.wake_request = ti.field(ti.i32, shape=capacity)
+
+
+@ti.data_oriented
+class Bodies:
+    """Per-body fields, shape (max_bodies,). A slot with ``active == 0`` is free. Three
+    kinds: the motion state (``motion_state``, a :class:`BodyMotion`, whose fields are also
+    attributes here so kernels read ``bodies.position``), the static data written once
+    when a body is added, and per-substep scratch.
+
+    Static fields (Writer: add_body, unless named):
+        inverse_mass: [1/kg], 0 for fixed bodies.
+        inertia_body: mat3 [kg m^2] about the COM, body axes.
+        inverse_inertia_body: mat3 [1/(kg m^2)], body axes, 0 for fixed bodies.
+        friction: Coulomb coefficient [-]. restitution: [-].
+        contact_compliance: (1 - nu^2) / E [1/Pa], 0 for a rigid body; contact_radius [m],
+            the radius of the sphere it impacts like (Hertz peak force of impact rows, see
+            impacts.py).
+        active: i32 1 = slot in use. fixed: i32 1 = never moves. Writer: add_body/remove_body.
         bounding_radius: [m] max |offset| + radius over the body's particles.
         mean_particle_radius, max_particle_radius: [m] of its collision particles
             (substep refinement, contact reach).
         local_lower, local_upper: vec3 [m] body-frame box holding every collision sphere.
         cluster (capacity, MAX_CLUSTERS) vec4: body-frame spheres (centre [m], radius [m])
             that each enclose a group of its collision spheres; cluster_count: how many.
+            (``clusters.py``)
         particle_start, particle_count: i32 its contiguous range of particle slots.
         grid_origin: vec3 [m] body-frame corner of its sphere grid (``collision/grid.py``),
             grid_edge: [m] cell edge, grid_dims: ivec3 cells per axis.
-        Writer of all the above: add_body.
+
+    Scratch fields (rewritten every substep before they are read):
+        pseudo_linear_velocity, pseudo_angular_velocity: vec3 split-impulse velocities
+            (penetration push-out, never kinetic energy). Writer: solver; cleared by integrate.
+        solver_inverse_mass: [1/kg], this substep (0 when sleeping or fixed).
+            Writer: integrate_velocities.
+        solver_inverse_inertia: mat3 world-frame inverse inertia this substep (0 when
+            sleeping or fixed). Writer: integrate_velocities.
+        sleep_blocked: i32 1 = an awake body it touches has not been slow for sleep_time
+            (so it may not sleep this substep). Writer: integrate.sleep_together.
+        touched: i32 1 = the body has a contact this substep (free-flying bodies are moved
+            by the exact ballistic step). Writer: prepare_contacts.
         rotation: mat3 body -> world this substep. motion: [m] bound on how far any of its
             points moves in this substep ((|v| + |w| bounding_radius) dt; 0 when idle).
         near_body, near_static: i32 culling flags (its motion-grown bounding sphere reaches
@@ -70,35 +93,32 @@ class Bodies:
             spheres overlap its own (one of the two awake); more than max_neighbors sets
             neighbor_count = -1 (then every particle of the body is tested).
         neighbor_motion (capacity, max_neighbors): [m] how far the gap to each neighbour
-            may close this substep (``bounds.pair_motion``).
+            may close this substep (``kinematics.bounds.pair_motion``).
             Writer of rotation ... neighbor_motion: body_cull (broadphase).
     """
 
     def __init__(self, capacity: int, max_neighbors: int = 128):
         self.capacity = capacity
         self.max_neighbors = max_neighbors
-        self.position = vec3.field(shape=capacity)
-        self.orientation = vec4.field(shape=capacity)
-        self.linear_velocity = vec3.field(shape=capacity)
-        self.angular_velocity = vec3.field(shape=capacity)
-        self.pseudo_linear_velocity = vec3.field(shape=capacity)
-        self.pseudo_angular_velocity = vec3.field(shape=capacity)
+        # Motion state.
+        self.motion_state = BodyMotion(capacity)
+        self.position = self.motion_state.position
+        self.orientation = self.motion_state.orientation
+        self.linear_velocity = self.motion_state.linear_velocity
+        self.angular_velocity = self.motion_state.angular_velocity
+        self.sleeping = self.motion_state.sleeping
+        self.sleep_timer = self.motion_state.sleep_timer
+        self.wake_request = self.motion_state.wake_request
+        # Static.
         self.inverse_mass = ti.field(ti.f32, shape=capacity)
         self.inertia_body = mat3.field(shape=capacity)
         self.inverse_inertia_body = mat3.field(shape=capacity)
-        self.solver_inverse_mass = ti.field(ti.f32, shape=capacity)
-        self.solver_inverse_inertia = mat3.field(shape=capacity)
         self.friction = ti.field(ti.f32, shape=capacity)
         self.contact_compliance = ti.field(ti.f32, shape=capacity)
         self.contact_radius = ti.field(ti.f32, shape=capacity)
         self.restitution = ti.field(ti.f32, shape=capacity)
         self.active = ti.field(ti.i32, shape=capacity)
         self.fixed = ti.field(ti.i32, shape=capacity)
-        self.sleeping = ti.field(ti.i32, shape=capacity)
-        self.sleep_timer = ti.field(ti.f32, shape=capacity)
-        self.sleep_blocked = ti.field(ti.i32, shape=capacity)
-        self.wake_request = ti.field(ti.i32, shape=capacity)
-        self.touched = ti.field(ti.i32, shape=capacity)
         self.bounding_radius = ti.field(ti.f32, shape=capacity)
         self.mean_particle_radius = ti.field(ti.f32, shape=capacity)
         self.max_particle_radius = ti.field(ti.f32, shape=capacity)
@@ -106,16 +126,23 @@ class Bodies:
         self.local_upper = vec3.field(shape=capacity)
         self.cluster = vec4.field(shape=(capacity, MAX_CLUSTERS))
         self.cluster_count = ti.field(ti.i32, shape=capacity)
-        self.rotation = mat3.field(shape=capacity)
-        self.motion = ti.field(ti.f32, shape=capacity)
-        self.neighbor_count = ti.field(ti.i32, shape=capacity)
-        self.neighbors = ti.field(ti.i32, shape=(capacity, max_neighbors))
-        self.neighbor_motion = ti.field(ti.f32, shape=(capacity, max_neighbors))
         self.particle_start = ti.field(ti.i32, shape=capacity)
         self.particle_count = ti.field(ti.i32, shape=capacity)
         self.grid_origin = vec3.field(shape=capacity)
         self.grid_edge = ti.field(ti.f32, shape=capacity)
         self.grid_dims = ti.math.ivec3.field(shape=capacity)
+        # Scratch.
+        self.pseudo_linear_velocity = vec3.field(shape=capacity)
+        self.pseudo_angular_velocity = vec3.field(shape=capacity)
+        self.solver_inverse_mass = ti.field(ti.f32, shape=capacity)
+        self.solver_inverse_inertia = mat3.field(shape=capacity)
+        self.sleep_blocked = ti.field(ti.i32, shape=capacity)
+        self.touched = ti.field(ti.i32, shape=capacity)
+        self.rotation = mat3.field(shape=capacity)
+        self.motion = ti.field(ti.f32, shape=capacity)
+        self.neighbor_count = ti.field(ti.i32, shape=capacity)
+        self.neighbors = ti.field(ti.i32, shape=(capacity, max_neighbors))
+        self.neighbor_motion = ti.field(ti.f32, shape=(capacity, max_neighbors))
         self.near_body = ti.field(ti.i32, shape=capacity)
         self.near_static = ti.field(ti.i32, shape=capacity)
         # Scalar: one past the highest slot in use (loops run to it).
@@ -146,7 +173,7 @@ class Particles:
         particle's entries (only the last store, ``cache_epoch``, is valid; add_body sets
         -1 on a reused slot). Writer: solver.store_impulses; read by the narrowphase when
         the same pair is made again.
-        Contact patches (``model.ContactPatches``): point_start, point_count (i32) the rows
+        Contact patches (``geometry.contact_patches.ContactPatches``): point_start, point_count (i32) the rows
             of ``surface_point`` holding sphere P's patch (count 0: the sphere is its own
             surface, the contacts are sphere contacts); patch_normal (vec3 body frame,
             unit outward, or zero where the patch faces every way). surface_point, shape
@@ -200,23 +227,6 @@ class StepParams:
         self.sleep_time = ti.field(ti.f32, shape=())
         self.warm_start = ti.field(ti.f32, shape=())
         self.rolling_resistance = ti.field(ti.f32, shape=())
-
-
-@ti.data_oriented
-class KeptMotion:
-    """The bodies' motion state at one moment, kept on the device (``World.checkpoint``).
-
-    Fields:
-        rows: (max_bodies, 17) f32, slot b in ``_pack_body``'s layout (position [m],
-            orientation wxyz, linear [m/s] and angular [rad/s] velocity, active, sleeping,
-            sleep timer [s], wake request); exact copies of the f32 state.
-        cache: (2,) i32 the contact cache's parity and epoch.
-    Writer: World.checkpoint; read by World.restore and World.checkpoint_state.
-    """
-
-    def __init__(self, capacity: int):
-        self.rows = ti.field(ti.f32, shape=(capacity, 17))
-        self.cache = ti.field(ti.i32, shape=2)
 
 
 @ti.data_oriented

@@ -1,8 +1,11 @@
-"""The rigid-body world: fixed-capacity Taichi fields, bodies added and removed at run time
-(fragments) by writing into them, and the substep loop that sequences the kernels.
+"""The rigid-body world's façade: fixed-capacity Taichi fields, bodies added and removed at
+run time (fragments) by writing into them, and the substep loop that sequences the kernels.
 
 The host only loops over substeps and stages; every pass over particles, contacts or
-bodies is a kernel (``collision/``, ``integrate.py``, ``solver.py``, ``impacts.py``).
+bodies is a kernel (``collision/``, ``integrate.py``, ``solver.py``, ``impacts.py``). Where
+a body's slots are (``slots.py``), the row layouts that carry bodies and impacts to and
+from the kernels (``layouts.py``, ``body_fields.py``), cluster spheres (``clusters.py``)
+and checkpoints (``checkpoints.py``) each have their own module.
 """
 
 
@@ -14,25 +17,19 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
-from ..collision.grid import CELLS_PER_SPHERE, body_grid
 from ..collision import broadphase, narrowphase
-from ..geometry.rotation import quaternion_matrix
+from ..collision.grid import body_grid
+from ..kinematics.quaternion import quaternion_matrix
 from ..model import BodyModel
+from . import body_fields, checkpoints, integrate, stages
 from . import impacts as impact_kernels
-from . import integrate, stages
+from .checkpoints import Checkpoint
+from .layouts import BODY_STATE, BODY_WRITE, BODY_WRITE_INTS, IMPACT, IMPACT_INTEGERS
 from .options import CapacityError, DynamicsOptions, WorldCapacity
-from .state import MAX_CLUSTERS, Bodies, KeptMotion, Particles, Statics, StepParams
+from .slots import SlotAllocator
+from .state import MAX_CLUSTERS, Bodies, Particles, Statics, StepParams
 
 STAGES = ("collision", "response")
-
-
-@dataclass(frozen=True)
-class Checkpoint:
-    """The motion state of the bodies ``ids`` (K,) at one moment, kept on the device
-    (``World.checkpoint``): valid until the World's next checkpoint. ``token`` names it."""
-
-    ids: np.ndarray
-    token: int
 
 
 @dataclass
@@ -66,323 +63,6 @@ class WorldStats:
     last_frame_seconds: float = 0.0
 
 
-#: Layout of a ``_write_bodies`` row (f32, 43): pose (13: position, orientation wxyz,
-#: linear and angular velocity), inertia and inverse inertia (row-major 3x3), the scalars
-#: (inverse mass, friction, restitution, compliance, contact radius), the sphere grid's
-#: origin, edge and dims (``grid.body_grid``).
-_ROW_INERTIA, _ROW_INVERSE_INERTIA, _ROW_SCALARS, _ROW_GRID = 13, 22, 31, 36  # (the pose at 0)
-#: Columns of a ``_write_bodies`` ints row (i32): body slot, first particle slot, fixed,
-#: its spheres' first and last + 1 row, its grid entries' first and last + 1 row, cluster
-#: spheres asked.
-_INT_SLOT, _INT_START, _INT_FIXED, _INT_SPHERES, _INT_SPHERES_END, _INT_GRID, _INT_GRID_END, _INT_CLUSTERS = range(8)
-
-
-@ti.func
-def _sphere_f32(spheres: ti.template(), k):
-    """Row k of ``spheres`` (N,4) f64 as the f32 the fields hold (round to nearest, as
-    numpy's astype)."""
-    return ti.Vector([ti.cast(spheres[k, c], ti.f32) for c in ti.static(range(4))], dt=ti.f32)
-
-
-_vec3d = ti.types.vector(3, ti.f64)
-
-
-@ti.func
-def _centre(spheres: ti.template(), k):
-    return _vec3d(spheres[k, 0], spheres[k, 1], spheres[k, 2])
-
-
-@ti.func
-def _cluster_spheres(bodies: ti.template(), slot, spheres: ti.template(), begin, end, wanted,
-                     nearest: ti.template()):
-    """Body ``slot``'s cluster spheres (``Bodies.cluster``) over its collision spheres (rows
-    ``begin`` to ``end`` of ``spheres`` (N,4) f64: body-frame centre [m], radius [m]), in
-    f64: at most ``wanted`` seeds by farthest-point sampling (the first the sphere
-    farthest from their mean), each cluster sphere at the mean of the spheres nearest its
-    seed, its radius reaching the far side of every member (|offset - centre| + radius).
-    ``nearest`` (N,) f64 is scratch (each sphere's squared distance to the nearest seed,
-    then its cluster). Ties go to the lower index, as numpy's argmax/argmin."""
-    mean = _vec3d(0.0)
-    for k in range(begin, end):
-        mean += _centre(spheres, k)
-    mean /= ti.cast(end - begin, ti.f64)
-    first = begin
-    far = ti.cast(-1.0, ti.f64)
-    for k in range(begin, end):
-        d = _centre(spheres, k) - mean
-        if d.dot(d) > far:
-            far = d.dot(d)
-            first = k
-    seed_index = ti.Vector([0] * MAX_CLUSTERS, dt=ti.i32)
-    seed_index[0] = first
-    for k in range(begin, end):
-        d = _centre(spheres, k) - _centre(spheres, first)
-        nearest[k] = d.dot(d)
-    seeds = 1
-    while seeds < wanted:
-        pick = begin
-        for k in range(begin, end):
-            if nearest[k] > nearest[pick]:
-                pick = k
-        if nearest[pick] <= 0.0:  # (coincident centres: fewer seeds)
-            break
-        seed_index[seeds] = pick
-        seeds += 1
-        for k in range(begin, end):
-            d = _centre(spheres, k) - _centre(spheres, pick)
-            nearest[k] = ti.min(nearest[k], d.dot(d))
-    # Each sphere's cluster (its nearest seed), then each cluster's mean, then its reach.
-    for k in range(begin, end):
-        label = 0
-        best = ti.cast(1e300, ti.f64)
-        for m in range(seeds):
-            d = _centre(spheres, k) - _centre(spheres, seed_index[m])
-            if d.dot(d) < best:
-                best = d.dot(d)
-                label = m
-        nearest[k] = label
-    sums = ti.Matrix([[0.0] * 4 for _ in range(MAX_CLUSTERS)], ti.f64)  # centre sum, count; then centre, reach
-    for k in range(begin, end):
-        m = ti.cast(nearest[k], ti.i32)
-        for x in ti.static(range(3)):
-            sums[m, x] += spheres[k, x]
-        sums[m, 3] += 1.0
-    for m in range(seeds):
-        for x in ti.static(range(3)):
-            sums[m, x] /= sums[m, 3]
-        sums[m, 3] = 0.0
-    for k in range(begin, end):
-        m = ti.cast(nearest[k], ti.i32)
-        centre = _vec3d(sums[m, 0], sums[m, 1], sums[m, 2])
-        sums[m, 3] = ti.max(sums[m, 3], (_centre(spheres, k) - centre).norm() + spheres[k, 3])
-    for m in range(seeds):
-        bodies.cluster[slot, m] = ti.Vector([ti.cast(sums[m, c], ti.f32) for c in ti.static(range(4))], dt=ti.f32)
-    bodies.cluster_count[slot] = seeds
-
-
-@ti.kernel
-def _write_bodies(bodies: ti.template(), particles: ti.template(),
-                  ints: ti.types.ndarray(dtype=ti.i32, ndim=2),
-                  row: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                  spheres: ti.types.ndarray(dtype=ti.f64, ndim=2),
-                  grid_ints: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                  nearest: ti.types.ndarray(dtype=ti.f64, ndim=1)):
-    """Fill K body slots and their particle ranges in one launch: ``ints`` (K,8) (see
-    ``_INT_*``), ``row`` (K,43) (see ``_ROW_*``), ``spheres`` (N,4) every body's collision
-    spheres, body after body (body-frame centre [m], radius [m]), ``grid_ints`` each
-    body's sphere-grid order (its spheres' count) then cell starts (cells + 1),
-    body-relative, body after body; ``nearest`` (N,) scratch. Few array arguments: each
-    costs ~11 us of Python a launch, and one launch serves all the pieces of a split."""
-    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for b in range(ints.shape[0]):
-        slot = ints[b, _INT_SLOT]
-        start = ints[b, _INT_START]
-        begin = ints[b, _INT_SPHERES]
-        end = ints[b, _INT_SPHERES_END]
-        bodies.position[slot] = ti.math.vec3(row[b, 0], row[b, 1], row[b, 2])
-        bodies.orientation[slot] = ti.math.vec4(row[b, 3], row[b, 4], row[b, 5], row[b, 6]).normalized()
-        bodies.linear_velocity[slot] = ti.math.vec3(row[b, 7], row[b, 8], row[b, 9])
-        bodies.angular_velocity[slot] = ti.math.vec3(row[b, 10], row[b, 11], row[b, 12])
-        bodies.pseudo_linear_velocity[slot] = ti.math.vec3(0.0)
-        bodies.pseudo_angular_velocity[slot] = ti.math.vec3(0.0)
-        for r, c in ti.static(ti.ndrange(3, 3)):
-            bodies.inertia_body[slot][r, c] = row[b, _ROW_INERTIA + 3 * r + c]
-            bodies.inverse_inertia_body[slot][r, c] = row[b, _ROW_INVERSE_INERTIA + 3 * r + c]
-        bodies.inverse_mass[slot] = row[b, _ROW_SCALARS]
-        bodies.friction[slot] = row[b, _ROW_SCALARS + 1]
-        bodies.restitution[slot] = row[b, _ROW_SCALARS + 2]
-        bodies.contact_compliance[slot] = row[b, _ROW_SCALARS + 3]
-        bodies.contact_radius[slot] = row[b, _ROW_SCALARS + 4]
-        bodies.fixed[slot] = ints[b, _INT_FIXED]
-        bodies.sleeping[slot] = 0
-        bodies.sleep_timer[slot] = 0.0
-        bodies.wake_request[slot] = 0
-        bodies.particle_start[slot] = start
-        bodies.particle_count[slot] = end - begin
-        bodies.active[slot] = 1
-        bounding = 0.0
-        largest = 0.0
-        total = 0.0
-        lower = ti.math.vec3(1e30)
-        upper = ti.math.vec3(-1e30)
-        for k in range(begin, end):
-            sphere = _sphere_f32(spheres, k)
-            offset = ti.math.vec3(sphere[0], sphere[1], sphere[2])
-            r = sphere[3]
-            bounding = ti.max(bounding, offset.norm() + r)
-            largest = ti.max(largest, r)
-            total += r
-            lower = ti.min(lower, offset - r)
-            upper = ti.max(upper, offset + r)
-        bodies.bounding_radius[slot] = bounding
-        bodies.max_particle_radius[slot] = largest
-        bodies.mean_particle_radius[slot] = total / (end - begin)
-        bodies.local_lower[slot] = lower
-        bodies.local_upper[slot] = upper
-        bodies.motion[slot] = 0.0
-        g = _ROW_GRID
-        bodies.grid_origin[slot] = ti.math.vec3(row[b, g], row[b, g + 1], row[b, g + 2])
-        bodies.grid_edge[slot] = row[b, g + 3]
-        bodies.grid_dims[slot] = ti.math.ivec3(ti.cast(row[b, g + 4], ti.i32), ti.cast(row[b, g + 5], ti.i32),
-                                               ti.cast(row[b, g + 6], ti.i32))
-        _cluster_spheres(bodies, slot, spheres, begin, end, ints[b, _INT_CLUSTERS], nearest)
-        grid = ints[b, _INT_GRID]
-        count = end - begin
-        for k in range(count):
-            p = start + k
-            particles.body[p] = slot
-            particles.cache_stamp[0, p] = -1
-            particles.cache_stamp[1, p] = -1
-            particles.point_count[p] = 0  # (sphere contacts unless _write_patches says otherwise)
-            sphere = _sphere_f32(spheres, begin + k)
-            particles.offset[p] = ti.math.vec3(sphere[0], sphere[1], sphere[2])
-            particles.radius[p] = sphere[3]
-            j = grid_ints[grid + k]
-            particles.grid_sphere[p] = _sphere_f32(spheres, begin + j)
-            particles.grid_slot[p] = start + j
-        for c in range(ints[b, _INT_GRID_END] - grid - count):
-            particles.cell_first[ti.static(CELLS_PER_SPHERE) * start + c] = start + grid_ints[grid + count + c]
-
-
-@ti.kernel
-def _write_patches(particles: ti.template(), ints: ti.types.ndarray(dtype=ti.i32, ndim=2),
-                   normals: ti.types.ndarray(dtype=ti.f32, ndim=2), points: ti.types.ndarray(dtype=ti.f32, ndim=2)):
-    """The contact patches of S spheres: ``ints`` (S,4) (particle slot, first row of
-    ``surface_point`` for its patch, its point count, the first row of those points in
-    ``points``), ``normals`` (S,3) body frame, ``points`` (P,3) [m] body frame."""
-    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for s in range(ints.shape[0]):
-        p = ints[s, 0]
-        start = ints[s, 1]
-        particles.point_start[p] = start
-        particles.point_count[p] = ints[s, 2]
-        particles.patch_normal[p] = ti.math.vec3(normals[s, 0], normals[s, 1], normals[s, 2])
-        for k in range(ints[s, 2]):
-            row = ints[s, 3] + k
-            particles.surface_point[start + k] = ti.math.vec3(points[row, 0], points[row, 1], points[row, 2])
-
-
-@ti.kernel
-def _clear_body(bodies: ti.template(), particles: ti.template(), slot: ti.i32, start: ti.i32, count: ti.i32):
-    bodies.active[slot] = 0
-    bodies.near_body[slot] = 0
-    bodies.near_static[slot] = 0
-    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for k in range(count):
-        particles.body[start + k] = -1
-
-
-@ti.kernel
-def _set_velocity(bodies: ti.template(), slot: ti.i32, v: ti.types.vector(3, ti.f32), w: ti.types.vector(3, ti.f32)):
-    bodies.linear_velocity[slot] = v
-    bodies.angular_velocity[slot] = w
-    bodies.sleeping[slot] = 0
-    bodies.sleep_timer[slot] = 0.0
-
-
-@ti.kernel
-def _wake(bodies: ti.template(), slot: ti.i32):
-    bodies.sleeping[slot] = 0
-    bodies.sleep_timer[slot] = 0.0
-
-
-@ti.kernel
-def _pack_impacts(impacts: ti.template(), first: ti.i32, rows: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-    """Impact rows first..first+R-1 into ``rows`` (R, 27): body, other, point, normal, impulse,
-    force, duration, speed, dt, substep, point_body, normal_body, force_body (the layout
-    World.impacts unpacks)."""
-    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for r in range(rows.shape[0]):
-        k = first + r
-        rows[r, 0] = impacts.body[k]
-        rows[r, 1] = impacts.other[k]
-        for c in ti.static(range(3)):
-            rows[r, 2 + c] = impacts.point[k][c]
-            rows[r, 5 + c] = impacts.normal[k][c]
-            rows[r, 8 + c] = impacts.impulse[k][c]
-            rows[r, 11 + c] = impacts.force[k][c]
-            rows[r, 18 + c] = impacts.point_body[k][c]
-            rows[r, 21 + c] = impacts.normal_body[k][c]
-            rows[r, 24 + c] = impacts.force_body[k][c]
-        rows[r, 14] = impacts.duration[k]
-        rows[r, 15] = impacts.speed[k]
-        rows[r, 16] = impacts.dt[k]
-        rows[r, 17] = impacts.substep[k]
-
-
-@ti.func
-def _pack_body(bodies: ti.template(), b, rows: ti.template(), k):
-    for c in ti.static(range(3)):
-        rows[k, c] = bodies.position[b][c]
-        rows[k, 7 + c] = bodies.linear_velocity[b][c]
-        rows[k, 10 + c] = bodies.angular_velocity[b][c]
-    for c in ti.static(range(4)):
-        rows[k, 3 + c] = bodies.orientation[b][c]
-    rows[k, 13] = bodies.active[b]
-    rows[k, 14] = bodies.sleeping[b]
-    rows[k, 15] = bodies.sleep_timer[b]
-    rows[k, 16] = bodies.wake_request[b]
-
-
-@ti.kernel
-def _pack_bodies(bodies: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                 rows: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-    """Bodies ``ids`` (K,) into ``rows`` (K, 17): position, orientation (wxyz), linear and
-    angular velocity, active, sleeping, sleep timer, wake request (the layout
-    World.body_state unpacks)."""
-    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for k in range(ids.shape[0]):
-        _pack_body(bodies, ids[k], rows, k)
-
-
-@ti.func
-def _unpack_body(bodies: ti.template(), b, rows: ti.template(), k):
-    """The inverse of _pack_body for the motion state (not ``active``) of body ``b``."""
-    for c in ti.static(range(3)):  # (f64 rows of f32 values: exact)
-        bodies.position[b][c] = ti.cast(rows[k, c], ti.f32)
-        bodies.linear_velocity[b][c] = ti.cast(rows[k, 7 + c], ti.f32)
-        bodies.angular_velocity[b][c] = ti.cast(rows[k, 10 + c], ti.f32)
-    for c in ti.static(range(4)):
-        bodies.orientation[b][c] = ti.cast(rows[k, 3 + c], ti.f32)
-    bodies.sleeping[b] = ti.cast(rows[k, 14], ti.i32)
-    bodies.sleep_timer[b] = ti.cast(rows[k, 15], ti.f32)
-    bodies.wake_request[b] = ti.cast(rows[k, 16], ti.i32)
-
-
-@ti.kernel
-def _keep_bodies(f: ti.template(), kept: ti.template()):
-    """Every body slot's motion state and the contact cache's parity and epoch into
-    ``kept`` (a KeptMotion). One serial task: a parallel one over ~100 bodies costs more to
-    dispatch than the copy, and a copy to the host, with its array arguments, would be paid
-    before every substep of a scene that re-runs broken substeps."""
-    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for b in range(f.bodies.slot_end[None]):
-        _pack_body(f.bodies, b, kept.rows, b)
-    kept.cache[0] = f.particles.parity[None]
-    kept.cache[1] = f.particles.cache_epoch[None]
-
-
-@ti.kernel
-def _restore_kept(f: ti.template(), kept: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-    """Bodies ``ids`` back to their motion state in ``kept`` (slot b in row b), and the
-    contact cache's parity and epoch."""
-    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for k in range(ids.shape[0]):
-        _unpack_body(f.bodies, ids[k], kept.rows, ids[k])
-    f.particles.parity[None] = kept.cache[0]
-    f.particles.cache_epoch[None] = kept.cache[1]
-
-
-@ti.kernel
-def _pack_kept(kept: ti.template(), ids: ti.types.ndarray(dtype=ti.i32, ndim=1),
-               rows: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-    """Rows of ``kept`` for bodies ``ids`` (K,) into ``rows`` (K, 17)."""
-    ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
-    for k in range(ids.shape[0]):
-        for c in ti.static(range(17)):
-            rows[k, c] = kept.rows[ids[k], c]
-
-
 @ti.kernel
 def _begin_advance(f: ti.template(), margin: ti.f32, frame_dt: ti.f32, substeps: ti.i32,
                    motion_fraction: ti.f32) -> ti.i32:
@@ -401,12 +81,6 @@ def _advance_counters(f: ti.template()) -> ti.types.vector(5, ti.i32):
     recorded) in one launch instead of five field reads."""
     return ti.Vector([f.contacts.count[None], f.contacts.peak[None], f.contacts.overflow[None],
                       f.impacts.overflow[None], f.impacts.count[None]], dt=ti.i32)
-
-
-def _body_rows(ids: np.ndarray, rows: np.ndarray) -> dict:
-    """The dict World.body_state returns from rows (K, 17) in ``_pack_body``'s layout."""
-    return dict(id=ids, position=rows[:, 0:3], orientation=rows[:, 3:7], linear_velocity=rows[:, 7:10],
-                angular_velocity=rows[:, 10:13], active=rows[:, 13] != 0, sleeping=rows[:, 14] != 0)
 
 
 class World:
@@ -432,19 +106,12 @@ class World:
         self.fields = stages.WorldFields(self.bodies, self.statics, self.particles, self.grid, self.contacts,
                                          self.impact_buffer, StepParams())
         self._params_of = None  # the options object the StepParams fields hold
-        self.kept = KeptMotion(cap.max_bodies)
+        self.kept = checkpoints.KeptState(cap.max_bodies)
         self._checkpoint_token = 0
         self.particles.body.fill(-1)
         self.statics.gravity[None] = tuple(map(float, self.options.gravity))
         self.stats = WorldStats()
-        self._free_body_slots: list[int] = []
-        self._body_slot_end = 0
-        self._free_ranges: list[tuple[int, int]] = [(0, cap.max_boundary_particles)]  # (start, count)
-        self._body_range: dict[int, tuple[int, int]] = {}
-        self._particles_in_use = 0
-        self._free_points: list[tuple[int, int]] = [(0, cap.max_surface_points)]  # (start, count)
-        self._point_range: dict[int, tuple[int, int]] = {}  # body slot -> its patch points
-        self._particle_slot_end = 0
+        self.slots = SlotAllocator(cap)
         self._plane_count = 0
         self._box_count = 0
         self._substep_counter = 0
@@ -512,23 +179,10 @@ class World:
                     raise ValueError(f"the model's boundary groups ({len(patches[-1].offsets) - 1}) do not match "
                                      f"its {len(radii)} collision spheres: rebuild it, or add it with "
                                      "DynamicsOptions(surface_contact=False)")
-        taken = []  # (slot, start, count): given back if a later body does not fit
-        point_starts = []
-        try:
-            for offsets, radii in layers:
-                slot = self._allocate_body_slot()
-                taken.append((slot, self._allocate_particles(len(radii), slot_for_error=slot), len(radii)))
-            for patch in patches:
-                point_starts.append(self._allocate_points(len(patch.points)))
-        except CapacityError:
-            for slot, start, n in reversed(taken):  # (so the slots go out again in the same order)
-                self._free_body_slots.insert(0, slot)
-                self._release_particles(start, n)
-            for first, patch in zip(point_starts, patches):
-                self._free_points = _give_range(self._free_points, first, len(patch.points))
-            raise
-        ints = np.zeros((count, 8), dtype=np.int32)
-        rows_out = np.empty((count, 43), dtype=np.float32)
+        taken, point_starts = self.slots.take([len(radii) for _, radii in layers],
+                                              [len(patch.points) for patch in patches])
+        ints = np.zeros((count, BODY_WRITE_INTS.width), dtype=np.int32)
+        rows_out = np.empty((count, BODY_WRITE.width), dtype=np.float32)
         sphere_rows, grid_rows = [], []
         spheres_so_far = grid_so_far = 0
         for b, (model, (offsets, radii), (slot, start, n)) in enumerate(zip(models, layers, taken)):
@@ -539,28 +193,30 @@ class World:
                 inverse_mass, inverse_inertia = 1.0 / model.mass, np.linalg.inv(inertia)
             radius = contact_radius if contact_radius is not None else (3.0 * model.volume / (4.0 * np.pi)) ** (1 / 3)
             origin, edge, dims, cell_first, order = body_grid(offsets, radii, self.options.contact_margin)
-            rows_out[b] = np.concatenate([poses[b], inertia.reshape(-1), inverse_inertia.reshape(-1),
-                                          [inverse_mass, friction, restitution, compliance, radius], origin, [edge],
-                                          dims])
+            rows_out[b] = BODY_WRITE.row(
+                position=positions[b], orientation=orientations_wxyz[b], linear_velocity=linear_velocities[b],
+                angular_velocity=angular_velocities[b], inertia=inertia, inverse_inertia=inverse_inertia,
+                inverse_mass=inverse_mass, friction=friction, restitution=restitution, contact_compliance=compliance,
+                contact_radius=radius, grid_origin=origin, grid_edge=edge, grid_dims=dims)
             sphere_rows.append(np.column_stack([offsets, radii]))
             grid_rows.append(np.concatenate([order, cell_first]))
-            ints[b] = (slot, start, int(fixed), spheres_so_far, spheres_so_far + n, grid_so_far,
-                       grid_so_far + len(grid_rows[-1]), min(MAX_CLUSTERS, max(1, n // 16)))
+            ints[b] = BODY_WRITE_INTS.row(
+                slot=slot, particle_start=start, fixed=int(fixed), spheres=spheres_so_far,
+                spheres_end=spheres_so_far + n, grid=grid_so_far, grid_end=grid_so_far + len(grid_rows[-1]),
+                clusters=min(MAX_CLUSTERS, max(1, n // 16)))
             spheres_so_far += n
             grid_so_far += len(grid_rows[-1])
         spheres = np.concatenate(sphere_rows).astype(np.float64)
-        _write_bodies(self.bodies, self.particles, ints, rows_out, spheres,
-                      np.concatenate(grid_rows).astype(np.int32), np.empty(len(spheres)))
+        body_fields.write_bodies(self.bodies, self.particles, ints, rows_out, spheres,
+                                 np.concatenate(grid_rows).astype(np.int32), np.empty(len(spheres)))
         if patches:
             self._write_patches(taken, patches, point_starts)
         self.breakable = getattr(self, "breakable", {})
         for (slot, start, n), can_break in zip(taken, breakable):
-            self._body_range[slot] = (start, n)
+            self.slots.hold(slot, start, n)
             self.breakable[slot] = bool(can_break)
-            self._particles_in_use += n
-            self._particle_slot_end = max(self._particle_slot_end, start + n)
-        self.particles.slot_end[None] = self._particle_slot_end
-        self.bodies.slot_end[None] = self._body_slot_end
+        self.particles.slot_end[None] = self.slots.particle_slot_end
+        self.bodies.slot_end[None] = self.slots.body_slot_end
         return [slot for slot, _, _ in taken]
 
     def _write_patches(self, taken, patches, point_starts) -> None:
@@ -571,22 +227,16 @@ class World:
             ints.append(np.column_stack([start + np.arange(n), first + patch.offsets[:-1], counts,
                                          rows_so_far + patch.offsets[:-1]]))
             rows_so_far += len(patch.points)
-            self._point_range[slot] = (first, len(patch.points))
-        _write_patches(self.particles, np.ascontiguousarray(np.concatenate(ints), dtype=np.int32),
+            self.slots.point_range[slot] = (first, len(patch.points))
+        body_fields.write_patches(self.particles, np.ascontiguousarray(np.concatenate(ints), dtype=np.int32),
                        np.concatenate([p.normals for p in patches]).astype(np.float32),
                        np.concatenate([p.points for p in patches]).astype(np.float32))
 
     def remove_body(self, body: int) -> None:
         """Free a body's slot and particle range (a parent replaced by its fragments)."""
-        if body not in self._body_range:
-            raise KeyError(f"body {body} is not in the world")
-        start, count = self._body_range.pop(body)
-        _clear_body(self.bodies, self.particles, body, start, count)
-        self._free_body_slots.append(body)
-        self._release_particles(start, count)
-        self._particles_in_use -= count
-        if body in self._point_range:
-            self._free_points = _give_range(self._free_points, *self._point_range.pop(body))
+        self._check_body(body)
+        start, count = self.slots.release(body)
+        body_fields.clear_body(self.bodies, self.particles, body, start, count)
 
     def add_ground(self, height: float = 0.0, friction: float = 0.5, restitution: float = 0.2) -> int:
         """A horizontal ground plane z = height [m] (normal +Z); returns its index."""
@@ -623,25 +273,20 @@ class World:
     def set_body_velocity(self, body: int, linear_velocity, angular_velocity) -> None:
         """Set a body's world velocities [m/s], [rad/s] and wake it."""
         self._check_body(body)
-        _set_velocity(self.bodies, body, ti.Vector(list(map(float, linear_velocity))),
-                      ti.Vector(list(map(float, angular_velocity))))
+        body_fields.set_velocity(self.bodies, body, ti.Vector(list(map(float, linear_velocity))),
+                                 ti.Vector(list(map(float, angular_velocity))))
 
     def wake(self, body: int) -> None:
         self._check_body(body)
-        _wake(self.bodies, body)
+        body_fields.wake(self.bodies, body)
 
     def clear(self) -> None:
         """Remove every body and static collider (fields and compiled kernels are kept)."""
-        for body in list(self._body_range):
+        for body in list(self.slots.body_range):
             self.remove_body(body)
-        self._free_body_slots = []
-        self._body_slot_end = 0
+        self.slots.clear()
         self.bodies.slot_end[None] = 0
-        self._particle_slot_end = 0
         self.particles.slot_end[None] = 0
-        self._free_ranges = [(0, self.capacity.max_boundary_particles)]
-        self._free_points = [(0, self.capacity.max_surface_points)]
-        self._point_range = {}
         self._plane_count = self._box_count = 0
         self.statics.plane_count[None] = 0
         self.statics.box_count[None] = 0
@@ -655,7 +300,7 @@ class World:
 
     @property
     def body_ids(self) -> list[int]:
-        return sorted(self._body_range)
+        return sorted(self.slots.body_range)
 
     # ---------------------------------------------------------------- stepping
 
@@ -762,10 +407,11 @@ class World:
             raise IndexError(f"body ids must lie in [0, {self.capacity.max_bodies}), got {ids.min()}..{ids.max()}")
         # One launch for the K rows: six whole-field reads would cost more, paid per
         # analysed impact and per written frame.
-        rows = np.zeros((len(ids), 17), dtype=np.float64)
+        rows = np.zeros((len(ids), BODY_STATE.width), dtype=np.float64)
         if len(ids):
-            _pack_bodies(self.bodies, np.ascontiguousarray(ids, dtype=np.int32), rows)
-        return _body_rows(ids, rows)
+            body_fields.pack_bodies(self.bodies.motion_state, self.bodies.active,
+                                    np.ascontiguousarray(ids, dtype=np.int32), rows)
+        return _body_state(ids, rows)
 
     def impact_count(self) -> int:
         """Impact rows recorded so far in this advance (see :meth:`impacts`): the count the
@@ -779,7 +425,7 @@ class World:
         cache's, kept on the device for :meth:`restore` and :meth:`checkpoint_state` (one
         small launch; nothing is copied to the host; static data is not copied). Valid
         until the next checkpoint: the World keeps only the latest."""
-        _keep_bodies(self.fields, self.kept)
+        checkpoints.keep(self.fields, self.kept)
         self._checkpoint_token += 1
         return Checkpoint(ids=np.asarray(self.body_ids, dtype=np.int32), token=self._checkpoint_token)
 
@@ -789,17 +435,17 @@ class World:
         moment: the impulses stored since are no longer the valid half, so a substep run
         again warm-starts as it did. The other bodies are left as they are."""
         ids = np.asarray(ids, dtype=np.int64)
-        missing = [int(b) for b in ids if int(b) not in self._body_range]
+        missing = [int(b) for b in ids if int(b) not in self.slots.body_range]
         if missing:
             raise KeyError(f"bodies {missing} are not in the world")
-        _restore_kept(self.fields, self.kept, self._checkpoint_ids(checkpoint, ids))
+        checkpoints.restore(self.fields, self.kept, self._checkpoint_ids(checkpoint, ids))
 
     def checkpoint_state(self, checkpoint: Checkpoint, ids) -> dict:
         """:meth:`body_state` of bodies ``ids`` as ``checkpoint`` holds them."""
         ids = np.asarray(ids, dtype=np.int64)
-        rows = np.zeros((len(ids), 17), dtype=np.float64)
-        _pack_kept(self.kept, self._checkpoint_ids(checkpoint, ids), rows)
-        return _body_rows(ids, rows)
+        rows = np.zeros((len(ids), BODY_STATE.width), dtype=np.float64)
+        body_fields.pack_bodies(self.kept.motion, self.kept.active, self._checkpoint_ids(checkpoint, ids), rows)
+        return _body_state(ids, rows)
 
     def _checkpoint_ids(self, checkpoint: Checkpoint, ids: np.ndarray) -> np.ndarray:
         """``ids`` as i32 for a kernel; raises if ``checkpoint`` is stale or lacks one."""
@@ -825,84 +471,29 @@ class World:
         first = min(max(int(first), 0), n)
         # The rows in one launch: reading each field whole (16k rows x 10 fields) costs
         # milliseconds a frame.
-        rows = np.zeros((n - first, 27), dtype=np.float64)
+        rows = np.zeros((n - first, IMPACT.width), dtype=np.float64)
         if n > first:
-            _pack_impacts(self.impact_buffer, first, rows)
-        return dict(
-            body=rows[:, 0].astype(np.int32), other=rows[:, 1].astype(np.int32), point=rows[:, 2:5],
-            normal=rows[:, 5:8], impulse=rows[:, 8:11], force=rows[:, 11:14], duration=rows[:, 14],
-            speed=rows[:, 15], dt=rows[:, 16], substep=rows[:, 17].astype(np.int32),
-            point_body=rows[:, 18:21], normal_body=rows[:, 21:24], force_body=rows[:, 24:27],
-        )
+            body_fields.pack_impacts(self.impact_buffer, first, rows)
+        return IMPACT.split(rows, integers=IMPACT_INTEGERS)
 
     def particle_state(self, body: int) -> dict:
         """World positions (K,3) [m] and radii (K,) [m] of one body's collision particles
         (tests, diagnostics; computed from the pose, not the broadphase buffer)."""
-        start, count = self._body_range[body]
+        start, count = self.slots.body_range[body]
         offsets = self.particles.offset.to_numpy()[start:start + count].astype(np.float64)
         radii = self.particles.radius.to_numpy()[start:start + count].astype(np.float64)
         state = self.body_state([body])
         rot = quaternion_matrix(state["orientation"][0])
         return dict(position=state["position"][0] + offsets @ rot.T, radius=radii)
 
-    # ---------------------------------------------------------------- slots
-
     def _check_body(self, body: int) -> None:
-        if body not in self._body_range:
+        if body not in self.slots.body_range:
             raise KeyError(f"body {body} is not in the world")
 
-    def _allocate_body_slot(self) -> int:
-        if self._free_body_slots:
-            return self._free_body_slots.pop(0)
-        if self._body_slot_end >= self.capacity.max_bodies:
-            raise CapacityError(f"more than max_bodies={self.capacity.max_bodies} bodies: "
-                                "raise WorldCapacity(max_bodies=...)")
-        self._body_slot_end += 1
-        return self._body_slot_end - 1
 
-    def _allocate_particles(self, count: int, slot_for_error: int) -> int:
-        start = _take_range(self._free_ranges, count)
-        if start is not None:
-            return start
-        self._free_body_slots.insert(0, slot_for_error)
-        raise CapacityError(
-            f"no room for {count} more collision particles: {self._particles_in_use} of "
-            f"max_boundary_particles={self.capacity.max_boundary_particles} in use "
-            f"(largest free range {max((f for _, f in self._free_ranges), default=0)}): "
-            "raise WorldCapacity(max_boundary_particles=...)")
-
-    def _allocate_points(self, count: int) -> int:
-        start = _take_range(self._free_points, count)
-        if start is None:
-            raise CapacityError(
-                f"no room for {count} more contact-patch points (max_surface_points="
-                f"{self.capacity.max_surface_points}, largest free range "
-                f"{max((f for _, f in self._free_points), default=0)}): raise WorldCapacity(max_surface_points=...)")
-        return start
-
-    def _release_particles(self, start: int, count: int) -> None:
-        self._free_ranges = _give_range(self._free_ranges, start, count)
-
-
-def _take_range(ranges: list, count: int):
-    """First fit: the start of ``count`` slots taken from the free ``ranges`` [(start,
-    count)] (updated in place), or None when no range is large enough."""
-    for k, (start, free) in enumerate(ranges):
-        if free >= count:
-            if free == count:
-                ranges.pop(k)
-            else:
-                ranges[k] = (start + count, free - count)
-            return start
-    return None
-
-
-def _give_range(ranges: list, start: int, count: int) -> list:
-    """The free ``ranges`` with [start, start + count) given back, neighbours merged."""
-    merged: list[tuple[int, int]] = []
-    for s, n in sorted(ranges + [(start, count)]):
-        if merged and merged[-1][0] + merged[-1][1] == s:
-            merged[-1] = (merged[-1][0], merged[-1][1] + n)
-        else:
-            merged.append((s, n))
-    return merged
+def _body_state(ids: np.ndarray, rows: np.ndarray) -> dict:
+    """The dict World.body_state returns from rows (K, BODY_STATE.width)."""
+    state = dict(id=ids, **BODY_STATE.split(rows))
+    state["active"] = state["active"] != 0
+    state["sleeping"] = state["sleeping"] != 0
+    return state

@@ -28,12 +28,12 @@ Decisions (docs/method.md):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..geometry.components import connected_tets
-from ..geometry.rotation import quaternion_matrix
+from ..kinematics.quaternion import quaternion_matrix
 from ..model import BodyModel, build_fragment_models
 from ..options import FractureOptions, Material, ParticleOptions
 from .crack_types import ImpactAnalysis

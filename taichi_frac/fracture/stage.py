@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry.rotation import quaternion_matrix
+from ..kinematics.quaternion import quaternion_matrix
 from ..model import BodyModel
 from ..options import FractureOptions, Material, ParticleOptions
 from .cracks import analyze_impact

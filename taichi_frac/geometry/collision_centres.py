@@ -1,4 +1,4 @@
-"""The collision centres of boundary groups (``model.contact_sphere_centres``: the formula
+"""The collision centres of boundary groups (``contact_sphere_centres``: the formula
 and why) in one Taichi kernel launch, f64.
 
 In numpy the computation takes ~20 calls (normals, their sums per group, heights, spans)
@@ -147,7 +147,7 @@ def _centres(
 
 
 def collision_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius, group_piece, face_piece):
-    """The kernel's arguments from ``model.contact_sphere_centres``' and its launch:
+    """The kernel's arguments from ``contact_sphere_centres``' and its launch:
     (G,3) [m] collision centres. ``owner`` (M,) the group of each member (grouped
     together, in order), ``group_piece`` (G,) and ``face_piece`` (F,) the pieces."""
     group_count = len(b_pos)
@@ -204,3 +204,41 @@ def collision_centres(vertices, faces, face_tet, centroids, members, owner, b_po
              np.ascontiguousarray(key[scan]), np.ascontiguousarray(np.column_stack([mid[scan], face_radius[scan]])),
              cell_first, np.ascontiguousarray(pieces), np.empty((group_count, 4)), np.zeros(piece_count), out)
     return out
+
+
+#: A kept boundary group's collision centre is computed again when a crack face lies
+#: within this many of its radii of its centre: the centre moves inward by less than
+#: 2 radii (``contact_sphere_centres``: at most R - h, h > -R for a surface group's own
+#: faces) and the thickness ray looks a radius beyond that.
+CENTRE_REACH = 3.0
+
+
+def contact_sphere_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius, *,
+                           group_piece=None, face_piece=None):
+    """Collision centres of the boundary spheres (see ``BodyModel.boundary_contact_position``).
+
+    For each group: its outward normal n (area-weighted normals of its members' boundary
+    faces), the height h of the true surface above its centre along n (largest over those
+    faces' vertices), the radius rho its members' centroids span about the normal axis,
+    and the body's thickness t behind the centre along -n (``ray_exit_distance`` against
+    the boundary faces, looked at only as far as the limit can bind, s + R).
+    The centre moves inward by
+
+        s = min(R - h, sqrt(R^2 - rho^2) - h, t - R), at least 0:
+
+    toward putting the sphere's outermost point on the surface (R - h), but never so far
+    that its cross-section at the surface stops covering its members (so neighbouring
+    spheres leave no hole a small body could fall through, even on a coarse mesh), and
+    never so far that it pokes out behind (t - R).
+
+    ``group_piece`` (G,) and ``face_piece`` (F,): the piece of each group and face when
+    several bodies' groups are given at once (``_assemble``): each group then looks only
+    at its own piece's faces, and the smallest normal counted as one is relative to its
+    own piece's largest. None: one body. One kernel launch
+    (``geometry.collision_centres``); tests/test_model_two_scale.py checks it against
+    this formula in numpy.
+    """
+    if group_piece is None:
+        group_piece, face_piece = np.zeros(len(b_pos), dtype=np.int64), np.zeros(len(faces), dtype=np.int64)
+    return collision_centres(vertices, faces, face_tet, centroids, members, owner, b_pos, b_radius,
+                             np.asarray(group_piece), np.asarray(face_piece))

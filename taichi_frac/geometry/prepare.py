@@ -28,7 +28,7 @@ from .primitives import make_primitive, parse_primitive_spec
 from .simplify import simplified_tet_surfaces
 from .tetra import BACKENDS, TetMesh, regular_tet_edge, tetrahedralize
 from .topology import dihedral_angles_deg, signed_volumes
-from .validate import MeshError, validate_surface
+from .validate import MeshError
 
 #: Bump when meshing changes so old cache entries are not reused.
 CACHE_VERSION = 2

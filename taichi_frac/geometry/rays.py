@@ -2,7 +2,7 @@
 ray-triangle test (``ray_triangle``) that ``collision_centres``' kernel shares.
 
 ``first_hits`` answers how far each of a few hundred short rays runs through a body's
-boundary faces (``model.ray_exit_distance``; ``collision_centres`` does the same for the
+boundary faces (``ray_exit_distance``; ``collision_centres`` does the same for the
 boundary spheres it moves inward). It is faster than a vectorised numpy KD-tree query
 with a Moller-Trumbore test on the candidates. The faces are sorted along the axis their centres spread
 most on, each ray scans the slab of them within its reach with a bounding-sphere test
@@ -139,3 +139,28 @@ def _first_hits_numpy(corners, centre, radius, origin, direction, reach):
     hit = ok & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > 0.0) & (t <= reach[ray])
     np.minimum.at(result, ray[hit], t[hit])
     return result
+
+
+def near_faces(vertices, faces, points, reach) -> np.ndarray:
+    """(P,) bool: does any of ``faces`` (F,3) come within ``reach`` (P,) [m] of ``points``
+    (P,3) [m] (the nearest face centre's distance less the largest face's own radius; a
+    conservative test)."""
+    from scipy.spatial import cKDTree
+
+    if len(faces) == 0 or len(points) == 0:
+        return np.zeros(len(points), dtype=bool)
+    centre, radius = face_bounds(vertices[faces])
+    distance, _ = cKDTree(centre).query(points)
+    return distance < reach + float(radius.max())
+
+
+def ray_exit_distance(vertices, faces, origin, direction, reach):
+    """Distance [m] along each ray (origin (P,3) [m], unit direction (P,3)) to the first
+    boundary face (F,3) it crosses within ``reach`` (P,) [m]; inf when none does.
+
+    ``geometry.rays.first_hits``: one kernel, each ray testing only the faces whose
+    bounding sphere comes within its reach (Moller-Trumbore). The model build's own
+    thickness rays run inside ``geometry.collision_centres``' kernel (the same triangle
+    test); this is the general query, and the tests' reference for them.
+    """
+    return first_hits(vertices, faces, origin, direction, reach)

@@ -18,9 +18,10 @@ import time as _time
 from pathlib import Path
 
 import numpy as np
-from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, Vt
+from pxr import Gf, Sdf, Tf, Usd, UsdGeom, Vt
 
 from .. import __version__
+from ..kinematics.quaternion import quaternion_multiply
 from ..options import LOOKS, MaterialLook, SurfaceLook
 from . import schema
 
@@ -31,15 +32,6 @@ _Z_TO_Y_UP_MATRIX = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]
 
 # The look of a body given none.
 _DEFAULT_LOOK = LOOKS["plaster"]
-
-
-def _quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of (w, x, y, z) quaternions; a (4,), b (K,4)."""
-    aw, av = a[0], a[1:]
-    bw, bv = b[:, 0], b[:, 1:]
-    w = aw * bw - bv @ av
-    v = aw * bv + bw[:, None] * av + np.cross(np.broadcast_to(av, bv.shape), bv)
-    return np.concatenate([w[:, None], v], axis=1)
 
 
 def _per_corner(values: np.ndarray | None, faces: np.ndarray, vertex_count: int, width: int, what: str):
@@ -417,7 +409,7 @@ class CacheWriter:
         quats = quats / norms[:, None]
         positions, _ = self._to_stage_vectors(positions)
         if self.up_axis == "Y":
-            quats = _quat_multiply(_Z_TO_Y_UP, quats)
+            quats = quaternion_multiply(_Z_TO_Y_UP, quats)
         frame = int(frame)
         layer = self._layer
         with Sdf.ChangeBlock():  # (the layer's own time samples: ~2x faster than UsdAttribute.Set)

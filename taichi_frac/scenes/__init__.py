@@ -9,7 +9,7 @@ from .description import (
     OutputSettings,
     Scene,
     SceneObject,
-    SimulationSettings,
+    SimulationOptions,
     euler_deg_to_quaternion,
 )
 from .loader import BUILTIN_SCENE_DIR, apply_overrides, builtin_scenes, find_scene, load_scene, scene_from_dict
@@ -23,7 +23,7 @@ __all__ = [
     "OutputSettings",
     "Scene",
     "SceneObject",
-    "SimulationSettings",
+    "SimulationOptions",
     "euler_deg_to_quaternion",
     "load_scene",
     "scene_from_dict",

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..geometry.meshio_in import SIZE_RANGE, UNITS
 from ..geometry.primitives import parse_primitive_spec
+from ..kinematics.quaternion import quaternion_multiply
 from ..options import (
     FractureOptions,
     Material,
@@ -33,9 +34,6 @@ from ..options import (
     check_range,
     material_preset,
 )
-
-#: The scene file's [simulation] table is exactly :class:`SimulationOptions`.
-SimulationSettings = SimulationOptions
 
 
 def euler_deg_to_quaternion(euler_deg) -> tuple[float, float, float, float]:
@@ -47,18 +45,7 @@ def euler_deg_to_quaternion(euler_deg) -> tuple[float, float, float, float]:
     qx = np.array([math.cos(a), math.sin(a), 0.0, 0.0])
     qy = np.array([math.cos(b), 0.0, math.sin(b), 0.0])
     qz = np.array([math.cos(c), 0.0, 0.0, math.sin(c)])
-    return tuple(float(v) for v in _qmul(qz, _qmul(qy, qx)))
-
-
-def _qmul(p, q):
-    w1, x1, y1, z1 = p
-    w2, x2, y2, z2 = q
-    return np.array([
-        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-    ])
+    return tuple(float(v) for v in quaternion_multiply(qz, quaternion_multiply(qy, qx)))
 
 
 #: Largest coordinate [m] of a position, ground height or box: float32 positions are

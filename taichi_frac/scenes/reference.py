@@ -35,8 +35,15 @@ _UNIT = re.compile(r"\[([^\],]+)\]")
 
 
 def docstring_attributes(cls) -> dict[str, str]:
-    """``{field: text}`` from the ``Attributes:`` section of ``cls``'s docstring."""
-    doc = inspect.getdoc(cls) or ""
+    """``{field: text}`` from the ``Attributes:`` sections of the docstrings of ``cls`` and
+    its bases (a field inherited from a shared options class is documented there)."""
+    entries: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        entries.update(_own_attributes(inspect.cleandoc(vars(klass).get("__doc__") or "")))
+    return entries
+
+
+def _own_attributes(doc: str) -> dict[str, str]:
     entries: dict[str, str] = {}
     in_section, current = False, None
     for line in doc.splitlines():
@@ -84,9 +91,18 @@ def _is_none(args, k) -> bool:
 
 
 def allowed_values(cls) -> dict[str, str]:
-    """``{field: "[low, high]" or "a, b, c"}`` read from ``cls.__post_init__``."""
+    """``{field: "[low, high]" or "a, b, c"}`` read from the ``__post_init__`` of ``cls`` and
+    of its bases (a subclass's check of a field overrides its base's)."""
+    ranges: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        if "__post_init__" in vars(klass):
+            ranges.update(_own_allowed_values(klass))
+    return ranges
+
+
+def _own_allowed_values(cls) -> dict[str, str]:
     try:
-        source = textwrap.dedent(inspect.getsource(cls.__post_init__))
+        source = textwrap.dedent(inspect.getsource(vars(cls)["__post_init__"]))
     except (OSError, TypeError, AttributeError):
         return {}
     module_globals = vars(sys.modules[cls.__module__])
