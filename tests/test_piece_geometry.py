@@ -65,6 +65,23 @@ def test_edge_counts_and_inside_catch_broken_meshes():
     np.testing.assert_array_equal(inside(points, cube.triangles), [True, True, False, False])
 
 
+def test_face_with_corners_of_two_origins_gets_the_crack_it_lies_on():
+    """Hand-made faces whose corners carry different crack indices (as exact booleans leave
+    them where a cut meets a face): a face on crack 0's plane gets 0, one on crack 1's plane
+    (corners -1, 1, 0) gets 1, one on neither gets the artist's surface (-1), one with a hull
+    corner and on no crack the hull's index."""
+    from taichi_frac.geometry.piece_surface import HULL_FACE, CrackSurface, _face_cracks
+
+    spacing = 0.01
+    cracks = (CrackSurface(np.zeros(3), np.array([0.0, 0.0, 1.0])), CrackSurface(np.zeros(3), np.array([1.0, 0.0, 0.0])))
+    on_z = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]])
+    on_x = np.array([[0.0, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.1]])
+    off = on_z + np.array([0.0, 0.0, 0.5 * spacing])  # half a spacing off crack 0: not on it
+    corners = np.array([[0, 0, 0], [-1, 0, -1], [-1, 1, 0], [-1, 0, 1], [HULL_FACE, 0, -1]])
+    triangles = np.stack([on_z, on_z, on_x, off, off])
+    np.testing.assert_array_equal(_face_cracks(corners, triangles, cracks, spacing), [0, 0, 1, -1, HULL_FACE])
+
+
 def test_one_plane_cuts_the_box_exactly(box):
     model, report, surface = box
     render = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)

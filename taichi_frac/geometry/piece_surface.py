@@ -478,6 +478,21 @@ def _tets_inside(part, model, low, high, triangles) -> np.ndarray:
     return in_box[inside(model.particle_position[in_box], every)]
 
 
+def _face_cracks(corner_crack: np.ndarray, triangles: np.ndarray, cracks, spacing: float) -> np.ndarray:
+    """(F,) each face's crack index from its corners' (F,3): the one they share, else (a face
+    the booleans gave corners of two origins) the crack whose surface all three corners lie on
+    (within SPHERE_SAGITTA_FACTOR spacings), else the artist's surface (-1), or a hull's."""
+    crack = corner_crack[:, 0].copy()
+    mixed = np.nonzero((corner_crack != corner_crack[:, :1]).any(axis=1))[0]
+    for f in mixed:
+        crack[f] = HULL_FACE if (corner_crack[f] == HULL_FACE).any() else -1
+        for index in np.unique(corner_crack[f][corner_crack[f] >= 0]):
+            if np.all(np.abs(cracks[index].distance(triangles[f])) <= SPHERE_SAGITTA_FACTOR * spacing):
+                crack[f] = index
+                break
+    return crack
+
+
 def piece_mesh(render: RenderSolid) -> PieceMesh:
     """The render solid as a triangle mesh with per-corner shading (see PieceMesh)."""
     mesh = render.solid.to_mesh64()
@@ -492,9 +507,10 @@ def piece_mesh(render: RenderSolid) -> PieceMesh:
     positions = props[used, :3]
     faces = vertex_of.reshape(-1)[tri_verts]
     corner = props[tri_verts]  # (F,3,P)
-    crack = np.rint(corner[:, :, _CRACK].max(axis=1)).astype(np.int64)
-    inner = crack != -1
     tri = positions[faces]
+    corner_crack = np.rint(np.nan_to_num(corner[:, :, _CRACK], nan=-1.0)).astype(np.int64)
+    crack = _face_cracks(corner_crack, tri, render.cracks, render.spacing)
+    inner = crack != -1
     flat = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     flat /= np.maximum(np.linalg.norm(flat, axis=1, keepdims=True), 1e-300)
     normals = corner[:, :, _NORMAL].copy()
