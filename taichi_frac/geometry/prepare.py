@@ -25,9 +25,9 @@ from ..options import Material, ParticleOptions, material_preset
 from .bounded import DEFAULT_PREPARE_SECONDS, StepClock, StepShareExceeded
 from .meshio_in import check_or_repair, is_tet_file, load_surface, load_tet_mesh, unit_scale
 from .primitives import make_primitive, parse_primitive_spec
-from .simplify import simplified_tet_surfaces
+from .simplify import deviation_points, simplified_tet_surfaces, surface_deviation
 from .tetra import BACKENDS, TetMesh, regular_tet_edge, tetrahedralize
-from .topology import dihedral_angles_deg, signed_volumes
+from .topology import boundary_faces, dihedral_angles_deg, signed_volumes
 from .validate import MeshError, validate_surface
 
 #: Bump when meshing changes so old cache entries are not reused.
@@ -86,6 +86,10 @@ class PrepareReport:
     tet_extents: list = field(default_factory=list)
     #: Whether ``surface`` is closed at full resolution (False: the best surface there was).
     surface_closed: bool = True
+    #: Largest distance [m] from a point of ``surface`` (its vertices, at most 50,000) to the
+    #: tets' boundary: how far the simulated solid strays from the artist's (None for
+    #: tet-mesh files).
+    surface_deviation: float | None = None
 
     def as_dict(self) -> dict:
         return {k: v for k, v in self.__dict__.items() if k not in ("surface", "tet_surface")}
@@ -133,30 +137,43 @@ TETGEN_TIME_SHARE = 0.2
 
 
 def _mesh_with_fallback(mesh, kwargs: dict, clock, backend: str, notes: list | None, fallback_on_refusal: bool):
-    """``tetrahedralize`` under ``clock``; with TetGen, when it crashes, hangs past
-    :data:`TETGEN_TIME_SHARE` of the time left (TetGen loops on some unions of many shells,
-    e.g. the 33-piece beetle) or (``fallback_on_refusal``) refuses the surface, the surface is
-    meshed with fTetWild (``wildmeshing``) in the time left, and ``notes`` gets a line."""
+    """``tetrahedralize`` under ``clock``; with TetGen, when it crashes or hangs past
+    :data:`TETGEN_TIME_SHARE` of the time left (TetGen's optimisation pass loops on some
+    unions of many shells, e.g. the 33-piece beetle), TetGen runs again without that pass
+    (seconds) under the same share; when that fails too, or (``fallback_on_refusal``) TetGen
+    refuses the surface, the surface is meshed with fTetWild (``wildmeshing``, minutes on a
+    loaded machine) in the time left. ``notes`` gets a line for each fallback taken."""
     if clock is None:
         return tetrahedralize(mesh, **kwargs)
     step = f"tetrahedralize ({backend})"
     if backend != "tetgen" or notes is None or "wildmeshing" not in BACKENDS:
         return clock.run(step, tetrahedralize, mesh, **kwargs)
-    left = clock.remaining()
-    try:
-        return clock.run_within(step, None if left is None else TETGEN_TIME_SHARE * left, tetrahedralize, mesh,
-                                **kwargs)
-    except StepShareExceeded as exc:
-        reason = f"TetGen ran past its share of the time bound ({TETGEN_TIME_SHARE * left:.1f} s)"
-        cause = exc
-    except MeshError as exc:
-        if "ran out of time" in str(exc):
-            raise
-        crashed = "crashed" in str(exc)
-        if not (crashed or fallback_on_refusal):
-            raise
-        reason = "TetGen crashed" if crashed else f"TetGen refused the surface ({exc})"
-        cause = exc
+
+    def tetgen_within(step_name, **extra):
+        left = clock.remaining()
+        share = None if left is None else TETGEN_TIME_SHARE * left
+        try:
+            return clock.run_within(step_name, share, tetrahedralize, mesh, **dict(kwargs, **extra)), None
+        except StepShareExceeded as exc:
+            return None, (f"TetGen ran past its share of the time bound ({share:.1f} s)", exc)
+        except MeshError as exc:
+            if "ran out of time" in str(exc):
+                raise
+            crashed = "crashed" in str(exc)
+            if not (crashed or fallback_on_refusal):
+                raise
+            return None, ("TetGen crashed" if crashed else f"TetGen refused the surface ({exc})", exc)
+
+    tm, failure = tetgen_within(step)
+    if tm is not None:
+        return tm
+    reason, cause = failure
+    if "refused" not in reason:
+        tm, again = tetgen_within("tetrahedralize (tetgen, no optimisation pass)", optimize=False)
+        if tm is not None:
+            notes.append(f"meshed by TetGen without its optimisation pass: {reason} with it")
+            return tm
+        reason = f"{reason}; without its optimisation pass: {again[0]}"
     fallback = dict(kwargs, backend="wildmeshing", relax_quality=False)
     try:
         tm = clock.run("tetrahedralize (wildmeshing fallback)", tetrahedralize, mesh, **fallback)
@@ -354,6 +371,11 @@ def prepare_body(
     except ValueError as exc:
         raise MeshError(f"{name!r}: cannot build a particle model from its tets: {exc}") from exc
     timings["model"] = time.perf_counter() - t2
+    deviation = None
+    if surface is not None:
+        # Measured on the tets themselves, so a part lost anywhere (decimation, the mesher)
+        # shows as a distance of the order of that part's length.
+        deviation = surface_deviation(deviation_points(surface), tm.vertices, boundary_faces(tm.tets)[0])
     # The simulated solid is measured against the artist's full-resolution surface.
     reference_volume = float(surface.volume) if surface is not None else tm.surface_volume
     extents = np.ptp(tm.vertices, axis=0)
@@ -387,5 +409,6 @@ def prepare_body(
                        else (surface.extents.tolist() if surface is not None else extents.tolist())),
         tet_extents=extents.tolist(),
         surface_closed=surface is None or bool(surface.is_watertight and surface.is_winding_consistent),
+        surface_deviation=deviation,
     )
     return model, report
