@@ -212,26 +212,6 @@ def test_tetgen_hang_or_crash_falls_back_to_ftetwild(monkeypatch, mesher, why):
     assert abs(model.volume / box.volume - 1) <= 0.01
 
 
-def test_tetgen_optimisation_hang_falls_back_to_tetgen_without_it(monkeypatch):
-    """TetGen's optimisation pass loops on some unions of shells (the beetle) while plain
-    refinement finishes in seconds: the fallback is TetGen without the pass, not fTetWild."""
-    real = tetra_module._tetgen
-
-    def optimisation_hangs(*args, optimize=True, **kwargs):
-        if optimize:
-            time.sleep(60.0)
-        return real(*args, optimize=optimize, **kwargs)
-
-    monkeypatch.setitem(tetra_module.BACKENDS, "tetgen", optimisation_hangs)
-    monkeypatch.setattr(tetra_module, "_tetgen", optimisation_hangs)
-    box = trimesh.creation.box((0.1, 0.1, 0.1))
-    model, report = prepare_body(box, particles=ParticleOptions(target_particles=300), use_cache=False,
-                                 time_limit=40.0)
-    assert report.backend == "tetgen"
-    assert any("without its optimisation pass" in step for step in report.repair_steps), report.repair_steps
-    assert abs(model.volume / box.volume - 1) <= 1e-9  # TetGen keeps the surface exactly
-
-
 # --- resolution set by the target -------------------------------------------------------------
 
 def test_surface_deviation_matches_hand_computed_distances():

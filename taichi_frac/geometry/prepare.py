@@ -137,43 +137,30 @@ TETGEN_TIME_SHARE = 0.2
 
 
 def _mesh_with_fallback(mesh, kwargs: dict, clock, backend: str, notes: list | None, fallback_on_refusal: bool):
-    """``tetrahedralize`` under ``clock``; with TetGen, when it crashes or hangs past
-    :data:`TETGEN_TIME_SHARE` of the time left (TetGen's optimisation pass loops on some
-    unions of many shells, e.g. the 33-piece beetle), TetGen runs again without that pass
-    (seconds) under the same share; when that fails too, or (``fallback_on_refusal``) TetGen
-    refuses the surface, the surface is meshed with fTetWild (``wildmeshing``, minutes on a
-    loaded machine) in the time left. ``notes`` gets a line for each fallback taken."""
+    """``tetrahedralize`` under ``clock``; with TetGen, when it crashes, hangs past
+    :data:`TETGEN_TIME_SHARE` of the time left (TetGen loops on some unions of many shells,
+    e.g. the 33-piece beetle) or (``fallback_on_refusal``) refuses the surface, the surface is
+    meshed with fTetWild (``wildmeshing``) in the time left, and ``notes`` gets a line."""
     if clock is None:
         return tetrahedralize(mesh, **kwargs)
     step = f"tetrahedralize ({backend})"
     if backend != "tetgen" or notes is None or "wildmeshing" not in BACKENDS:
         return clock.run(step, tetrahedralize, mesh, **kwargs)
-
-    def tetgen_within(step_name, **extra):
-        left = clock.remaining()
-        share = None if left is None else TETGEN_TIME_SHARE * left
-        try:
-            return clock.run_within(step_name, share, tetrahedralize, mesh, **dict(kwargs, **extra)), None
-        except StepShareExceeded as exc:
-            return None, (f"TetGen ran past its share of the time bound ({share:.1f} s)", exc)
-        except MeshError as exc:
-            if "ran out of time" in str(exc):
-                raise
-            crashed = "crashed" in str(exc)
-            if not (crashed or fallback_on_refusal):
-                raise
-            return None, ("TetGen crashed" if crashed else f"TetGen refused the surface ({exc})", exc)
-
-    tm, failure = tetgen_within(step)
-    if tm is not None:
-        return tm
-    reason, cause = failure
-    if "refused" not in reason:
-        tm, again = tetgen_within("tetrahedralize (tetgen, no optimisation pass)", optimize=False)
-        if tm is not None:
-            notes.append(f"meshed by TetGen without its optimisation pass: {reason} with it")
-            return tm
-        reason = f"{reason}; without its optimisation pass: {again[0]}"
+    left = clock.remaining()
+    try:
+        return clock.run_within(step, None if left is None else TETGEN_TIME_SHARE * left, tetrahedralize, mesh,
+                                **kwargs)
+    except StepShareExceeded as exc:
+        reason = f"TetGen ran past its share of the time bound ({TETGEN_TIME_SHARE * left:.1f} s)"
+        cause = exc
+    except MeshError as exc:
+        if "ran out of time" in str(exc):
+            raise
+        crashed = "crashed" in str(exc)
+        if not (crashed or fallback_on_refusal):
+            raise
+        reason = "TetGen crashed" if crashed else f"TetGen refused the surface ({exc})"
+        cause = exc
     fallback = dict(kwargs, backend="wildmeshing", relax_quality=False)
     try:
         tm = clock.run("tetrahedralize (wildmeshing fallback)", tetrahedralize, mesh, **fallback)

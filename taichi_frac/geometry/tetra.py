@@ -65,16 +65,13 @@ class TetMesh:
         return len(self.tets)
 
 
-def _tetgen(vertices, faces, max_volume, min_dihedral_deg, minratio=1.5, optimize=True):
+def _tetgen(vertices, faces, max_volume, min_dihedral_deg, minratio=1.5):
     import tetgen
 
     # The optimisation settings (flips + smoothing, dihedral target 165 deg) halve the
     # slivers left by plain quality refinement at no measurable cost (measured on tori).
-    # On some surfaces (unions of many shells) that pass never ends: ``optimize=False``
-    # leaves it out.
-    kwargs = dict(quality=True, minratio=minratio, mindihedral=min_dihedral_deg, verbose=0)
-    if optimize:
-        kwargs.update(opt_scheme=7, opt_max_flip_level=5, opt_iterations=20, optmaxdihedral=165.0)
+    kwargs = dict(quality=True, minratio=minratio, mindihedral=min_dihedral_deg, verbose=0, opt_scheme=7,
+                  opt_max_flip_level=5, opt_iterations=20, optmaxdihedral=165.0)
     if max_volume is not None:
         kwargs.update(fixedvolume=True, maxvolume=float(max_volume))
     try:
@@ -182,7 +179,6 @@ def tetrahedralize(
     tolerance: float = 0.1,
     count_tolerance: float = 0.15,
     relax_quality: bool = False,
-    optimize: bool = True,
 ) -> TetMesh:
     """Fill the closed surface ``mesh`` [m] with tets.
 
@@ -194,17 +190,12 @@ def tetrahedralize(
     keeps the count above ``count_tolerance`` over the target (short surface features, thin
     parts), it re-meshes with the looser bounds of :data:`_TETGEN_RELAXED_QUALITY` until the
     count fits (used for simplified copies of artists' meshes; primitives keep the bound).
-    ``optimize=False`` leaves out TetGen's mesh optimisation pass (flips and smoothing),
-    which loops on a few surfaces; other backends ignore it.
     """
     if backend not in BACKENDS:
         raise MeshError(f"unknown mesher backend {backend!r}: use one of {', '.join(BACKENDS)}")
     if target_tets is not None and max_volume is not None:
         raise ValueError("give target_tets or max_volume, not both")
     run = BACKENDS[backend]
-    if backend == "tetgen" and not optimize:
-        def run(v, f, bound, min_dihedral):
-            return _tetgen(v, f, bound, min_dihedral, optimize=False)
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int64)
     volume = float(mesh.volume)
@@ -215,7 +206,7 @@ def tetrahedralize(
         nonlocal runs
         runs += 1
         v, t = run(vertices, faces, bound, min_dihedral_deg) if quality is None else _tetgen(
-            vertices, faces, bound, quality[1], minratio=quality[0], optimize=optimize)
+            vertices, faces, bound, quality[1], minratio=quality[0])
         if len(t) == 0:
             raise MeshError(f"mesher {backend!r} produced no tets (is the surface closed?)")
         v, t, _ = compact_vertices(v, t)
