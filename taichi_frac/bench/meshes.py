@@ -124,8 +124,13 @@ def _prepare_row(name, source, target: int, out: Path):
     seconds = time.perf_counter() - t0
     # Again through the tet cache, so that the drop's own preparation (inside the
     # Simulation, under the default bound) reuses these tets instead of meshing again.
-    prepare_body(source, scale=scale, repair=True, particles=ParticleOptions(target_particles=target),
-                 time_limit=TIME_LIMIT)
+    try:
+        prepare_body(source, scale=scale, repair=True, particles=ParticleOptions(target_particles=target),
+                     time_limit=TIME_LIMIT)
+    except MeshError as exc:  # the drop's own preparation will say so in the row
+        cache_error = str(exc)
+    else:
+        cache_error = None
     path = source
     if isinstance(source, trimesh.Trimesh):
         path = out / f"{name.replace(' ', '_').replace(',', '')}.obj"
@@ -139,6 +144,8 @@ def _prepare_row(name, source, target: int, out: Path):
                target=target, volume_error=report.volume_error, kept=report.kept_volume_fraction,
                extents_min=float(extents.min()), extents_max=float(extents.max()), seconds=seconds,
                steps=report.timings, surface_closed=report.surface.is_watertight)
+    if cache_error is not None:
+        row["cache_error"] = cache_error
     return row, (path, scale, report)
 
 
