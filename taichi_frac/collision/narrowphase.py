@@ -263,11 +263,11 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
 
 @ti.func
 def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
-                     contacts: ti.template(), margin, dt, i, a, x):
+                     contacts: ti.template(), margin, dt, bounce_speed, i, a, x):
     """Sphere-plane and sphere-box contacts of particle ``i`` of awake body ``a`` (normal
     out of the collider, i.e. into the body); ``x`` [m] its world centre. The sphere
-    finds the contact; with a contact patch, its gap and point are the patch's
-    (``surface.against``)."""
+    finds the contact; with a contact patch, its gap and points are the patch's
+    (``_collider_contacts``; ``bounce_speed`` [m/s]: the restitution threshold)."""
     r = particles.radius[i]
     patch = particles.point_count[i] > 0
     planes = statics.plane_count[None]
@@ -322,24 +322,26 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
             mu = ti.sqrt(bodies.friction[a] * statics.box_friction[k])
             e = ti.max(bodies.restitution[a], statics.box_restitution[k])
         if gap < margin * r + bodies.motion[a]:
-            _collider_contacts(bodies, particles, statics, contacts, margin, dt, i, a, x, patch, n, gap, point,
-                               level, kind, k, key, mu, e)
+            _collider_contacts(bodies, particles, statics, contacts, margin, dt, bounce_speed, i, a, x, patch, n,
+                               gap, point, level, kind, k, key, mu, e)
 
 
 @ti.func
 def _collider_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
-                       contacts: ti.template(), margin, dt, i, a, x, patch, n, gap, point, level, kind, k, key, mu,
-                       e):
+                       contacts: ti.template(), margin, dt, bounce_speed, i, a, x, patch, n, gap, point, level, kind, k,
+                       key, mu, e):
     """Contacts of particle ``i`` (body ``a``, world centre ``x`` [m]) with static collider
     ``k`` (``kind``: GROUND or STATIC_BOX) along its normal ``n`` (out of the collider):
     the sphere's (``gap`` [m], at the collider's ``point`` nearest it) or, with a patch,
-    one per ``surface.manifold`` point (the collider's support along n is ``level`` [m]).
-    ``key``: the cache key of the first; the manifold's points count down from it."""
+    one per ``surface.manifold`` point (the collider's support along n is ``level`` [m]),
+    or one for an impact (approaching faster than ``bounce_speed`` [m/s], the restitution
+    threshold: ``surface.against``). ``key``: the cache key of the first; the manifold's points count down from it."""
     count = 1
     points = ti.Matrix.zero(ti.f32, ti.static(surface.MANIFOLD_POINTS), 3)
     levels = ti.Vector.zero(ti.f32, ti.static(surface.MANIFOLD_POINTS))
     if patch:
-        gap, count, points, levels = surface.against(bodies, particles, a, i, n, level)
+        v, _ = _point_velocity(bodies, a, x)
+        gap, count, points, levels = surface.against(bodies, particles, a, i, n, level, -v.dot(n) > bounce_speed)
     r = particles.radius[i]
     for m in range(count):  # (a dynamic loop: unrolled, each _append was inlined four times)
         g = gap + levels[m]
@@ -355,7 +357,7 @@ def _collider_contacts(bodies: ti.template(), particles: ti.template(), statics:
 
 @ti.func
 def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
-                      contacts: ti.template(), margin, sleep_time, dt):
+                      contacts: ti.template(), margin, sleep_time, dt, bounce_speed):
     """One pass over the particles of awake bodies near something: each particle's world
     centre, its sphere-sphere contacts with each neighbour o of its body a that it makes
     (o > a when both are awake, so a pair is made once; every idle neighbour, which makes
@@ -363,7 +365,8 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: 
     near a static collider. When a's neighbour list overflowed, every body is tried with
     the pair's closing computed here. A parallel task on every arch, unlike the small
     passes: a particle's contacts are appended by one thread in program order
-    (neighbours, cells, entries), and ``order_contacts`` sorts them by particle."""
+    (neighbours, cells, entries), and ``order_contacts`` sorts them by particle.
+    ``bounce_speed`` [m/s]: the restitution threshold (``_collider_contacts``)."""
     for i in range(particles.slot_end[None]):
         a = particles.body[i]
         if a >= 0:
@@ -386,7 +389,7 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: 
                         _pair_contacts(bodies, particles, statics, contacts, margin, sleep_time, dt, i, a, xi, ri,
                                        o, closing)
                 if bodies.near_static[a] == 1:
-                    _static_contacts(bodies, particles, statics, contacts, margin, dt, i, a, xi)
+                    _static_contacts(bodies, particles, statics, contacts, margin, dt, bounce_speed, i, a, xi)
 
 
 @ti.func

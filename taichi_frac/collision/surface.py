@@ -228,14 +228,24 @@ def by_patches(particles: ti.template(), i, j):
 
 
 @ti.func
-def against(bodies: ti.template(), particles: ti.template(), a, i, n, level):
+def against(bodies: ti.template(), particles: ti.template(), a, i, n, level, impact):
     """Sphere ``i`` of body ``a`` against a static collider whose support along the world
     normal ``n`` (out of the collider, into a) is ``level`` [m]: (gap [m] of the deepest
-    point, and ``manifold``'s count, points (world [m]) and levels along n)."""
+    point, and ``manifold``'s count, points (world [m]) and levels along n). ``impact``
+    (the patch approaches faster than the restitution threshold): one point instead, the
+    middle of the band (``contact_spot``). Spread over four contacts, an impact's
+    restitution was shared unevenly: the single ring's rebound fell from 5.8 % to 12.9 %
+    under single-scale's, its first impulse from 1.9 % to 4.1 % under."""
     rot_a = bodies.rotation[a]
     axis = rot_a.transpose() @ n
     low = lowest(particles, i, axis)
     count, points, levels = manifold(particles, i, axis, low)
+    if impact:
+        count = 1
+        spot = contact_spot(particles, i, axis, low)
+        for c in ti.static(range(3)):
+            points[0, c] = spot[c]
+        levels[0] = 0.0
     points = points @ rot_a.transpose()
     for m in ti.static(range(MANIFOLD_POINTS)):
         for c in ti.static(range(3)):
