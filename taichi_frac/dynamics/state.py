@@ -14,9 +14,7 @@ from ..collision.grid import CELLS_PER_SPHERE
 vec3 = ti.math.vec3
 vec4 = ti.math.vec4
 mat3 = ti.math.mat3
-# Contacts remembered per particle for warm starting (a surface-contact patch makes up to
-# four with one partner: collision/surface.py's manifold).
-CACHE_SLOTS = 8
+CACHE_SLOTS = 4  # contacts remembered per particle for warm starting
 # Cluster spheres per body for the narrowphase's pre-test (a sphere near one of them reads
 # the body's grid; narrowphase._pair_contacts): one per 16 collision spheres, at most this
 # many (16 passes about half as many spheres as the box alone, 8 noticeably more, 32 few
