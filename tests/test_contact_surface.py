@@ -103,3 +103,27 @@ def test_chip_dropped_at_10_m_s_never_falls_through_a_flat_body():
     assert lowest > top - 2e-3  # no chip's surface ever more than 2 mm into the slab
     z = world.body_state(chips)["position"][:, 2]
     assert np.all(z > top) and np.all(z < top + 0.01)
+
+
+def test_chips_on_the_ground_come_to_rest_and_sleep():
+    """Thirty-six one-tet chips (2 cm) thrown spinning onto the ground come to rest on a
+    face and sleep within 2 s, as they do on their spheres: each patch holds the ground
+    at up to four points of its face (``surface.manifold``), where one contact under the
+    face's middle let a chip rock from corner to corner forever. At rest every chip lies
+    on a face: its lowest three vertices on the ground (within 0.5 mm)."""
+    chip = single_tet_model(0.02)
+    world = fresh_world(surface_contact=True, sleep_time=0.25)
+    world.add_ground(0.0)
+    rng = np.random.default_rng(1)
+    chips = []
+    for k in range(36):
+        q = rng.normal(size=4)
+        chips.append(world.add_body(chip, ((k % 6) * 0.06, (k // 6) * 0.06, 0.05 + 0.03 * rng.random()),
+                                    tuple(q / np.linalg.norm(q)), (0, 0, -1.0), tuple(rng.normal(0, 3, 3))))
+    for _ in range(100):
+        world.advance(0.02, 10)
+    state = world.body_state(chips)
+    assert state["sleeping"].all()
+    for x, q in zip(state["position"], state["orientation"]):
+        heights = np.sort((chip.vertices @ rotation(q).T + x)[:, 2])
+        np.testing.assert_allclose(heights[:3], 0.0, atol=REST_TOLERANCE)

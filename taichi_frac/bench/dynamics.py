@@ -298,13 +298,21 @@ def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) ->
     return dict(rest=float(world.body_state([body])["position"][0][2]), depth=depth)
 
 
+#: Runs of each 13-ring mode in the contact table, interleaved; the fastest counts. A mode's
+#: first run in a process compiles its kernels (the collide kernel's contact-patch code,
+#: the fracture stage at the first crack) inside one of its frames, which the mean over 50
+#: frames carried as several times the real cost.
+CONTACT_RING_RUNS = 2
+
+
 def _rings_ms(ctx: BenchContext, scene, single: bool, surface: bool, fracture: bool, frames) -> float:
+    """Mean ms/frame of one 13-ring run, its first frame left out."""
     from .tables import run_scene
 
     label = [m[0] for m in CONTACT_MODES if m[1] == single and m[2] == surface][0]
     _, summary, _ = run_scene(ctx, _with_contact(scene, single, surface), f"13 rings, {label}", fracture=fracture,
                               frames=frames)
-    return float(summary.ms_per_frame["mean"])
+    return float(summary.ms_per_frame["mean_after_first"])
 
 
 def contact_section(ctx: BenchContext, scene, frames=None) -> str:
@@ -336,7 +344,12 @@ def contact_section(ctx: BenchContext, scene, frames=None) -> str:
            for k in labels],
     ]
     for fracture in (False, True):
-        ms = {m[0]: _rings_ms(ctx, scene, m[1], m[2], fracture, frames) for m in CONTACT_MODES}
-        rows.append([f"13 rings, fracture {'on' if fracture else 'off'}, ms/frame (ratio to sphere contacts)"]
+        runs = {m[0]: [] for m in CONTACT_MODES}
+        for _ in range(CONTACT_RING_RUNS):
+            for m in CONTACT_MODES:
+                runs[m[0]].append(_rings_ms(ctx, scene, m[1], m[2], fracture, frames))
+        ms = {k: min(v) for k, v in runs.items()}
+        rows.append([f"13 rings, fracture {'on' if fracture else 'off'}, ms/frame, fastest of {CONTACT_RING_RUNS} "
+                     "interleaved runs (ratio to sphere contacts)"]
                     + [f"{ms[k]:.1f} ({ms[k] / ms[labels[1]]:.2f}x)" for k in labels])
     return md_table(["measure", *labels], rows)

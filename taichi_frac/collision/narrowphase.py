@@ -263,67 +263,101 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
 
 @ti.func
 def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
-                     contacts: ti.template(), margin, dt, i, a, x):
+                     contacts: ti.template(), margin, dt, bounce_speed, i, a, x):
     """Sphere-plane and sphere-box contacts of particle ``i`` of awake body ``a`` (normal
     out of the collider, i.e. into the body); ``x`` [m] its world centre. The sphere
-    finds the contact; with a contact patch, its gap and point are the patch's
-    (``surface.against``)."""
+    finds the contact; with a contact patch, its gap and points are the patch's
+    (``_collider_contacts``; ``bounce_speed`` [m/s]: the restitution threshold)."""
     r = particles.radius[i]
     patch = particles.point_count[i] > 0
-    for k in range(statics.plane_count[None]):
-        gap = x[2] - r - statics.plane_height[k]
-        spot = x
-        point = vec3(x[0], x[1], statics.plane_height[k])
-        if patch and gap < margin * r + bodies.motion[a]:
-            gap, spot = surface.against(bodies, particles, a, i, vec3(0.0, 0.0, 1.0), statics.plane_height[k])
-            point = spot - vec3(0.0, 0.0, 0.5 * gap)
-        if gap < margin * r + bodies.motion[a] and gap < margin * r + _speculative(
-                bodies, statics, a, spot, -1, spot, vec3(0.0, 0.0, 1.0), dt):
+    planes = statics.plane_count[None]
+    # (one loop over planes and boxes: each call of _collider_contacts is inlined whole)
+    for s in range(planes + statics.box_count[None]):
+        n = vec3(0.0, 0.0, 1.0)
+        gap = 0.0
+        point = vec3(0.0)
+        level = 0.0
+        kind = GROUND
+        k = s
+        key = -1 - k * ti.static(surface.MANIFOLD_POINTS)
+        mu = 0.0
+        e = 0.0
+        if s < planes:
+            level = statics.plane_height[k]
+            gap = x[2] - r - level
+            point = vec3(x[0], x[1], level)
             mu = ti.sqrt(bodies.friction[a] * statics.plane_friction[k])
             e = ti.max(bodies.restitution[a], statics.plane_restitution[k])
-            _append(contacts, particles, i, -1 - k, a, GROUND, k, vec3(0.0, 0.0, 1.0), point, gap, r, mu, e)
-    for k in range(statics.box_count[None]):
-        rot = statics.box_rotation[k]
-        half = statics.box_half_extents[k]
-        local = rot.transpose() @ (x - statics.box_center[k])
-        q = ti.math.clamp(local, -half, half)
-        d = local - q
-        dist = d.norm()
-        n_local = vec3(0.0, 0.0, 1.0)
-        gap = 0.0
-        if dist > 1e-9:  # centre outside the box
-            n_local = d / dist
-            gap = dist - r
-        else:  # centre inside: leave through the nearest face
-            depth = half - ti.abs(local)
-            axis = 0
-            if depth[1] < depth[axis]:
-                axis = 1
-            if depth[2] < depth[axis]:
-                axis = 2
-            n_local = vec3(0.0, 0.0, 0.0)
-            for m in ti.static(range(3)):
-                if m == axis:
-                    side = 1.0 if local[m] >= 0.0 else -1.0
-                    n_local[m] = side
-                    q[m] = half[m] * side
-                    gap = -depth[m] - r
-        n = rot @ n_local
-        point = statics.box_center[k] + rot @ q
-        spot = x
-        if patch and gap < margin * r + bodies.motion[a]:
-            gap, spot = surface.against(bodies, particles, a, i, n, point.dot(n))
-            point = spot - 0.5 * gap * n
-        if gap < margin * r + bodies.motion[a] and gap < margin * r + _speculative(
-                bodies, statics, a, spot, -1, spot, n, dt):
+        else:
+            k = s - planes
+            kind = STATIC_BOX
+            key = -1000 - k * ti.static(surface.MANIFOLD_POINTS)
+            rot = statics.box_rotation[k]
+            half = statics.box_half_extents[k]
+            local = rot.transpose() @ (x - statics.box_center[k])
+            q = ti.math.clamp(local, -half, half)
+            d = local - q
+            dist = d.norm()
+            n_local = vec3(0.0, 0.0, 1.0)
+            if dist > 1e-9:  # centre outside the box
+                n_local = d / dist
+                gap = dist - r
+            else:  # centre inside: leave through the nearest face
+                depth = half - ti.abs(local)
+                axis = 0
+                if depth[1] < depth[axis]:
+                    axis = 1
+                if depth[2] < depth[axis]:
+                    axis = 2
+                n_local = vec3(0.0, 0.0, 0.0)
+                for m in ti.static(range(3)):
+                    if m == axis:
+                        side = 1.0 if local[m] >= 0.0 else -1.0
+                        n_local[m] = side
+                        q[m] = half[m] * side
+                        gap = -depth[m] - r
+            n = rot @ n_local
+            point = statics.box_center[k] + rot @ q
+            level = point.dot(n)
             mu = ti.sqrt(bodies.friction[a] * statics.box_friction[k])
             e = ti.max(bodies.restitution[a], statics.box_restitution[k])
-            _append(contacts, particles, i, -1000 - k, a, STATIC_BOX, k, n, point, gap, r, mu, e)
+        if gap < margin * r + bodies.motion[a]:
+            _collider_contacts(bodies, particles, statics, contacts, margin, dt, bounce_speed, i, a, x, patch, n,
+                               gap, point, level, kind, k, key, mu, e)
+
+
+@ti.func
+def _collider_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
+                       contacts: ti.template(), margin, dt, bounce_speed, i, a, x, patch, n, gap, point, level, kind, k,
+                       key, mu, e):
+    """Contacts of particle ``i`` (body ``a``, world centre ``x`` [m]) with static collider
+    ``k`` (``kind``: GROUND or STATIC_BOX) along its normal ``n`` (out of the collider):
+    the sphere's (``gap`` [m], at the collider's ``point`` nearest it) or, with a patch,
+    one per ``surface.manifold`` point (the collider's support along n is ``level`` [m]),
+    or one for an impact (approaching faster than ``bounce_speed`` [m/s], the restitution
+    threshold: ``surface.against``). ``key``: the cache key of the first; the manifold's points count down from it."""
+    count = 1
+    points = ti.Matrix.zero(ti.f32, ti.static(surface.MANIFOLD_POINTS), 3)
+    levels = ti.Vector.zero(ti.f32, ti.static(surface.MANIFOLD_POINTS))
+    if patch:
+        v, _ = _point_velocity(bodies, a, x)
+        gap, count, points, levels = surface.against(bodies, particles, a, i, n, level, -v.dot(n) > bounce_speed)
+    r = particles.radius[i]
+    for m in range(count):  # (a dynamic loop: unrolled, each _append was inlined four times)
+        g = gap + levels[m]
+        spot = x
+        at = point
+        if patch:  # (a point on the patch, the contact half the gap below it)
+            spot = vec3(points[m, 0], points[m, 1], points[m, 2])
+            at = spot - 0.5 * g * n
+        if g < margin * r + bodies.motion[a] and g < margin * r + _speculative(bodies, statics, a, spot, -1, spot, n,
+                                                                              dt):
+            _append(contacts, particles, i, key - m, a, kind, k, n, at, g, r, mu, e)
 
 
 @ti.func
 def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
-                      contacts: ti.template(), margin, sleep_time, dt):
+                      contacts: ti.template(), margin, sleep_time, dt, bounce_speed):
     """One pass over the particles of awake bodies near something: each particle's world
     centre, its sphere-sphere contacts with each neighbour o of its body a that it makes
     (o > a when both are awake, so a pair is made once; every idle neighbour, which makes
@@ -331,7 +365,8 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: 
     near a static collider. When a's neighbour list overflowed, every body is tried with
     the pair's closing computed here. A parallel task on every arch, unlike the small
     passes: a particle's contacts are appended by one thread in program order
-    (neighbours, cells, entries), and ``order_contacts`` sorts them by particle."""
+    (neighbours, cells, entries), and ``order_contacts`` sorts them by particle.
+    ``bounce_speed`` [m/s]: the restitution threshold (``_collider_contacts``)."""
     for i in range(particles.slot_end[None]):
         a = particles.body[i]
         if a >= 0:
@@ -354,7 +389,7 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: 
                         _pair_contacts(bodies, particles, statics, contacts, margin, sleep_time, dt, i, a, xi, ri,
                                        o, closing)
                 if bodies.near_static[a] == 1:
-                    _static_contacts(bodies, particles, statics, contacts, margin, dt, i, a, xi)
+                    _static_contacts(bodies, particles, statics, contacts, margin, dt, bounce_speed, i, a, xi)
 
 
 @ti.func

@@ -38,9 +38,21 @@ vec3 = ti.math.vec3
 TRUSTED_DEPTH = 0.5
 
 #: Points within this fraction of the sphere's radius of a patch's deepest point share the
-#: contact: the contact point is their mean (a flat patch resting on a plane touches at its
-#: middle, not at whichever corner comes first).
+#: contact: against a static collider they are its ``manifold``; against a chip, the
+#: contact point is their mean (a flat patch touches over its face, not at whichever corner
+#: comes first).
 SUPPORT_BAND = 0.1
+
+#: Contacts a patch makes at most with one static collider: its manifold, spread over the
+#: points within ``SUPPORT_BAND`` of its deepest (``manifold``). One contact at the
+#: band's mean left a one-sphere chip lying on a face balanced on one point under its
+#: middle: it rocked from corner to corner and never slept (22 of 36 one-tet chips awake
+#: after 3 s); three or four corners hold it like a face.
+MANIFOLD_POINTS = 4
+
+#: Manifold points closer than this fraction of the sphere's radius to the ones already
+#: kept (or to their line) add nothing: the manifold stops there.
+MANIFOLD_SPREAD = 0.05
 
 
 @ti.func
@@ -87,6 +99,76 @@ def contact_spot(particles: ti.template(), p, axis, low):
                 weight += 1.0
         spot = total / weight
     return spot
+
+
+@ti.func
+def manifold(particles: ti.template(), p, axis, low):
+    """Up to ``MANIFOLD_POINTS`` of sphere ``p``'s patch points within ``SUPPORT_BAND`` of
+    its radius of the lowest level ``low`` along ``axis`` (body frame), spread over that
+    band the way a box's contact face is reduced to its corners (Bullet's
+    ``btPersistentManifold::sortCachedPoints`` keeps the largest area): the deepest point,
+    the band point farthest from it, the one farthest from their line, and the one
+    farthest on the other side of that line. Returns (count, points (mat 4x3, body frame
+    [m], rows past ``count`` unused), levels (vec4 [m]: each point's height above ``low``
+    along ``axis``)). A sphere without a patch: its lowest point, count 1."""
+    points = ti.Matrix.zero(ti.f32, ti.static(MANIFOLD_POINTS), 3)
+    levels = ti.Vector.zero(ti.f32, ti.static(MANIFOLD_POINTS))
+    kept = 1
+    start = particles.point_start[p]
+    count = particles.point_count[p]
+    radius = particles.radius[p]
+    first = particles.offset[p] - radius * axis
+    if count > 0:
+        band = low + SUPPORT_BAND * radius
+        spread2 = (MANIFOLD_SPREAD * radius) ** 2
+        first = particles.surface_point[start]
+        for k in range(start, start + count):
+            x = particles.surface_point[k]
+            if x.dot(axis) < first.dot(axis):
+                first = x
+        # Second: farthest from the first.
+        second = first
+        best = spread2
+        for k in range(start, start + count):
+            x = particles.surface_point[k]
+            if x.dot(axis) <= band and (x - first).norm_sqr() > best:
+                best = (x - first).norm_sqr()
+                second = x
+        edge = second - first
+        third = first
+        fourth = first
+        if best > spread2:
+            kept = 2
+            # Third: farthest from the line first-second (largest triangle).
+            best3 = spread2 * edge.norm_sqr()
+            for k in range(start, start + count):
+                x = particles.surface_point[k]
+                area = (x - first).cross(edge).norm_sqr()
+                if x.dot(axis) <= band and area > best3:
+                    best3 = area
+                    third = x
+            if best3 > spread2 * edge.norm_sqr():
+                kept = 3
+                # Fourth: farthest from that line on the other side of it.
+                side = (third - first).cross(edge)
+                best4 = spread2 * edge.norm() * side.norm()
+                for k in range(start, start + count):
+                    x = particles.surface_point[k]
+                    away = -(x - first).cross(edge).dot(side)
+                    if x.dot(axis) <= band and away > best4:
+                        best4 = away
+                        fourth = x
+                if best4 > spread2 * edge.norm() * side.norm():
+                    kept = 4
+        rows = ti.Matrix.rows([first, second, third, fourth])
+        for m in ti.static(range(MANIFOLD_POINTS)):
+            for d in ti.static(range(3)):
+                points[m, d] = rows[m, d]
+            levels[m] = rows[m, 0] * axis[0] + rows[m, 1] * axis[1] + rows[m, 2] * axis[2] - low
+    else:
+        for d in ti.static(range(3)):
+            points[0, d] = first[d]
+    return kept, points, levels
 
 
 @ti.func
@@ -146,12 +228,26 @@ def by_patches(particles: ti.template(), i, j):
 
 
 @ti.func
-def against(bodies: ti.template(), particles: ti.template(), a, i, n, level):
+def against(bodies: ti.template(), particles: ti.template(), a, i, n, level, impact):
     """Sphere ``i`` of body ``a`` against a static collider whose support along the world
-    normal ``n`` (out of the collider, into a) is ``level`` [m]: (gap [m], a's contact
-    spot (world [m]))."""
+    normal ``n`` (out of the collider, into a) is ``level`` [m]: (gap [m] of the deepest
+    point, and ``manifold``'s count, points (world [m]) and levels along n). ``impact``
+    (the patch approaches faster than the restitution threshold): one point instead, the
+    middle of the band (``contact_spot``). Spread over four contacts, an impact's
+    restitution was shared unevenly: the single ring's rebound fell from 5.8 % to 12.9 %
+    under single-scale's, its first impulse from 1.9 % to 4.1 % under."""
     rot_a = bodies.rotation[a]
     axis = rot_a.transpose() @ n
     low = lowest(particles, i, axis)
-    spot = bodies.position[a] + rot_a @ contact_spot(particles, i, axis, low)
-    return bodies.position[a].dot(n) + low - level, spot
+    count, points, levels = manifold(particles, i, axis, low)
+    if impact:
+        count = 1
+        spot = contact_spot(particles, i, axis, low)
+        for c in ti.static(range(3)):
+            points[0, c] = spot[c]
+        levels[0] = 0.0
+    points = points @ rot_a.transpose()
+    for m in ti.static(range(MANIFOLD_POINTS)):
+        for c in ti.static(range(3)):
+            points[m, c] += bodies.position[a][c]
+    return bodies.position[a].dot(n) + low - level, count, points, levels
