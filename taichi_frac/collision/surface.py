@@ -1,6 +1,6 @@
 """Contacts from the true surface: the narrowphase's spheres say which parts of two bodies
 may touch; this module says where, along which normal and how deep, from the surface
-patches behind the spheres (``model.ContactPatches``: the vertices of the boundary
+patches behind the spheres (``geometry.contact_patches.ContactPatches``: the vertices of the boundary
 triangles of each sphere's member tets, in the body frame).
 
 Depth along a normal n is the gap between the two patches' supports (the separating-axis
