@@ -78,7 +78,7 @@ class Simulation:
 
     Usage::
 
-        sim = Simulation(load_scene("scenes/single_ring.toml"))
+        sim = Simulation(load_scene("single_ring"))
         summary = sim.run()                  # writes scene.output_path
         print(summary.fragments)
 

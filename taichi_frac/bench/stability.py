@@ -96,7 +96,7 @@ class Tracker:
 @dataclass
 class CaseResult:
     case: str
-    issue: int
+    kind: str  # "dynamics" or "fracture": the part of the simulation the case stresses
     criterion: str
     passed: bool
     max_speed: float
@@ -117,13 +117,13 @@ def _world(ctx, **options):
     return world
 
 
-def _result(name, issue, own_check, own_ok, tracker, bound, notes="", extra_nan=False):
+def _result(name, kind, own_check, own_ok, tracker, bound, notes="", extra_nan=False):
     ok_speed = tracker.max_speed <= bound
     ok_pen = tracker.max_penetration_ratio < 1.0
     nan = tracker.nan or extra_nan
     passed = (not nan) and ok_speed and ok_pen and own_ok
     criterion = f"no NaN; speed <= {bound:.2f} m/s; penetration < 1 radius" + (f"; {own_check}" if own_check else "")
-    return CaseResult(name, issue, criterion, passed, tracker.max_speed, bound, tracker.max_penetration,
+    return CaseResult(name, kind, criterion, passed, tracker.max_speed, bound, tracker.max_penetration,
                       tracker.max_penetration_ratio, nan, notes)
 
 
@@ -144,7 +144,7 @@ def case_deep_overlap(ctx, frames=100):
     t.run(frames)
     state = world.body_state([a, b])
     gap = float(np.linalg.norm(state["position"][0] - state["position"][1]))
-    return _result("bodies starting deeply overlapped (two 5 cm spheres, centres 1 cm apart)", 3,
+    return _result("bodies starting deeply overlapped (two 5 cm spheres, centres 1 cm apart)", "dynamics",
                    "separated to >= 1.5 radii", gap >= 0.075, t, _bound(world, [(0, 0.3)]),
                    f"centre distance at the end {100 * gap:.1f} cm")
 
@@ -166,7 +166,7 @@ def case_mass_ratio(ctx, frames=100):
     # sinks into the big one (centre outside the 20 cm box less its own half size).
     outside = bool(np.max(np.abs(local)) >= 0.1 - 0.01)
     ratio = big.mass / small.mass
-    return _result(f"mass ratio 1:{ratio:.0f} (2 cm cube dropped on a 20 cm cube)", 3,
+    return _result(f"mass ratio 1:{ratio:.0f} (2 cm cube dropped on a 20 cm cube)", "dynamics",
                    "small cube never inside the big one", outside, t, _bound(world, [(0, 0.24)]),
                    f"heights small / big {z[0]:.3f} / {z[1]:.3f} m, small in big's frame "
                    f"{np.round(local, 3).tolist()} m")
@@ -180,7 +180,7 @@ def case_single_tet(ctx, frames=100):
     t = Tracker(world)
     t.run(frames)
     z = float(world.body_state([body])["position"][0][2])
-    return _result("a body of a single tet (5 cm edges)", 3, "above the ground at the end", z > 0.0, t,
+    return _result("a body of a single tet (5 cm edges)", "dynamics", "above the ground at the end", z > 0.0, t,
                    _bound(world, [(0, 0.2)]), f"COM height at the end {1e3 * z:.1f} mm")
 
 
@@ -203,7 +203,7 @@ def case_pile(ctx, frames=25, bodies=1000):
     inside = bool(np.all(np.abs(world.body_state()["position"][:, :2]) < 0.3))
     overflows = world.stats.contact_overflows
     spin = 3.0 * 0.04  # |w| x edge: the bodies start spinning
-    return _result(f"{len(grid):,} single-tet bodies in a pile (walls, {frames} frames)", 3,
+    return _result(f"{len(grid):,} single-tet bodies in a pile (walls, {frames} frames)", "dynamics",
                    "no contact lost to capacity; all inside the walls", inside and overflows == 0, t,
                    _bound(world, [(spin, float(grid[:, 2].max()))]), f"contacts lost {overflows}")
 
@@ -219,7 +219,7 @@ def case_fast_sphere(ctx):
     t.run(4, frame_dt=0.005, substeps=1, each=lambda st: xs.append(float(st["position"][0][0])))
     vx = float(world.body_state([body])["linear_velocity"][0][0])
     ok = bool(xs) and max(xs) < 0.09 + 1e-3 and vx < 0
-    return _result("a 1 cm sphere at 100 m/s against a 2 cm wall", 3, "never past the wall's face; bounced back",
+    return _result("a 1 cm sphere at 100 m/s against a 2 cm wall", "dynamics", "never past the wall's face; bounced back",
                    ok, t, _bound(world, [(100.0, 0.0)]),
                    f"furthest x {max(xs) if xs else float('nan'):.4f} m (wall face 0.09 m), vx at the end {vx:.1f} m/s, "
                    f"{world.stats.total_substeps} substeps")
@@ -265,7 +265,7 @@ def _fracture_case(ctx, name, model, points, normals, forces, material, options,
     t, world = _drop_pieces(ctx, pieces, frames)
     own_ok, own_text = (True, "") if own_check is None else own_check(analysis, split, pieces)
     spin = 1.0 * 0.125  # |w| x ring radius
-    result = _result(name, 4, "mass conserved by the split" + (f"; {own_text}" if own_text else ""),
+    result = _result(name, "fracture", "mass conserved by the split" + (f"; {own_text}" if own_text else ""),
                      own_ok and mass_ok, t, _bound(world, [(spin, pose_height)]),
                      f"peak principal stress {analysis.peak_principal_stress / 1e6:.3g} MPa, "
                      f"{len(analysis.cracks)} cracks, {len(pieces)} pieces", extra_nan=stress_nan or piece_nan)
@@ -313,7 +313,7 @@ def fracture_cases(ctx, frames=50, model=None):
     single = [p for p in pieces if p.model.tet_count == 1]
     t, world = _drop_pieces(ctx, pieces, frames)
     nan = any(not np.all(np.isfinite(p.model.inertia)) for p in pieces)
-    out.append(_result("a one-tet fragment (isolated by cracks on its faces), dropped with the ring", 4,
+    out.append(_result("a one-tet fragment (isolated by cracks on its faces), dropped with the ring", "fracture",
                        "a 1-tet piece exists, positive inertia",
                        bool(single) and all(np.all(np.linalg.eigvalsh(p.model.inertia) > 0) for p in single),
                        t, _bound(world, [(0.125, 0.3)]), f"{len(pieces)} pieces, {len(single)} of one tet",
@@ -355,7 +355,7 @@ def run(ctx: BenchContext, quick_frames: int = 15) -> Section:
 
 
 def section(cases: list[CaseResult], seconds: float, frames: int) -> Section:
-    rows = [[f"{c.case} ({'dynamics' if c.issue == 3 else 'fracture'})", ("pass" if c.passed else "**FAIL**") + f": {c.criterion}",
+    rows = [[f"{c.case} ({c.kind})", ("pass" if c.passed else "**FAIL**") + f": {c.criterion}",
              f"{c.max_speed:.2f}", f"{1e3 * c.max_penetration:.2f} ({c.penetration_ratio:.2f} r)",
              "found" if c.nan else "none", c.notes] for c in cases]
     passed = sum(c.passed for c in cases)
