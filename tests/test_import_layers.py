@@ -1,0 +1,78 @@
+"""The package's import layers (docs/ARCHITECTURE.md): every relative import inside
+``taichi_frac`` goes down the list of layers or stays in its own layer, and no module
+imports the test suite. Checked on the source text (ast), so a lazy import inside a
+function counts too."""
+
+import ast
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / "taichi_frac"
+
+#: (module prefix, layer): 0 is the top; the longest matching prefix decides.
+LAYERS = [
+    ("cli", 0), ("__main__", 0), ("commands", 0), ("sweep", 0), ("bench", 0),
+    ("simulation", 1),
+    ("io", 2), ("fracture.stage", 2),
+    ("scenes", 3), ("geometry.prepare", 3), ("geometry.piece_surface", 3), ("geometry.piece_checks", 3),
+    ("fracture", 4),
+    ("dynamics", 5),
+    ("collision", 6),
+    ("model", 7), ("geometry", 7),
+    ("kinematics", 8), ("options", 8), ("runtime", 8), ("interrupts", 8),
+]
+
+
+def layer(module: str) -> int | None:
+    best = None
+    for prefix, level in LAYERS:
+        if (module == prefix or module.startswith(prefix + ".")) and (best is None or len(prefix) > len(best[0])):
+            best = (prefix, level)
+    return None if best is None else best[1]
+
+
+def imports(path: Path):
+    """(imported module, line) of every import in ``path``, relative ones resolved
+    against the package (``from .x import y`` -> ``x.y``: y may be a module)."""
+    parts = list(path.relative_to(PACKAGE).with_suffix("").parts)
+    package = parts[:-1] if parts[-1] != "__init__" else parts[:-1]
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            if node.level == 0:
+                yield (node.module or ""), node.lineno
+                continue
+            base = package[: len(package) - (node.level - 1)]
+            module = base + (node.module.split(".") if node.module else [])
+            for alias in node.names:
+                yield ".".join(module + [alias.name]), node.lineno
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name, node.lineno
+
+
+def test_layer_lookup_by_longest_prefix():
+    assert layer("fracture.stage") == 2 and layer("fracture.cracks") == 4
+    assert layer("geometry.prepare") == 3 and layer("geometry.rays") == 7
+    assert layer("kinematics.quaternion.quat_mul") == 8 and layer("numpy") is None
+
+
+def test_no_module_imports_a_layer_above_its_own():
+    upward = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        own = ".".join(path.relative_to(PACKAGE).with_suffix("").parts).removesuffix(".__init__")
+        mine = layer(own)
+        if mine is None or own.endswith("__init__"):
+            continue
+        for module, line in imports(path):
+            theirs = layer(module)
+            if theirs is not None and theirs < mine:
+                upward.append(f"{path.relative_to(PACKAGE.parent)}:{line} imports {module}")
+    assert not upward, "imports against the layers of docs/ARCHITECTURE.md:\n" + "\n".join(upward)
+
+
+def test_the_package_never_imports_the_tests():
+    found = [f"{path.relative_to(PACKAGE.parent)}:{line} imports {module}"
+             for path in sorted(PACKAGE.rglob("*.py")) for module, line in imports(path)
+             if module.split(".")[0] in ("tests", "support", "conftest") or module.startswith("test_")]
+    text_hits = [str(path.relative_to(PACKAGE.parent)) for path in PACKAGE.rglob("*.py")
+                 if "sys.path" in path.read_text() and "tests" in path.read_text()]
+    assert not found and not text_hits, found + text_hits
