@@ -33,6 +33,7 @@ by smooth value noise, the same on both faces, so the two sides of a crack still
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import manifold3d as m3
@@ -217,9 +218,18 @@ def _value_noise(u: np.ndarray, v: np.ndarray, seed: int) -> np.ndarray:
 
 def tangent_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The crack's in-plane axes (the analysis' own choice, fracture/cracks.py)."""
+    return _tangent_frame_of(*(float(c) for c in normal))
+
+
+@functools.lru_cache(maxsize=4096)
+def _tangent_frame_of(x: float, y: float, z: float) -> tuple[np.ndarray, np.ndarray]:
+    # Kept per normal: every piece's mesh asks again for each crack it inherited, and a
+    # scene's few hundred cracks repeat thousands of times (numpy's small-array overhead).
     from ..fracture.cracks import tangent_frame as crack_frame
 
-    return crack_frame(normal)
+    e1, e2 = crack_frame(np.array([x, y, z]))
+    e1.flags.writeable = e2.flags.writeable = False
+    return e1, e2
 
 
 def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, spacing: float, roughness: float,
@@ -509,23 +519,21 @@ def _assign_parts(parts, model, labels, spacing) -> list[int]:
             # than its own: ask which tets' centroids it holds, by their volume. (Not for
             # chips under a spacing cubed: a refracture through a piece's hairline shells
             # leaves dozens, and which side owns one is invisible.)
-            tets = _tets_inside(part, model, vp.min(axis=0), vp.max(axis=0), tri)
+            tets = _tets_inside(model, vp.min(axis=0), vp.max(axis=0), vp[tri_verts])
             if len(tets):
                 votes = np.bincount(labels[tets] + 1, weights=model.tet_volume[tets])
         owners.append(int(np.argmax(votes)) - 1)
     return owners
 
 
-def _tets_inside(part, model, low, high, triangles) -> np.ndarray:
-    """Up to MAX_PROBED_TETS tets (evenly spread over those in the part's box) whose
-    centroids lie inside ``part``; ``triangles`` its faces."""
+def _tets_inside(model, low, high, triangles) -> np.ndarray:
+    """Up to MAX_PROBED_TETS tets (evenly spread over those in the box ``low``..``high``
+    (3,) [m]) whose centroids lie inside the closed surface ``triangles`` (F,3,3) [m]."""
     from .piece_checks import inside
 
     in_box = np.nonzero(np.all((model.particle_position >= low) & (model.particle_position <= high), axis=1))[0]
     in_box = in_box[:: max(1, len(in_box) // MAX_PROBED_TETS)]
-    mesh = part.to_mesh64()
-    every = np.asarray(mesh.vert_properties)[:, :3][np.asarray(mesh.tri_verts, dtype=np.int64)]
-    return in_box[inside(model.particle_position[in_box], every)]
+    return in_box[inside(model.particle_position[in_box], triangles)]
 
 
 def _face_cracks(corner_crack: np.ndarray, triangles: np.ndarray, cracks, spacing: float) -> np.ndarray:
