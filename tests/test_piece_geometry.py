@@ -161,6 +161,47 @@ def test_finite_crack_and_ring_crack_make_closed_pieces_and_cut_again(box):
     assert sum(volumes) == pytest.approx(parent_volume, rel=1e-3)
 
 
+def test_a_piece_the_cut_fails_gets_its_tets_boundary(box):
+    """Where the slabs leave a gap in the wall between two pieces, the part on both sides
+    goes to one of them and the other keeps only a chip (here a bead of the artist's surface
+    beside it, a separate shell): both get their tets' boundary instead, exact in volume,
+    and the piece the cut did not fail keeps its render solid. Three pieces of the box:
+    A (x < 0), B (0 < x < 0.04), C (x > 0.04); the wall between A and B gets no slab."""
+    from taichi_frac.io.fragment_mesh import fragment_surface
+
+    model, report, _ = box
+    spacing = model.spacing
+    side = 0.5 * spacing
+    bead = trimesh.creation.box(extents=(side, side, side))
+    bead.apply_translation([0.02, SIZE[1] / 2 + 0.3 * spacing + side / 2, 0.0])
+    surface = trimesh.util.concatenate([report.surface, bead])
+    render = render_solid_from_surface(surface, model.com_in_source, model.spacing)
+    x_axis = np.array([1.0, 0.0, 0.0])
+    walls = [CrackPlane(point=np.array([x, 0.0, 0.0]) - model.com_in_source, normal=x_axis, extent=1.0,
+                        peak_stress=1.0) for x in (0.0, 0.04)]
+    split = split_body(model, walls, FractureOptions())
+    pieces = make_fragments(model, split, np.zeros(3), [1.0, 0.0, 0.0, 0.0], np.zeros(3), np.zeros(3), None,
+                            PARTICLES, options=FractureOptions())
+    assert len(pieces) == 3
+    leaky = [dataclasses.replace(walls[0], extent=1e-9), walls[1]]  # cuts no bond: no slab
+    renders, counts = cut_render_solid(render, model, split.fragment_tets, leaky,
+                                       [p.model.com_in_source for p in pieces])
+    order = np.argsort([p.model.com_in_source[0] for p in pieces])  # A, B, C
+    for piece, solid in zip(pieces, renders):
+        if solid is None:  # what the cache then writes (io/recorder.py)
+            vertices, faces, _ = fragment_surface(piece.model, model)
+        else:
+            mesh = piece_mesh(solid)
+            _assert_closed(mesh)
+            vertices, faces = mesh.vertices, mesh.faces
+        assert signed_volume(vertices, faces) == pytest.approx(piece.model.volume, rel=0.02)
+    assert counts["fallback_pieces"] == 2
+    assert renders[order[0]] is None and renders[order[1]] is None and renders[order[2]] is not None
+    # C is the box beyond x = 0.04 less half a slab.
+    mesh = piece_mesh(renders[order[2]])
+    assert signed_volume(mesh.vertices, mesh.faces) == pytest.approx(np.prod(SIZE) * 0.06 / SIZE[0], rel=1e-3)
+
+
 def test_rough_cracks_fit_together_and_keep_the_outside(box):
     model, report, _ = box
     render = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)

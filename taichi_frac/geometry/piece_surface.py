@@ -33,6 +33,7 @@ by smooth value noise, the same on both faces, so the two sides of a crack still
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import manifold3d as m3
@@ -64,6 +65,13 @@ DUST_VOLUME_FACTOR = 1e-2
 
 #: Largest gap [particle spacings] between a ring crack's sphere and its polygon.
 SPHERE_SAGITTA_FACTOR = 0.02
+
+#: A piece whose parts hold less than this share of its tets' volume lost its material to a
+#: neighbour (the slabs left a gap in the wall between them): it gets its tets' boundary.
+LOST_VOLUME_SHARE = 0.5
+#: The piece whose part holds a lost piece's tets gets its tets' boundary too when the lost
+#: volume is more than this share of its own tets' volume (else it would carry it along).
+SWALLOWED_VOLUME_SHARE = 0.05
 
 # Vertex property columns after x, y, z: corner normal (3), UV (2), crack index (-1: the
 # artist's surface).
@@ -210,9 +218,18 @@ def _value_noise(u: np.ndarray, v: np.ndarray, seed: int) -> np.ndarray:
 
 def tangent_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The crack's in-plane axes (the analysis' own choice, fracture/cracks.py)."""
+    return _tangent_frame_of(*(float(c) for c in normal))
+
+
+@functools.lru_cache(maxsize=4096)
+def _tangent_frame_of(x: float, y: float, z: float) -> tuple[np.ndarray, np.ndarray]:
+    # Kept per normal: every piece's mesh asks again for each crack it inherited, and a
+    # scene's few hundred cracks repeat thousands of times (numpy's small-array overhead).
     from ..fracture.cracks import tangent_frame as crack_frame
 
-    return crack_frame(normal)
+    e1, e2 = crack_frame(np.array([x, y, z]))
+    e1.flags.writeable = e2.flags.writeable = False
+    return e1, e2
 
 
 def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, spacing: float, roughness: float,
@@ -338,9 +355,10 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
         roughness: [m] crack-face noise amplitude (0: flat); roughness_scale [m] its
             wavelength (None: 4 particle spacings); seed: the noise's seed.
 
-    Returns (pieces, stats): pieces a list of F RenderSolid or None (a piece that got no part
-    of the render solid: the caller falls back to its tets' boundary); stats a dict of counts
-    (slabs, parts, unassigned parts, pieces without a part).
+    Returns (pieces, stats): pieces a list of F RenderSolid or None (the caller then gives the
+    piece its tets' boundary, exact in volume); stats a dict of counts (slabs, parts,
+    unassigned parts, pieces without a part, ``fallback_pieces``: pieces set to None because
+    the cut failed them, see ``_failed_pieces``).
     """
     from ..fracture.crack_types import CrackPlane
 
@@ -381,9 +399,14 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     stats["parts"] = len(parts)
     stats["carved_pieces"] = int(sum(1 for o in owner if o < -1))
     owner = [-(o + 2) if o < -1 else o for o in owner]
+    failed = _failed_pieces(parts, owner, model, fragment_tets)
+    stats["fallback_pieces"] = len(failed)
     pieces = []
     for k, origin in enumerate(np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)):
         mine = [p for p, o in zip(parts, owner) if o == k]
+        if k in failed:
+            pieces.append(None)
+            continue
         if not mine:
             pieces.append(None)
             stats["empty_pieces"] += 1
@@ -402,6 +425,52 @@ def _winding_inside(points: np.ndarray, solid: m3.Manifold) -> np.ndarray:
     return inside(points, np.asarray(mesh.vert_properties)[:, :3][np.asarray(mesh.tri_verts, dtype=np.int64)])
 
 
+def _part_holding(points: np.ndarray, parts) -> int | None:
+    """The index of the part holding most of ``points`` (N,3) [m], None when none holds any."""
+    best, best_count = None, 0
+    for j, part in enumerate(parts):
+        box = part.bounding_box()
+        near = np.all((points >= np.asarray(box[:3])) & (points <= np.asarray(box[3:])), axis=1)
+        if not near.any():
+            continue
+        count = int(_winding_inside(points[near], part).sum())
+        if count > best_count:
+            best, best_count = j, count
+    return best
+
+
+def _probe_points(model, tets: np.ndarray) -> np.ndarray:
+    """About 16 of ``tets``' centroids [m], evenly spread over the list."""
+    return model.particle_position[tets[:: max(1, len(tets) // 16)]]
+
+
+def _failed_pieces(parts, owner, model, fragment_tets) -> set[int]:
+    """Pieces the cut failed, to be given their tets' boundary: those whose parts hold less
+    than LOST_VOLUME_SHARE of their tets' volume (where the slabs leave a gap in the wall
+    between two pieces, the part on both sides goes to one of them by the vote and the other
+    keeps only chips), and the piece that got the part holding a lost piece's tets when the
+    volume it gained is more than SWALLOWED_VOLUME_SHARE of its own. A piece with no part at
+    all was carved already (``_carve_missing_pieces``) or has no render solid."""
+    rendered = np.zeros(len(fragment_tets))
+    for part, o in zip(parts, owner):
+        if o >= 0:
+            rendered[o] += part.volume()
+    failed = set()
+    for k, tets in enumerate(fragment_tets):
+        tets = np.asarray(tets, dtype=np.int64)
+        own = float(model.tet_volume[tets].sum())
+        if k not in owner or rendered[k] >= LOST_VOLUME_SHARE * own:
+            continue
+        failed.add(k)
+        holder = _part_holding(_probe_points(model, tets), parts)
+        if holder is None or owner[holder] < 0 or owner[holder] == k:
+            continue
+        taker = owner[holder]
+        if own - rendered[k] > SWALLOWED_VOLUME_SHARE * float(model.tet_volume[np.asarray(fragment_tets[taker])].sum()):
+            failed.add(taker)
+    return failed
+
+
 def _carve_missing_pieces(parts, owner, model, fragment_tets):
     """A piece no part went to (a few tets where cracks meet, smaller than the planes can
     resolve) is carved out of the part holding its tets: the part's intersection with the
@@ -412,16 +481,7 @@ def _carve_missing_pieces(parts, owner, model, fragment_tets):
         if k in owner or -(k + 2) in owner:
             continue
         tets = np.asarray(tets, dtype=np.int64)
-        probe = model.particle_position[tets[:: max(1, len(tets) // 16)]]
-        best, best_count = None, 0
-        for j, part in enumerate(parts):
-            lo, hi = (np.asarray(v) for v in (part.bounding_box()[:3], part.bounding_box()[3:]))
-            near = np.all((probe >= lo) & (probe <= hi), axis=1)
-            if not near.any():
-                continue
-            count = int(_winding_inside(probe[near], part).sum())
-            if count > best_count:
-                best, best_count = j, count
+        best = _part_holding(_probe_points(model, tets), parts)
         if best is None:
             continue
         hull = _with_crack_index(
@@ -459,23 +519,21 @@ def _assign_parts(parts, model, labels, spacing) -> list[int]:
             # than its own: ask which tets' centroids it holds, by their volume. (Not for
             # chips under a spacing cubed: a refracture through a piece's hairline shells
             # leaves dozens, and which side owns one is invisible.)
-            tets = _tets_inside(part, model, vp.min(axis=0), vp.max(axis=0), tri)
+            tets = _tets_inside(model, vp.min(axis=0), vp.max(axis=0), vp[tri_verts])
             if len(tets):
                 votes = np.bincount(labels[tets] + 1, weights=model.tet_volume[tets])
         owners.append(int(np.argmax(votes)) - 1)
     return owners
 
 
-def _tets_inside(part, model, low, high, triangles) -> np.ndarray:
-    """Up to MAX_PROBED_TETS tets (evenly spread over those in the part's box) whose
-    centroids lie inside ``part``; ``triangles`` its faces."""
+def _tets_inside(model, low, high, triangles) -> np.ndarray:
+    """Up to MAX_PROBED_TETS tets (evenly spread over those in the box ``low``..``high``
+    (3,) [m]) whose centroids lie inside the closed surface ``triangles`` (F,3,3) [m]."""
     from .piece_checks import inside
 
     in_box = np.nonzero(np.all((model.particle_position >= low) & (model.particle_position <= high), axis=1))[0]
     in_box = in_box[:: max(1, len(in_box) // MAX_PROBED_TETS)]
-    mesh = part.to_mesh64()
-    every = np.asarray(mesh.vert_properties)[:, :3][np.asarray(mesh.tri_verts, dtype=np.int64)]
-    return in_box[inside(model.particle_position[in_box], every)]
+    return in_box[inside(model.particle_position[in_box], triangles)]
 
 
 def _face_cracks(corner_crack: np.ndarray, triangles: np.ndarray, cracks, spacing: float) -> np.ndarray:
