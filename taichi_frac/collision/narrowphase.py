@@ -342,13 +342,14 @@ def _collider_contacts(bodies: ti.template(), particles: ti.template(), statics:
     the sphere's (``gap`` [m], at the collider's ``point`` nearest it) or, with a patch,
     one per ``surface.manifold`` point (the collider's support along n is ``level`` [m]),
     or one for an impact (approaching faster than ``bounce_speed`` [m/s], the restitution
-    threshold: ``surface.against``). ``key``: the cache key of the first; the manifold's points count down from it."""
+    threshold) or a body of many spheres (``surface.against``). ``key``: the cache key of the first; the manifold's points count down from it."""
     count = 1
     points = ti.Matrix.zero(ti.f32, ti.static(surface.MANIFOLD_POINTS), 3)
     levels = ti.Vector.zero(ti.f32, ti.static(surface.MANIFOLD_POINTS))
     if patch:
         v, _ = _point_velocity(bodies, a, x)
-        gap, count, points, levels = surface.against(bodies, particles, a, i, n, level, -v.dot(n) > bounce_speed)
+        single = -v.dot(n) > bounce_speed or bodies.particle_count[a] > ti.static(surface.MANIFOLD_MAX_SPHERES)
+        gap, count, points, levels = surface.against(bodies, particles, a, i, n, level, single)
     r = particles.radius[i]
     for m in range(count):  # (a dynamic loop: unrolled, each _append was inlined four times)
         g = gap + levels[m]
