@@ -342,7 +342,8 @@ def _collider_contacts(bodies: ti.template(), particles: ti.template(), statics:
     the sphere's (``gap`` [m], at the collider's ``point`` nearest it) or, with a patch,
     one per ``surface.manifold`` point (the collider's support along n is ``level`` [m]),
     or one for an impact (approaching faster than ``bounce_speed`` [m/s], the restitution
-    threshold) or a body of many spheres (``surface.against``). ``key``: the cache key of the first; the manifold's points count down from it."""
+    threshold) or a body of many spheres (``surface.against``). ``key``: the cache key of
+    the first; the manifold's points count down from it."""
     count = 1
     points = ti.Matrix.zero(ti.f32, ti.static(surface.MANIFOLD_POINTS), 3)
     levels = ti.Vector.zero(ti.f32, ti.static(surface.MANIFOLD_POINTS))
@@ -376,7 +377,7 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: 
     (neighbours, cells, entries), and ``order_contacts`` sorts them by particle.
     ``bounce_speed`` [m/s]: the restitution threshold (``_collider_contacts``). ``patches``
     (static bool): whether any body has contact patches; without, the patch code is not
-    compiled (it doubled the kernel's build time) and every contact is the spheres'."""
+    compiled (a third of the kernel's build time) and every contact is the spheres'."""
     for i in range(particles.slot_end[None]):
         a = particles.body[i]
         if a >= 0:
