@@ -27,8 +27,7 @@ def test_particle_contacts_match_brute_force():
         owners.append(np.full(12, b))
     centres, radii, owners = np.concatenate(centres), np.concatenate(radii), np.concatenate(owners)
     margin = world.options.contact_margin
-    stages.collide(world.fields, margin, 1e-3,
-                   world.options.sleep_time)
+    stages.collide(world.fields, margin, 1e-3, world.options.sleep_time, world.has_contact_patches)
     count = int(world.contacts.count[None])
     d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
     gap = d - radii[:, None] - radii[None]
@@ -74,8 +73,7 @@ def test_moving_ring_contacts_match_brute_force_with_the_speculative_reach():
     x, r, owner, slot = map(np.concatenate, (centres, radii, owners, slots))
     vel, curve = np.concatenate(velocity), 0.5 * np.concatenate(spin)
     margin = world.options.contact_margin
-    stages.collide(world.fields, margin, dt,
-                   world.options.sleep_time)
+    stages.collide(world.fields, margin, dt, world.options.sleep_time, world.has_contact_patches)
 
     d = x[:, None] - x[None]
     dist = np.linalg.norm(d, axis=-1)
@@ -134,7 +132,7 @@ def test_a_large_sphere_whose_cells_share_buckets_makes_each_pair_once():
     owners = np.concatenate([np.full(len(r), b) for b, r in enumerate(radii)])
     centres, radii = np.concatenate(centres), np.concatenate(radii)
     margin = world.options.contact_margin
-    stages.collide(world.fields, margin, 1e-3, world.options.sleep_time)
+    stages.collide(world.fields, margin, 1e-3, world.options.sleep_time, world.has_contact_patches)
     count = int(world.contacts.count[None])
     gap = np.linalg.norm(centres[:, None] - centres[None], axis=-1) - radii[:, None] - radii[None]
     close = (gap < margin * 0.5 * (radii[:, None] + radii[None])) & (owners[:, None] != owners[None])
@@ -190,7 +188,7 @@ def test_a_body_with_more_neighbours_than_its_list_holds_still_makes_every_conta
     owners = np.concatenate([np.full(len(r), b) for b, r in enumerate(radii)])
     centres, radii = np.concatenate(centres), np.concatenate(radii)
     margin = world.options.contact_margin
-    stages.collide(world.fields, margin, 1e-3, world.options.sleep_time)
+    stages.collide(world.fields, margin, 1e-3, world.options.sleep_time, world.has_contact_patches)
     assert world.bodies.neighbor_count[0] == -1
     count = int(world.contacts.count[None])
     gap = np.linalg.norm(centres[:, None] - centres[None], axis=-1) - radii[:, None] - radii[None]
@@ -232,7 +230,7 @@ def test_broadphase_neighbour_lists_equal_testing_every_pair():
     makes no contacts of its own: its awake neighbours' lists hold it)."""
     world, bodies, asleep = _scattered_bodies()
     margin, dt, g = world.options.contact_margin, 4e-3, 9.81
-    stages.collide(world.fields, margin, dt, world.options.sleep_time)
+    stages.collide(world.fields, margin, dt, world.options.sleep_time, world.has_contact_patches)
     assert world.grid.large_count[None] >= 1  # the plate
 
     f = world.bodies

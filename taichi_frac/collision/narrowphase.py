@@ -164,7 +164,8 @@ def clear_contacts(contacts: ti.template()):
 
 @ti.func
 def _pair_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
-                   contacts: ti.template(), margin, sleep_time, dt, i, a, xi, ri, o, closing):
+                   contacts: ti.template(), patches: ti.template(), margin, sleep_time, dt, i, a, xi, ri, o,
+                   closing):
     """Sphere-sphere contacts of particle ``i`` (awake body ``a``, world centre ``xi`` [m],
     radius ``ri`` [m]) with the spheres of body ``o``, whose gap may close by ``closing``
     [m] this substep (``bounds.pair_motion``, or the broadphase's value for the pair).
@@ -212,13 +213,13 @@ def _pair_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.
                             if (nearest - rel).norm_sqr() < wide * wide:
                                 cell = (cx * dims[1] + cy) * dims[2] + cz
                                 for k in range(particles.cell_first[base + cell], particles.cell_first[base + cell + 1]):
-                                    _test_pair(bodies, particles, statics, contacts, margin, sleep_time, dt, i, a, xi,
-                                               ri, o, rot, local, closing, k)
+                                    _test_pair(bodies, particles, statics, contacts, patches, margin, sleep_time, dt,
+                                               i, a, xi, ri, o, rot, local, closing, k)
 
 
 @ti.func
 def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.template(), contacts: ti.template(),
-               margin, sleep_time, dt, i, a, xi, ri, o, rot, local, closing, k):
+               patches: ti.template(), margin, sleep_time, dt, i, a, xi, ri, o, rot, local, closing, k):
     """Contact of particle ``i`` (body ``a``) with grid entry ``k`` of body ``o`` (its
     centre ``local`` [m] in o's frame, rotation ``rot`` o -> world), when their gap is
     within the margin plus the pair's closing (squared: no square root for the ~90 % of
@@ -242,17 +243,18 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
         point = xj + n * (rj + 0.5 * gap)
         x_a, x_o = xi, xj
         scale = ti.min(ri, rj)
-        if surface.by_patches(particles, i, j):
-            n_patch, gap_patch, spot_a, spot_o = surface.pair(bodies, particles, a, i, o, j, n)
-            if gap_patch >= -ti.static(surface.TRUSTED_DEPTH) * ti.max(ri, rj):
-                n, gap, x_a, x_o = n_patch, gap_patch, spot_a, spot_o
-                # Where along the surfaces: the smaller patch's spot (a chip on a wide
-                # patch touches under itself; the two spots' mean lay off the chip and
-                # spun it), half the gap across.
-                point = x_a - 0.5 * gap * n if ri <= rj else x_o + 0.5 * gap * n
-                # (the depth scale of a patch contact is the larger sphere's: a chip 2 mm
-                # into a slab is no deep overlap of the two)
-                scale = ti.max(ri, rj)
+        if ti.static(patches):
+            if surface.by_patches(particles, i, j):
+                n_patch, gap_patch, spot_a, spot_o = surface.pair(bodies, particles, a, i, o, j, n)
+                if gap_patch >= -ti.static(surface.TRUSTED_DEPTH) * ti.max(ri, rj):
+                    n, gap, x_a, x_o = n_patch, gap_patch, spot_a, spot_o
+                    # Where along the surfaces: the smaller patch's spot (a chip on a wide
+                    # patch touches under itself; the two spots' mean lay off the chip and
+                    # spun it), half the gap across.
+                    point = x_a - 0.5 * gap * n if ri <= rj else x_o + 0.5 * gap * n
+                    # (the depth scale of a patch contact is the larger sphere's: a chip 2 mm
+                    # into a slab is no deep overlap of the two)
+                    scale = ti.max(ri, rj)
         if gap < margin * mean_r + _speculative(bodies, statics, a, x_a, o, x_o, n, dt):
             mu = ti.sqrt(bodies.friction[a] * bodies.friction[o])
             e = ti.max(bodies.restitution[a], bodies.restitution[o])
@@ -263,13 +265,15 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
 
 @ti.func
 def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
-                     contacts: ti.template(), margin, dt, bounce_speed, i, a, x):
+                     contacts: ti.template(), patches: ti.template(), margin, dt, bounce_speed, i, a, x):
     """Sphere-plane and sphere-box contacts of particle ``i`` of awake body ``a`` (normal
     out of the collider, i.e. into the body); ``x`` [m] its world centre. The sphere
     finds the contact; with a contact patch, its gap and points are the patch's
     (``_collider_contacts``; ``bounce_speed`` [m/s]: the restitution threshold)."""
     r = particles.radius[i]
-    patch = particles.point_count[i] > 0
+    patch = False
+    if ti.static(patches):
+        patch = particles.point_count[i] > 0
     planes = statics.plane_count[None]
     # (one loop over planes and boxes: each call of _collider_contacts is inlined whole)
     for s in range(planes + statics.box_count[None]):
@@ -322,8 +326,11 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
             mu = ti.sqrt(bodies.friction[a] * statics.box_friction[k])
             e = ti.max(bodies.restitution[a], statics.box_restitution[k])
         if gap < margin * r + bodies.motion[a]:
-            _collider_contacts(bodies, particles, statics, contacts, margin, dt, bounce_speed, i, a, x, patch, n,
-                               gap, point, level, kind, k, key, mu, e)
+            if ti.static(patches):
+                _collider_contacts(bodies, particles, statics, contacts, margin, dt, bounce_speed, i, a, x, patch, n,
+                                   gap, point, level, kind, k, key, mu, e)
+            elif gap < margin * r + _speculative(bodies, statics, a, x, -1, x, n, dt):
+                _append(contacts, particles, i, key, a, kind, k, n, point, gap, r, mu, e)
 
 
 @ti.func
@@ -335,13 +342,15 @@ def _collider_contacts(bodies: ti.template(), particles: ti.template(), statics:
     the sphere's (``gap`` [m], at the collider's ``point`` nearest it) or, with a patch,
     one per ``surface.manifold`` point (the collider's support along n is ``level`` [m]),
     or one for an impact (approaching faster than ``bounce_speed`` [m/s], the restitution
-    threshold: ``surface.against``). ``key``: the cache key of the first; the manifold's points count down from it."""
+    threshold) or a body of many spheres (``surface.against``). ``key``: the cache key of
+    the first; the manifold's points count down from it."""
     count = 1
     points = ti.Matrix.zero(ti.f32, ti.static(surface.MANIFOLD_POINTS), 3)
     levels = ti.Vector.zero(ti.f32, ti.static(surface.MANIFOLD_POINTS))
     if patch:
         v, _ = _point_velocity(bodies, a, x)
-        gap, count, points, levels = surface.against(bodies, particles, a, i, n, level, -v.dot(n) > bounce_speed)
+        single = -v.dot(n) > bounce_speed or bodies.particle_count[a] > ti.static(surface.MANIFOLD_MAX_SPHERES)
+        gap, count, points, levels = surface.against(bodies, particles, a, i, n, level, single)
     r = particles.radius[i]
     for m in range(count):  # (a dynamic loop: unrolled, each _append was inlined four times)
         g = gap + levels[m]
@@ -357,7 +366,7 @@ def _collider_contacts(bodies: ti.template(), particles: ti.template(), statics:
 
 @ti.func
 def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
-                      contacts: ti.template(), margin, sleep_time, dt, bounce_speed):
+                      contacts: ti.template(), patches: ti.template(), margin, sleep_time, dt, bounce_speed):
     """One pass over the particles of awake bodies near something: each particle's world
     centre, its sphere-sphere contacts with each neighbour o of its body a that it makes
     (o > a when both are awake, so a pair is made once; every idle neighbour, which makes
@@ -366,7 +375,9 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: 
     the pair's closing computed here. A parallel task on every arch, unlike the small
     passes: a particle's contacts are appended by one thread in program order
     (neighbours, cells, entries), and ``order_contacts`` sorts them by particle.
-    ``bounce_speed`` [m/s]: the restitution threshold (``_collider_contacts``)."""
+    ``bounce_speed`` [m/s]: the restitution threshold (``_collider_contacts``). ``patches``
+    (static bool): whether any body has contact patches; without, the patch code is not
+    compiled (a third of the kernel's build time) and every contact is the spheres'."""
     for i in range(particles.slot_end[None]):
         a = particles.body[i]
         if a >= 0:
@@ -386,10 +397,11 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: 
                     if o != a and bodies.active[o] == 1 and (o > a or is_idle(bodies, o)):
                         if not listed:
                             closing = pair_motion(bodies, statics, a, o, dt)
-                        _pair_contacts(bodies, particles, statics, contacts, margin, sleep_time, dt, i, a, xi, ri,
-                                       o, closing)
+                        _pair_contacts(bodies, particles, statics, contacts, patches, margin, sleep_time, dt, i, a,
+                                       xi, ri, o, closing)
                 if bodies.near_static[a] == 1:
-                    _static_contacts(bodies, particles, statics, contacts, margin, dt, bounce_speed, i, a, xi)
+                    _static_contacts(bodies, particles, statics, contacts, patches, margin, dt, bounce_speed, i, a,
+                                     xi)
 
 
 @ti.func

@@ -50,6 +50,13 @@ SUPPORT_BAND = 0.1
 #: after 3 s); three or four corners hold it like a face.
 MANIFOLD_POINTS = 4
 
+#: Bodies of more collision spheres than this make one contact per patch with a static
+#: collider (under the middle of its band, ``contact_spot``), not a manifold: their many
+#: patches already hold them at many points, and four contacts a patch made a resting ring
+#: five times the contacts of its spheres, which the serial solver paid for in every
+#: iteration. A chip of a few spheres keeps its manifold (``MANIFOLD_POINTS``).
+MANIFOLD_MAX_SPHERES = 16
+
 #: Manifold points closer than this fraction of the sphere's radius to the ones already
 #: kept (or to their line) add nothing: the manifold stops there.
 MANIFOLD_SPREAD = 0.05
@@ -228,24 +235,27 @@ def by_patches(particles: ti.template(), i, j):
 
 
 @ti.func
-def against(bodies: ti.template(), particles: ti.template(), a, i, n, level, impact):
+def against(bodies: ti.template(), particles: ti.template(), a, i, n, level, single):
     """Sphere ``i`` of body ``a`` against a static collider whose support along the world
     normal ``n`` (out of the collider, into a) is ``level`` [m]: (gap [m] of the deepest
-    point, and ``manifold``'s count, points (world [m]) and levels along n). ``impact``
-    (the patch approaches faster than the restitution threshold): one point instead, the
-    middle of the band (``contact_spot``). Spread over four contacts, an impact's
-    restitution was shared unevenly: the single ring's rebound fell from 5.8 % to 12.9 %
-    under single-scale's, its first impulse from 1.9 % to 4.1 % under."""
+    point, and ``manifold``'s count, points (world [m]) and levels along n). ``single``:
+    one point instead, the middle of the band (``contact_spot``), for an impact (the patch
+    approaches faster than the restitution threshold) and for a body of more than
+    ``MANIFOLD_MAX_SPHERES`` spheres. Spread over four contacts, an impact's restitution
+    was shared unevenly: the single ring's rebound fell from 5.8 % to 12.9 % under
+    single-scale's, its first impulse from 1.9 % to 4.1 % under."""
     rot_a = bodies.rotation[a]
     axis = rot_a.transpose() @ n
     low = lowest(particles, i, axis)
-    count, points, levels = manifold(particles, i, axis, low)
-    if impact:
-        count = 1
+    count = 1
+    points = ti.Matrix.zero(ti.f32, ti.static(MANIFOLD_POINTS), 3)
+    levels = ti.Vector.zero(ti.f32, ti.static(MANIFOLD_POINTS))
+    if single:
         spot = contact_spot(particles, i, axis, low)
         for c in ti.static(range(3)):
             points[0, c] = spot[c]
-        levels[0] = 0.0
+    else:
+        count, points, levels = manifold(particles, i, axis, low)
     points = points @ rot_a.transpose()
     for m in ti.static(range(MANIFOLD_POINTS)):
         for c in ti.static(range(3)):

@@ -35,10 +35,12 @@ class WorldFields:
 
 
 @ti.kernel
-def collide(f: ti.template(), margin: ti.f32, dt: ti.f32, sleep_time: ti.f32):
+def collide(f: ti.template(), margin: ti.f32, dt: ti.f32, sleep_time: ti.f32, patches: ti.template()):
+    """``patches`` (bool, one compiled instance each): whether any body has contact
+    patches (``narrowphase.particle_contacts``)."""
     broadphase.body_cull(f.bodies, f.statics, f.grid, margin, dt)
     narrowphase.clear_contacts(f.contacts)
-    narrowphase.particle_contacts(f.bodies, f.particles, f.statics, f.contacts, margin, sleep_time, dt,
+    narrowphase.particle_contacts(f.bodies, f.particles, f.statics, f.contacts, patches, margin, sleep_time, dt,
                                   f.params.restitution_threshold[None])
     narrowphase.order_contacts(f.particles, f.contacts)
 

@@ -353,6 +353,12 @@ class World:
                   f"max_contacts={self.capacity.max_contacts} in a substep; raise WorldCapacity(max_contacts=...)")
         self.stats.last_frame_seconds = time.perf_counter() - self._frame_started
 
+    @property
+    def has_contact_patches(self) -> bool:
+        """Whether any body in the world has contact patches (added under
+        ``surface_contact``): the collision stage compiles its patch code only then."""
+        return bool(self.slots.point_range)
+
     def substep(self, dt: float, index: int) -> None:
         """Substep ``index`` (of the frame :meth:`begin_frame` started) of ``dt`` [s]:
         collision, then contact response and integration."""
@@ -360,7 +366,7 @@ class World:
         if self._params_of is not opt:
             self._write_params(opt)
         clock = self._clock()
-        stages.collide(self.fields, opt.contact_margin, dt, opt.sleep_time)
+        stages.collide(self.fields, opt.contact_margin, dt, opt.sleep_time, self.has_contact_patches)
         clock("collision")
         stages.respond(self.fields, dt, index, 1.0 - math.exp(-opt.position_correction_rate * dt))
         clock("response")
