@@ -230,8 +230,10 @@ def test_relaxed_quality_recalibrates_the_count():
     undershot (3,967 for 5,000) until it was re-fitted under the relaxed one."""
     shells = overlapping_shells()
     shells.apply_scale(0.3 / float(np.linalg.norm(shells.extents)))
+    # A generous time bound: on a quiet machine TetGen needs ~16.6 s here, near its share of a
+    # 120 s bound (17.5 s); the count is under test here, the bound's fallback elsewhere.
     model, report = prepare_body(shells, repair=True, particles=ParticleOptions(target_particles=5000),
-                                 use_cache=False, time_limit=120)
+                                 use_cache=False, time_limit=300)
     assert abs(report.physics_particles / 5000 - 1) <= 0.15, report.physics_particles
     assert abs(model.volume / report.surface_volume - 1) <= 0.01
 
