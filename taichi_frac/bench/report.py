@@ -73,7 +73,9 @@ def write(ctx: BenchContext, sections: list[Section], markdown_path: Path, head:
     body += [f"{i}. [{s.title}](#{i}-{_anchor(s.title)})" for i, s in enumerate(sections, 1)]
     body += _separate_sections(markdown_path.parent / "benchmarks")
     for i, s in enumerate(sections, 1):
-        body += ["", f"## {i}. {s.title}", "", s.markdown]
+        # A section that also writes its own page under docs/benchmarks/ links from there
+        # ("../guide/..."); here, one folder up, the same target is "guide/...".
+        body += ["", f"## {i}. {s.title}", "", s.markdown.replace("](../", "](")]
     markdown_path.parent.mkdir(parents=True, exist_ok=True)
     markdown_path.write_text("\n".join(body) + "\n")
     ctx.progress(f"wrote {markdown_path}")
