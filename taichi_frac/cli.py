@@ -64,11 +64,22 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # (while the parser's modules load)
         print("\ntaichi-frac: interrupted", file=sys.stderr)
         return 130
+    except Exception:
+        # A Ctrl-C that lands inside an extension module's import comes back as that
+        # import's own error (Taichi's core: "ImportError: initialization failed").
+        if interrupts.requested():
+            print("\ntaichi-frac: interrupted", file=sys.stderr)
+            return 130
+        raise
     finally:
         interrupts.restore()
 
 
 def _main(argv: list[str] | None) -> int:
+    # stdout is the command's result (a --json object): Taichi's version banner, printed there
+    # by whichever module imports Taichi first (the parser's modules may), is turned off (its
+    # other messages go to stderr: see runtime).
+    os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -76,15 +87,14 @@ def _main(argv: list[str] | None) -> int:
         return 2
     prefix = f"taichi-frac {args.command}"
     try:
-        # stdout is the command's result (a --json object): Taichi's version banner, printed
-        # there by whichever module imports Taichi first, is turned off (its other messages
-        # go to stderr: see runtime).
-        os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "false")
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print(f"\n{prefix}: interrupted", file=sys.stderr)
         return 130
     except Exception as exc:  # noqa: BLE001 - the one place that turns errors into exit codes
+        if interrupts.requested():  # (the Ctrl-C surfaced as a library's own error)
+            print(f"\n{prefix}: interrupted", file=sys.stderr)
+            return 130
         if args.debug:
             traceback.print_exc()
         user = isinstance(exc, _user_errors())
