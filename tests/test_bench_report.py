@@ -2,7 +2,7 @@
 and PNG plots are written, and their numbers come from the run (particle counts equal the
 models'), never typed in. No wall-clock time is asserted.
 
-Runs on the dynamics tests' session World (tests/support/dynamics.py), so no kernel
+Runs on the World the whole test run shares (tests/support/dynamics.py), so no kernel
 compiles for it beyond what the suite compiles anyway.
 """
 
