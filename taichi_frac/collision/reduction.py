@@ -1,10 +1,10 @@
-"""Contact reduction: a large body resting on the ground through its true surface touches it
-at every patch along its contact area (a ring's flat bottom, a cube's face: tens of
-contacts), where its boundary spheres touched at a few. The serial solver pays for each in
-every sweep, and a rigid body needs no more than its contact area's outline to stand on.
+"""Contact reduction: a body resting on the ground through its true surface touches it at
+every patch along its contact area (a ring's flat bottom, a cube's face: tens of contacts;
+a small piece at up to four points a patch), where its boundary spheres touched at a few.
+The serial solver pays for each in every sweep, and a rigid body needs no more than its
+contact area's outline to stand on.
 
-So the patch contacts of a body of more than ``surface.MANIFOLD_MAX_SPHERES`` spheres with
-one static collider are reduced to representatives, the way a physics engine reduces a
+So a body's patch contacts with one static collider are reduced to representatives, the way a physics engine reduces a
 face-face manifold (Bullet's ``btPersistentManifold::sortCachedPoints``, PhysX's patch
 reduction): the deepest contact, and the contact farthest out along each of
 ``DIRECTIONS`` directions across the contact normal among the contacts that touch (gap
@@ -42,11 +42,9 @@ UNSEEN, KEEP, DROP = 0, 1, 2
 
 
 @ti.func
-def _reducible(bodies: ti.template(), particles: ti.template(), contacts: ti.template(), c):
-    """Whether contact ``c`` is a patch contact of a large body with a static collider."""
-    a = contacts.body_a[c]
-    return (contacts.body_b[c] < 0 and particles.point_count[contacts.query[c]] > 0
-            and bodies.particle_count[a] > ti.static(surface.MANIFOLD_MAX_SPHERES))
+def _reducible(particles: ti.template(), contacts: ti.template(), c):
+    """Whether contact ``c`` is a patch contact with a static collider."""
+    return contacts.body_b[c] < 0 and particles.point_count[contacts.query[c]] > 0
 
 
 @ti.func
@@ -81,7 +79,7 @@ def _reduce_group(bodies: ti.template(), particles: ti.template(), contacts: ti.
     landing = False
     for k in range(first, end):
         c = contacts.order[k]
-        if _reducible(bodies, particles, contacts, c) and _same_collider(contacts, c, lead):
+        if _reducible(particles, contacts, c) and _same_collider(contacts, c, lead):
             if contacts.separation[c] < contacts.separation[deepest]:
                 deepest = c
             v = bodies.linear_velocity[a] + bodies.angular_velocity[a].cross(contacts.point[c] - bodies.position[a])
@@ -98,7 +96,7 @@ def _reduce_group(bodies: ti.template(), particles: ti.template(), contacts: ti.
     score = ti.Matrix([[-1e30] * DIRECTIONS] * 2, dt=ti.f32)
     for k in range(first, end):
         c = contacts.order[k]
-        if _reducible(bodies, particles, contacts, c) and _same_collider(contacts, c, lead):
+        if _reducible(particles, contacts, c) and _same_collider(contacts, c, lead):
             layer = _layer(contacts, c, low, margin)
             if layer < 2:
                 p = contacts.point[c]
@@ -112,7 +110,7 @@ def _reduce_group(bodies: ti.template(), particles: ti.template(), contacts: ti.
                         best[layer, m] = c
     for k in range(first, end):
         c = contacts.order[k]
-        if _reducible(bodies, particles, contacts, c) and _same_collider(contacts, c, lead):
+        if _reducible(particles, contacts, c) and _same_collider(contacts, c, lead):
             keep = landing or c == deepest or _layer(contacts, c, low, margin) == 2
             for layer, m in ti.static(ti.ndrange(2, DIRECTIONS)):
                 keep = keep or c == best[layer, m]
@@ -122,7 +120,7 @@ def _reduce_group(bodies: ti.template(), particles: ti.template(), contacts: ti.
 @ti.func
 def reduce_static_contacts(bodies: ti.template(), particles: ti.template(), contacts: ti.template(), margin,
                            bounce_speed):
-    """Serial: reduce each large body's patch contacts with each static collider (module
+    """Serial: reduce each body's patch contacts with each static collider (module
     docstring) and compact the kept contacts to the front of the buffer, in their slot
     order. Reads ``contacts.order`` (sorted by particle, so one body's contacts are
     consecutive in it); the caller sorts the compacted contacts again. Skipped when the
@@ -142,11 +140,10 @@ def reduce_static_contacts(bodies: ti.template(), particles: ti.template(), cont
                 end = start + 1
                 while end < n and contacts.body_a[contacts.order[end]] == a:
                     end += 1
-                if bodies.particle_count[a] > ti.static(surface.MANIFOLD_MAX_SPHERES):
-                    for k in range(start, end):
-                        c = contacts.order[k]
-                        if contacts.reduce_mark[c] == UNSEEN and _reducible(bodies, particles, contacts, c):
-                            _reduce_group(bodies, particles, contacts, end, k, margin, bounce_speed)
+                for k in range(start, end):
+                    c = contacts.order[k]
+                    if contacts.reduce_mark[c] == UNSEEN and _reducible(particles, contacts, c):
+                        _reduce_group(bodies, particles, contacts, end, k, margin, bounce_speed)
                 start = end
             for c in range(n):
                 dropped += ti.cast(contacts.reduce_mark[c] == DROP, ti.i32)
