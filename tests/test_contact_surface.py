@@ -127,3 +127,32 @@ def test_chips_on_the_ground_come_to_rest_and_sleep():
     for x, q in zip(state["position"], state["orientation"]):
         heights = np.sort((chip.vertices @ rotation(q).T + x)[:, 2])
         np.testing.assert_allclose(heights[:3], 0.0, atol=REST_TOLERANCE)
+
+
+def test_a_resting_ring_stands_on_a_few_contacts_that_carry_its_weight():
+    """A torus of many spheres resting flat touches the ground with every patch along its
+    bottom circle; ``collision.reduction`` keeps the deepest and the outermost of them in
+    each of ``DIRECTIONS`` directions (of the touching ones and of the near ones). The
+    touching ones outline the circle (two of them a major diameter apart, within 10 %),
+    carry the ring's weight (summed normal impulse
+    m g dt per substep, within 2 %: static equilibrium) and hold it at its rest height."""
+    from taichi_frac.collision import reduction
+
+    model = ring_model()
+    world = fresh_world(surface_contact=True, sleep_time=100.0)
+    world.add_ground(0.0, restitution=0.0)
+    body = world.add_body(model, (0, 0, 0.0255), restitution=0.0)
+    for _ in range(50):
+        world.advance(0.02, 10)
+    state = world.body_state([body])
+    assert not state["sleeping"][0]
+    assert state["position"][0][2] == pytest.approx(0.025, abs=REST_TOLERANCE)
+    n = int(world.contacts.count[None])
+    ground = world.contacts.body_b.to_numpy()[:n] < 0
+    assert 3 <= ground.sum() <= 1 + 2 * reduction.DIRECTIONS
+    touching = ground & (world.contacts.separation.to_numpy()[:n] < REST_TOLERANCE)
+    points = world.contacts.point.to_numpy()[:n][touching]
+    spread = np.max(np.linalg.norm(points[:, None, :2] - points[None, :, :2], axis=2))
+    assert spread == pytest.approx(0.2, rel=0.1)
+    impulse = world.contacts.normal_impulse.to_numpy()[:n][ground].sum()
+    assert impulse == pytest.approx(model.mass * 9.81 * 0.002, rel=0.02)

@@ -53,6 +53,8 @@ class Contacts:
     the impulse cache and the impact records visit them (sorted by querying particle).
     Written by solver.solve_contacts: sweep_order (i32), ``order`` with the contacts
     between bodies first, then those with static colliders.
+    Written by reduction.reduce_static_contacts: reduce_mark (i32, scratch: whether the
+    contact is kept).
     Scalars: count (may exceed capacity: the excess is ``overflow``), overflow (summed over
     an advance, reset by the World), peak (largest count since the World reset it),
     order_epoch (sorts so far).
@@ -87,6 +89,11 @@ class Contacts:
         self.key = ti.field(ti.i32, shape=capacity)
         self.order = ti.field(ti.i32, shape=capacity)
         self.sweep_order = ti.field(ti.i32, shape=capacity)
+        self.reduce_mark = ti.field(ti.i32, shape=capacity)
+        # (what ``_append`` writes: the fields that moving a contact to another slot moves)
+        self.written_by_narrowphase = (self.query, self.key, self.body_a, self.body_b, self.static_index, self.normal,
+                                       self.point, self.separation, self.radius, self.friction, self.restitution,
+                                       self.normal_impulse, self.tangent_impulse)
         self.order_epoch = ti.field(ti.i32, shape=())
         self.count = ti.field(ti.i32, shape=())
         self.overflow = ti.field(ti.i32, shape=())

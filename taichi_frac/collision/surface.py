@@ -43,6 +43,15 @@ TRUSTED_DEPTH = 0.5
 #: comes first).
 SUPPORT_BAND = 0.1
 
+#: A patch that touches a static collider at one point (``against``'s ``single``: a landing,
+#: or a body of many spheres) touches at the mean of its points within this fraction of
+#: the sphere's radius of its lowest: a spot a little inside its lowest point, as a contact
+#: area's middle is. It sets where a landing's impulse acts, and so how a tilted body
+#: landing on one side turns: with it the report's ring drop matches the single-scale
+#: reference's rebound and first impulse (``taichi-frac bench dynamics --contact-only``);
+#: bands of 0.125-0.15 do, 0.1 and 0.175 or more turn the ring too much or too little.
+SPOT_BAND = 0.14
+
 #: Contacts a patch makes at most with one static collider: its manifold, spread over the
 #: points within ``SUPPORT_BAND`` of its deepest (``manifold``). One contact at the
 #: band's mean left a one-sphere chip lying on a face balanced on one point under its
@@ -88,14 +97,14 @@ def lowest3(particles: ti.template(), p, axes):
 
 
 @ti.func
-def contact_spot(particles: ti.template(), p, axis, low):
-    """Body-frame mean of sphere ``p``'s patch points within ``SUPPORT_BAND`` of its radius
+def contact_spot(particles: ti.template(), p, axis, low, band_fraction=SUPPORT_BAND):
+    """Body-frame mean of sphere ``p``'s patch points within ``band_fraction`` of its radius
     of the lowest level ``low`` along ``axis`` (the sphere's lowest point when it has no
     patch)."""
     count = particles.point_count[p]
     spot = particles.offset[p] - particles.radius[p] * axis
     if count > 0:
-        band = low + SUPPORT_BAND * particles.radius[p]
+        band = low + band_fraction * particles.radius[p]
         total = vec3(0.0)
         weight = 0.0
         start = particles.point_start[p]
@@ -239,11 +248,11 @@ def against(bodies: ti.template(), particles: ti.template(), a, i, n, level, sin
     """Sphere ``i`` of body ``a`` against a static collider whose support along the world
     normal ``n`` (out of the collider, into a) is ``level`` [m]: (gap [m] of the deepest
     point, and ``manifold``'s count, points (world [m]) and levels along n). ``single``:
-    one point instead, the middle of the band (``contact_spot``), for an impact (the patch
-    approaches faster than the restitution threshold) and for a body of more than
-    ``MANIFOLD_MAX_SPHERES`` spheres. Spread over four contacts, an impact's restitution
-    was shared unevenly: the single ring's rebound fell from 5.8 % to 12.9 % under
-    single-scale's, its first impulse from 1.9 % to 4.1 % under."""
+    one point instead, the middle of its ``SPOT_BAND`` (``contact_spot``), for an impact
+    (the patch approaches faster than the restitution threshold) and for a body of more
+    than ``MANIFOLD_MAX_SPHERES`` spheres (whose contacts ``reduction`` then thins out).
+    Spread over four contacts, an impact's restitution was shared unevenly: the ring
+    drop's rebound fell to 12.9 % under single-scale's, its first impulse to 4.1 % under."""
     rot_a = bodies.rotation[a]
     axis = rot_a.transpose() @ n
     low = lowest(particles, i, axis)
@@ -251,7 +260,7 @@ def against(bodies: ti.template(), particles: ti.template(), a, i, n, level, sin
     points = ti.Matrix.zero(ti.f32, ti.static(MANIFOLD_POINTS), 3)
     levels = ti.Vector.zero(ti.f32, ti.static(MANIFOLD_POINTS))
     if single:
-        spot = contact_spot(particles, i, axis, low)
+        spot = contact_spot(particles, i, axis, low, SPOT_BAND)
         for c in ti.static(range(3)):
             points[0, c] = spot[c]
     else:

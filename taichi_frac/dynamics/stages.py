@@ -13,7 +13,7 @@ argument costs ~8 us of Python per launch, so the kernels take ``WorldFields``.
 
 import taichi as ti
 
-from ..collision import broadphase, narrowphase
+from ..collision import broadphase, narrowphase, reduction
 from . import impacts, integrate, solver
 
 
@@ -43,6 +43,10 @@ def collide(f: ti.template(), margin: ti.f32, dt: ti.f32, sleep_time: ti.f32, pa
     narrowphase.particle_contacts(f.bodies, f.particles, f.statics, f.contacts, patches, margin, sleep_time, dt,
                                   f.params.restitution_threshold[None])
     narrowphase.order_contacts(f.particles, f.contacts)
+    if ti.static(patches):
+        reduction.reduce_static_contacts(f.bodies, f.particles, f.contacts, margin,
+                                         f.params.restitution_threshold[None])
+        narrowphase.order_contacts(f.particles, f.contacts)
 
 
 @ti.kernel

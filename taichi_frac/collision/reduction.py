@@ -1,0 +1,158 @@
+"""Contact reduction: a body resting on the ground through its true surface touches it at
+every patch along its contact area (a ring's flat bottom, a cube's face: tens of contacts;
+a small piece at up to four points a patch), where its boundary spheres touched at a few.
+The serial solver pays for each in every sweep, and a rigid body needs no more than its
+contact area's outline to stand on.
+
+So a body's patch contacts with one static collider are reduced to representatives, the way a physics engine reduces a
+face-face manifold (Bullet's ``btPersistentManifold::sortCachedPoints``, PhysX's patch
+reduction): the deepest contact, and the contact farthest out along each of
+``DIRECTIONS`` directions across the contact normal among the contacts that touch (gap
+within ``surface.SUPPORT_BAND`` of their sphere's radius of the deepest gap), and
+among those near (within the contact margin, as the narrowphase makes a resting body's
+contacts). Against a plane a body's gap is an
+affine function of the point (for the small rotation of one substep), so the
+representatives holding their gaps hold every point inside their outline. Contacts
+farther from the collider (speculative contacts of a tilting body's far side, made
+because they approach) are kept as they are: they stop the parts that will touch next.
+A landing body (a contact approaching faster than the restitution threshold) keeps all
+its contacts: they share the impact's impulse, and where it acts decides how the body
+turns.
+
+The choice depends on the contacts' geometry and their (particle, key) order alone, not
+on the order the parallel narrowphase appended them, so runs stay reproducible; a body
+resting still keeps the same representatives from substep to substep, so their impulses
+warm-start.
+"""
+
+import math
+
+import taichi as ti
+
+from . import surface
+
+vec3 = ti.math.vec3
+
+#: Directions across the contact normal along which the outermost contact is kept: eight
+#: (every 45 degrees) outline a ring's circle of contacts within 8 % of its radius.
+DIRECTIONS = 8
+
+#: ``contacts.reduce_mark`` values.
+UNSEEN, KEEP, DROP = 0, 1, 2
+
+
+@ti.func
+def _reducible(particles: ti.template(), contacts: ti.template(), c):
+    """Whether contact ``c`` is a patch contact with a static collider."""
+    return contacts.body_b[c] < 0 and particles.point_count[contacts.query[c]] > 0
+
+
+@ti.func
+def _same_collider(contacts: ti.template(), c, d):
+    return contacts.body_b[c] == contacts.body_b[d] and contacts.static_index[c] == contacts.static_index[d]
+
+
+@ti.func
+def _layer(contacts: ti.template(), c, low, margin):
+    """Which layer of the contact area contact ``c`` lies in, by its gap above the deepest
+    gap ``low`` [m] in its sphere's radii: 0 within ``surface.SUPPORT_BAND`` (touching),
+    1 within ``margin`` (near), 2 beyond (made because it approaches: never reduced)."""
+    rise = contacts.separation[c] - low
+    r = contacts.radius[c]
+    return ti.select(rise <= ti.static(surface.SUPPORT_BAND) * r, 0, ti.select(rise <= margin * r, 1, 2))
+
+
+@ti.func
+def _reduce_group(bodies: ti.template(), particles: ti.template(), contacts: ti.template(), end, first, margin,
+                  bounce_speed):
+    """Mark the contacts of ``order[first:end]`` (one body's, sorted by particle) with the
+    static collider of contact ``order[first]``: KEEP the deepest, the outermost in each
+    direction of each layer (``_layer``: touching, near) and those beyond the margin, DROP
+    the rest; KEEP all while the body lands (a contact approaches faster than
+    ``bounce_speed`` [m/s], the restitution threshold). A layer's outline is its own: the
+    touching contacts' outline holds the body up, the near ones' (a ring's next row of
+    vertices, further out and a few millimetres up) would not."""
+    lead = contacts.order[first]
+    a = contacts.body_a[lead]
+    # Deepest (the first in order on a tie).
+    deepest = lead
+    landing = False
+    for k in range(first, end):
+        c = contacts.order[k]
+        if _reducible(particles, contacts, c) and _same_collider(contacts, c, lead):
+            if contacts.separation[c] < contacts.separation[deepest]:
+                deepest = c
+            v = bodies.linear_velocity[a] + bodies.angular_velocity[a].cross(contacts.point[c] - bodies.position[a])
+            if -v.dot(contacts.normal[c]) > bounce_speed:
+                landing = True
+    low = contacts.separation[deepest]
+    n = contacts.normal[deepest]
+    t1 = vec3(1.0, 0.0, 0.0)
+    if ti.abs(n[0]) > 0.57735:
+        t1 = vec3(0.0, 1.0, 0.0)
+    t1 = (t1 - t1.dot(n) * n).normalized()
+    t2 = n.cross(t1)
+    best = ti.Matrix([[deepest] * DIRECTIONS] * 2, dt=ti.i32)
+    score = ti.Matrix([[-1e30] * DIRECTIONS] * 2, dt=ti.f32)
+    for k in range(first, end):
+        c = contacts.order[k]
+        if _reducible(particles, contacts, c) and _same_collider(contacts, c, lead):
+            layer = _layer(contacts, c, low, margin)
+            if layer < 2:
+                p = contacts.point[c]
+                u = p.dot(t1)
+                v = p.dot(t2)
+                for m in ti.static(range(DIRECTIONS)):
+                    s = u * ti.static(math.cos(2.0 * math.pi * m / DIRECTIONS)) \
+                        + v * ti.static(math.sin(2.0 * math.pi * m / DIRECTIONS))
+                    if s > score[layer, m]:
+                        score[layer, m] = s
+                        best[layer, m] = c
+    for k in range(first, end):
+        c = contacts.order[k]
+        if _reducible(particles, contacts, c) and _same_collider(contacts, c, lead):
+            keep = landing or c == deepest or _layer(contacts, c, low, margin) == 2
+            for layer, m in ti.static(ti.ndrange(2, DIRECTIONS)):
+                keep = keep or c == best[layer, m]
+            contacts.reduce_mark[c] = KEEP if keep else DROP
+
+
+@ti.func
+def reduce_static_contacts(bodies: ti.template(), particles: ti.template(), contacts: ti.template(), margin,
+                           bounce_speed):
+    """Serial: reduce each body's patch contacts with each static collider (module
+    docstring) and compact the kept contacts to the front of the buffer, in their slot
+    order. Reads ``contacts.order`` (sorted by particle, so one body's contacts are
+    consecutive in it); the caller sorts the compacted contacts again. Skipped when the
+    buffer overflowed (the overflow is reported; its contacts are not all here).
+    ``margin``: the contact margin (fraction of a sphere's radius); ``bounce_speed``
+    [m/s]: the restitution threshold (a landing keeps all its contacts)."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        n = contacts.count[None]
+        if n <= contacts.capacity:
+            for c in range(n):
+                contacts.reduce_mark[c] = UNSEEN
+            start = 0
+            dropped = 0
+            while start < n:
+                a = contacts.body_a[contacts.order[start]]
+                end = start + 1
+                while end < n and contacts.body_a[contacts.order[end]] == a:
+                    end += 1
+                for k in range(start, end):
+                    c = contacts.order[k]
+                    if contacts.reduce_mark[c] == UNSEEN and _reducible(particles, contacts, c):
+                        _reduce_group(bodies, particles, contacts, end, k, margin, bounce_speed)
+                start = end
+            for c in range(n):
+                dropped += ti.cast(contacts.reduce_mark[c] == DROP, ti.i32)
+            if dropped > 0:
+                kept = 0
+                for c in range(n):
+                    if contacts.reduce_mark[c] != DROP:
+                        if kept != c:
+                            for field in ti.static(contacts.written_by_narrowphase):
+                                field[kept] = field[c]
+                        kept += 1
+                contacts.count[None] = kept
