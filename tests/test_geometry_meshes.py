@@ -12,6 +12,7 @@ import trimesh
 
 from taichi_frac.bench.meshes import overlapping_shells, shared_meshes_dir
 from taichi_frac.geometry import repair as repair_module
+from taichi_frac.geometry import simplify as simplify_module
 from taichi_frac.geometry import tetra as tetra_module
 from taichi_frac.geometry.bounded import StepClock
 from taichi_frac.geometry.intersections import crossing_face_pairs
@@ -213,6 +214,48 @@ def test_tetgen_hang_or_crash_falls_back_to_ftetwild(monkeypatch, mesher, why):
 
 # --- resolution set by the target -------------------------------------------------------------
 
+def test_surface_deviation_matches_hand_computed_distances():
+    box = trimesh.creation.box((1.0, 1.0, 1.0))
+    points = np.array([[2.0, 0.0, 0.0], [0.0, 0.0, 0.5], [0.5, 0.5, 1.5]])  # 1.5, 0, sqrt(1^2) = 1
+    assert simplify_module.surface_deviation(points, box.vertices, box.faces) == pytest.approx(1.5, abs=1e-12)
+    assert simplify_module.surface_deviation(points[1:], box.vertices, box.faces) == pytest.approx(1.0, abs=1e-12)
+
+
+def _sphere_with_tail():
+    """A 0.05 m sphere (5,120 faces) with a 3 mm thick tail reaching to x = 0.1 m: one closed
+    solid whose tail is thinner than the particle spacing of 1,000 particles (8 mm)."""
+    body = trimesh.creation.icosphere(subdivisions=4, radius=0.05)
+    tail = trimesh.creation.cylinder(radius=0.0015, height=0.06, sections=8)
+    tail.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [0, 1, 0]))
+    tail.apply_translation((0.07, 0.0, 0.0))
+    v, f = repair_module._manifold_union([(body.vertices, body.faces), (tail.vertices, tail.faces)])
+    return trimesh.Trimesh(v, f, process=True)
+
+
+def test_a_copy_that_loses_a_thin_part_is_refused(monkeypatch):
+    """The cow's tail: decimated into its leg, then cut away with the crossing, 7 % of its length
+    and 0.01 % of its volume. A decimator that drops the tail below 1,000 faces stands in:
+    the distance bound refuses those copies and keeps the finer one, whose box is the input's."""
+    mesh = _sphere_with_tail()
+    assert mesh.is_watertight and mesh.bounds[1][0] == pytest.approx(0.1)
+    real = simplify_module._decimate
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.05)
+
+    def tail_lost_when_coarse(vertices, faces, count):
+        return real(sphere.vertices, sphere.faces, count) if count < 1000 else real(vertices, faces, count)
+
+    monkeypatch.setattr(simplify_module, "_decimate", tail_lost_when_coarse)
+    spacing = simplify_module.particle_spacing(mesh.volume, 1000)
+    unbounded, _ = simplify_module.simplify_to_faces(mesh, 700, max_deviation=None)
+    assert unbounded.bounds[1][0] == pytest.approx(0.05, abs=0.002)  # the tail is gone: the test can fail
+    copy, _ = simplify_module.simplify_to_faces(mesh, 700, max_deviation=0.5 * spacing)
+    assert len(copy.faces) >= 1000
+    np.testing.assert_allclose(copy.bounds, mesh.bounds, atol=0.5 * spacing)
+    points = simplify_module.deviation_points(mesh)
+    assert simplify_module.surface_deviation(points, copy.vertices, copy.faces) <= 0.5 * spacing
+
+
+
 def test_dense_surface_meshes_at_the_target():
     sphere = trimesh.creation.icosphere(subdivisions=5, radius=0.05)  # 20,480 faces
     model, report = prepare_body(sphere, particles=ParticleOptions(target_particles=1500), use_cache=False)
@@ -286,6 +329,31 @@ def test_shared_meshes_keep_their_whole_shape(name, shells):
     # Closing an open shell can add volume the winding number counts as half outside (the
     # beetle's open underside), never lose it.
     assert mesh.volume >= 0.95 * report.input_volume
+
+
+def test_cow_keeps_its_tail():
+    """The cow's tail is thinner than the particle spacing of 5,000 particles; its simplified
+    copies either cross themselves there or lose it. The simulated solid's box is held to the
+    source file's own box (read without repair) within half a particle spacing on every side,
+    at the target count."""
+    path = SHARED / "cow.obj"
+    if not path.exists():
+        pytest.skip(f"{path} is not there (the public test meshes live beside the checkout)")
+    from taichi_frac.bench.meshes import _scale_for
+    from taichi_frac.geometry.meshio_in import read_surface
+
+    scale = _scale_for(str(path))
+    model, report = prepare_body(str(path), scale=scale, repair=True, particles=ParticleOptions(target_particles=5000),
+                                 use_cache=False, time_limit=300)
+    source_bounds = read_surface(path).bounds * scale
+    spacing = simplify_module.particle_spacing(report.surface_volume, 5000)
+    tets = report.tet_surface if report.tet_surface is not None else report.surface
+    assert tets is not None
+    lo, hi = np.asarray(report.tet_extents), np.asarray(source_bounds[1] - source_bounds[0])
+    assert np.all(np.abs(lo - hi) <= spacing), (lo, hi, spacing)
+    np.testing.assert_allclose(tets.bounds, source_bounds, atol=0.5 * spacing)
+    assert report.surface_deviation <= 0.5 * spacing
+    assert abs(report.physics_particles / 5000 - 1) <= 0.15, report.physics_particles
 
 
 def test_teapot_meets_the_particle_target():

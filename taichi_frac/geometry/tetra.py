@@ -132,7 +132,7 @@ _TETGEN_OVERSHOOT = 2.0
 
 #: Looser (radius-edge ratio, min dihedral [deg]) TetGen bounds tried in turn when the quality
 #: bound alone overshoots the target count.
-_TETGEN_RELAXED_QUALITY = ((2.0, 5.0), (4.0, 0.0))
+_TETGEN_RELAXED_QUALITY = ((2.0, 5.0), (4.0, 0.0), (8.0, 0.0))
 
 
 #: Volume-bound calibration runs under each relaxed quality bound.
@@ -247,6 +247,12 @@ def tetrahedralize(
                     seen.append((quality_bound, len(t2)))
                     quality_bound = _next_bound(seen, target_tets)
                     if quality_bound is None:
+                        if quality == _TETGEN_RELAXED_QUALITY[-1]:
+                            # The loosest bound's floor is above the target (parts thinner
+                            # than the spacing): the count nearest it is the floor itself.
+                            v2, t2 = mesh_once(8.0 * max(b for b, _ in seen), quality)
+                            if miss_of(t2) < miss_of(t):
+                                v, t, bound = v2, t2, 8.0 * max(b for b, _ in seen)
                         break
                 if miss_of(t) <= tolerance:
                     break
