@@ -43,9 +43,10 @@ VOLUME_TOLERANCE = 0.005
 #: Fewest triangles a simplified copy keeps (a coarser copy loses the shape, not just detail).
 MIN_FACES = 500
 #: Largest distance from a point of the input to the copy, in particle spacings
-#: (:func:`particle_spacing`). Decimating to the target's spacing moves the surface by
-#: 0.1-0.3 spacings; a lost thin part is one spacing or more away.
-MAX_DEVIATION = 0.5
+#: (:func:`particle_spacing`). Decimating to the target's spacing moves the surface by up to
+#: 0.6 spacings (where shells were united); a lost thin part lies its length away (the cow's
+#: tail: 2.4 spacings).
+MAX_DEVIATION = 1.0
 #: Input points the deviation is measured at: every vertex up to this count, else a random
 #: subset of this size (a lost part has many vertices; one is enough to see it).
 DEVIATION_SAMPLES = 50_000
@@ -154,21 +155,58 @@ def restore_volume(mesh: trimesh.Trimesh, volume: float, passes: int = 2) -> tri
     return mesh
 
 
+def _copy_at(mesh: trimesh.Trimesh, count: int, volume: float, near, clock=None):
+    """One decimation of ``mesh`` to ``count`` faces, relaxed and given ``volume`` [m^3] back:
+    (copy, how) when it comes out closed, non-crossing, within :data:`VOLUME_TOLERANCE` of
+    ``volume`` and ``near`` the input, else None."""
+    if clock is not None:
+        v, f = clock.run("simplify (fast-simplification)", _decimate, mesh.vertices, mesh.faces, count)
+    else:
+        v, f = _decimate(mesh.vertices, mesh.faces, count)
+    copy = trimesh.Trimesh(v, f, process=True)
+    if not (copy.is_watertight and copy.is_winding_consistent and copy.volume > 0
+            and abs(copy.volume / volume - 1.0) < 0.2):
+        return None
+    relaxed = relax_tangentially(copy, reference=mesh)
+    # Restoring the volume can push thin walls through each other: then the copy as it is, if
+    # its volume is within VOLUME_TOLERANCE; the unrelaxed copy is the last resort (its thin
+    # triangles make more tets than asked for).
+    for candidate, how in ((restore_volume(relaxed, volume), "relaxed, volume restored"),
+                           (relaxed, "relaxed"), (restore_volume(copy, volume), "volume restored"),
+                           (copy, "as decimated")):
+        if abs(candidate.volume / volume - 1.0) > VOLUME_TOLERANCE:
+            continue
+        if len(self_intersections(candidate.vertices, candidate.faces)) == 0 and near(candidate):
+            return candidate, how
+    # Thin parts (legs, ears) decimated into each other: MeshFix removes the crossings (and,
+    # when it cuts a thin part away, the distance bound refuses the result).
+    cleaned = _meshfix_copy(restore_volume(relaxed, volume), clock)
+    if cleaned is not None and abs(cleaned.volume / volume - 1.0) < 0.05:
+        cleaned = restore_volume(cleaned, volume)
+        if (abs(cleaned.volume / volume - 1.0) <= VOLUME_TOLERANCE
+                and len(self_intersections(cleaned.vertices, cleaned.faces)) == 0 and near(cleaned)):
+            return cleaned, "relaxed, crossings removed by pymeshfix, volume restored"
+    return None
+
+
 def simplify_to_faces(mesh: trimesh.Trimesh, face_count: int, clock=None, reference_volume: float | None = None,
-                      max_deviation: float | None = None, reference_points: np.ndarray | None = None):
+                      max_deviation: float | None = None, reference_points: np.ndarray | None = None,
+                      finer: trimesh.Trimesh | None = None):
     """A closed, non-crossing copy of ``mesh`` [m] decimated to about ``face_count`` faces,
     relaxed, with ``reference_volume`` (default: the mesh's) [m^3], and no point of
     ``reference_points`` (default: :func:`deviation_points` of ``mesh``) farther than
     ``max_deviation`` [m] from it (None: no bound), or None.
 
     Returns (copy, how) or None. A copy that comes out open, self-crossing, off in volume or
-    too far from the input is retried with 1.15x the triangles, up to :data:`RETRIES` times; if all fail,
-    None (the mesher then gets the full surface and the count follows the surface, as the
-    report will show).
+    too far from the input is first made again from ``finer`` (the surface ``mesh`` was itself
+    decimated from, if any: a staged copy can have merged what the full surface keeps apart),
+    then retried with 1.15x the triangles, up to :data:`RETRIES` times, while that is still
+    fewer than the surface has; if all fail, None (the mesher then gets the full surface and
+    the count follows the surface, as the report will show).
     """
     volume = float(mesh.volume if reference_volume is None else reference_volume)
     if max_deviation is not None and reference_points is None:
-        reference_points = deviation_points(mesh)
+        reference_points = deviation_points(mesh if finer is None else finer)
 
     def near(candidate) -> bool:
         return max_deviation is None or surface_deviation(reference_points, candidate.vertices,
@@ -176,34 +214,13 @@ def simplify_to_faces(mesh: trimesh.Trimesh, face_count: int, clock=None, refere
 
     count = max(int(face_count), MIN_FACES)
     for _ in range(RETRIES):
-        if count >= len(mesh.faces):
+        sources = [source for source in (mesh, finer) if source is not None and count < len(source.faces)]
+        if not sources:
             return None
-        if clock is not None:
-            v, f = clock.run("simplify (fast-simplification)", _decimate, mesh.vertices, mesh.faces, count)
-        else:
-            v, f = _decimate(mesh.vertices, mesh.faces, count)
-        copy = trimesh.Trimesh(v, f, process=True)
-        if (copy.is_watertight and copy.is_winding_consistent and copy.volume > 0
-                and abs(copy.volume / volume - 1.0) < 0.2):
-            relaxed = relax_tangentially(copy, reference=mesh)
-            # Restoring the volume can push thin walls through each other: then the copy as
-            # it is, if its volume is within VOLUME_TOLERANCE; the unrelaxed copy is the last
-            # resort (its thin triangles make more tets than asked for).
-            for candidate, how in ((restore_volume(relaxed, volume), "relaxed, volume restored"),
-                                   (relaxed, "relaxed"), (restore_volume(copy, volume), "volume restored"),
-                                   (copy, "as decimated")):
-                if abs(candidate.volume / volume - 1.0) > VOLUME_TOLERANCE:
-                    continue
-                if len(self_intersections(candidate.vertices, candidate.faces)) == 0 and near(candidate):
-                    return candidate, how
-            # Thin parts (legs, ears) decimated into each other: MeshFix removes the crossings
-            # (and, when it cuts a thin part away, the distance bound refuses the result).
-            cleaned = _meshfix_copy(restore_volume(relaxed, volume), clock)
-            if cleaned is not None and abs(cleaned.volume / volume - 1.0) < 0.05:
-                cleaned = restore_volume(cleaned, volume)
-                if (abs(cleaned.volume / volume - 1.0) <= VOLUME_TOLERANCE
-                        and len(self_intersections(cleaned.vertices, cleaned.faces)) == 0 and near(cleaned)):
-                    return cleaned, "relaxed, crossings removed by pymeshfix, volume restored"
+        for source in sources:
+            copy = _copy_at(source, count, volume, near, clock)
+            if copy is not None:
+                return copy
         count = int(count * 1.15)  # (the decimator's output is open at some counts, not at others)
     return None
 
@@ -242,9 +259,8 @@ def simplified_tet_surfaces(mesh: trimesh.Trimesh, target_particles: int, clock=
             source = staged[0]
     count = wanted
     for _ in range(3):
-        copy = simplify_to_faces(source, count, clock, reference_volume=volume, **bound)
-        if copy is None and source is not mesh:
-            copy = simplify_to_faces(mesh, count, clock, **bound)
+        copy = simplify_to_faces(source, count, clock, reference_volume=volume,
+                                 finer=None if source is mesh else mesh, **bound)
         if copy is None:
             return
         tets = yield copy[0], (f"tetrahedralized a copy simplified to the particle spacing: {len(mesh.faces):,} -> "
