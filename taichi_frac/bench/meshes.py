@@ -143,7 +143,9 @@ def _prepare_row(name, source, target: int, out: Path):
     row = dict(deviation=report.surface_deviation / spacing, name=name, faces=faces_in, tet_faces=report.tet_surface_triangles, particles=report.physics_particles,
                target=target, volume_error=report.volume_error, kept=report.kept_volume_fraction,
                extents_min=float(extents.min()), extents_max=float(extents.max()), seconds=seconds,
-               steps=report.timings, surface_closed=report.surface.is_watertight)
+               steps=report.timings, surface_closed=report.surface.is_watertight,
+               input_extents=np.sort(np.asarray(report.input_extents, dtype=float)),
+               surface_volume=report.surface_volume)
     if cache_error is not None:
         row["cache_error"] = cache_error
     return row, (path, scale, report)
@@ -168,23 +170,51 @@ def _drop(ctx: BenchContext, name: str, path, scale: float, target: int, cache_d
     sim = Simulation(scene, output=str(cache), world=ctx.world(), arch=ctx.arch)
     summary = sim.run()
     lost = abs(summary.mass_final + summary.mass_dropped - summary.mass_initial) / summary.mass_initial
-    meshes, issues = _read_back(cache)
     return dict(ms=summary.ms_per_frame["mean_after_first"] or summary.ms_per_frame["mean"],
                 fragments=summary.fragments, mass_error=lost, dropped=summary.mass_dropped / summary.mass_initial,
-                meshes=meshes, issues=issues)
+                **_read_back(cache))
 
 
-def _read_back(cache: Path) -> tuple[int, int]:
-    """(fragment meshes with faces, findings of USD's validators) of a written cache: what an
-    import into Blender reads, without Blender."""
+def _read_back(cache: Path) -> dict:
+    """What an import into Blender reads from a written cache, without Blender: ``meshes``
+    (fragment meshes with faces), ``issues`` (findings of USD's validators), ``extents`` (3,)
+    [m] (the visible meshes' world box at the first frame, sorted: the whole solid as it
+    renders before it breaks) and ``volume`` [m^3] (the enclosed volume of the meshes
+    visible at the last frame: every piece's render surface)."""
     from pxr import Usd, UsdGeom
 
     from ..io.cache import check_cache
 
     stage = Usd.Stage.Open(str(cache))
-    meshes = sum(1 for prim in stage.Traverse() if prim.IsA(UsdGeom.Mesh)
-                 and len(UsdGeom.Mesh(prim).GetFaceVertexCountsAttr().Get() or []) > 0)
-    return meshes, len(check_cache(cache))
+    metres = UsdGeom.GetStageMetersPerUnit(stage)
+    meshes = [UsdGeom.Mesh(prim) for prim in stage.Traverse() if prim.IsA(UsdGeom.Mesh)
+              and len(UsdGeom.Mesh(prim).GetFaceVertexCountsAttr().Get() or []) > 0]
+    first = stage.GetStartTimeCode()
+    box = UsdGeom.BBoxCache(first, [UsdGeom.Tokens.default_, UsdGeom.Tokens.render]).ComputeWorldBound(
+        stage.GetPseudoRoot()).ComputeAlignedRange()
+    extents = np.sort(np.array(box.GetSize()) * metres) if not box.IsEmpty() else np.zeros(3)
+    last = stage.GetEndTimeCode()
+    volume = 0.0
+    for mesh in meshes:
+        if mesh.ComputeVisibility(last) == UsdGeom.Tokens.invisible:
+            continue
+        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(last))
+        indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(last))
+        points = np.asarray(mesh.GetPointsAttr().Get(last), dtype=np.float64) * metres
+        if np.all(counts == 3):
+            triangles = indices.reshape(-1, 3)
+        else:  # fan-triangulate each polygon
+            starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+            triangles = np.array([(indices[s], indices[s + k], indices[s + k + 1])
+                                  for s, c in zip(starts, counts) for k in range(1, c - 1)])
+        # (Rigid poses leave a closed mesh's volume as it is in its own frame.)
+        volume += trimesh.Trimesh(points, triangles, process=False).volume
+    return dict(meshes=len(meshes), issues=len(check_cache(cache)), extents=extents, volume=volume)
+
+
+def _rendered(row: dict, drop: dict) -> str:
+    box = drop["extents"] / row["input_extents"]
+    return f"{box.min():.3f}-{box.max():.3f}, {100 * drop['volume'] / row['surface_volume']:.1f} %"
 
 
 def _validation_timing(quick: bool):
@@ -252,7 +282,7 @@ def _markdown(rows, drops, timing, target, load_before) -> str:
         d = drops.get(r["name"])
         if "error" in r:
             table_rows.append([r["name"], f"{r['faces']:,}", "-", "-", "-", "-", "-", "-", f"{r['seconds']:.1f}",
-                               "-", "-", "-", "-", f"error: {r['error'][:120]}"])
+                               "-", "-", "-", "-", "-", f"error: {r['error'][:120]}"])
             continue
         table_rows.append([
             r["name"], f"{r['faces']:,}", f"{r['tet_faces']:,}", f"{r['particles']:,} ({r['particles'] / target - 1:+.0%})",
@@ -260,11 +290,13 @@ def _markdown(rows, drops, timing, target, load_before) -> str:
             f"{r['extents_min']:.3f}-{r['extents_max']:.3f}", f"{r['deviation']:.2f}", f"{r['seconds']:.1f}",
             f"{d['ms']:.1f}" if d else "-", f"{d['fragments']}" if d else "-",
             f"{d['mass_error']:.1e}" if d else "-", f"{d['meshes']} ({d['issues']})" if d else "-",
+            _rendered(r, d) if d else "-",
             ("" if r["surface_closed"] else "surface not closed; ")
             + (f"drop: {r['drop_error'][:160]}" if "drop_error" in r else "")])
     table = md_table(["mesh", "faces in", "tet surface", f"particles (target {target:,})", "volume error",
                       "kept (winding no.)", "extents kept", "deviation [spacings]", "prepare [s]", "drop ms/frame",
-                      "fragments", "mass error", "cache read back", "note"], table_rows, align="lrrrrrrrrrrrrl")
+                      "fragments", "mass error", "cache read back", "rendered: box, volume", "note"], table_rows,
+                     align="lrrrrrrrrrrrrrl")
     check = md_table(["faces", "crossing pairs found", "crossing check wall [s]", "its main-thread CPU [s]",
                       "all checks wall [s]"],
                      [[f"{timing['faces']:,}", timing["pairs"], f"{timing['crossing_wall']:.2f}",
@@ -282,7 +314,10 @@ def _markdown(rows, drops, timing, target, load_before) -> str:
         "smallest and largest axis; *deviation*: the farthest point of the input's surface from the "
         "simulated solid's, in particle spacings (edge of a regular tet of the target's particle volume); "
         "*mass error*: |final + dropped debris - initial| / initial; *cache read back*: the drop's USD cache "
-        "opened again: fragment meshes with faces (findings of USD's validators).",
+        "opened again: fragment meshes with faces (findings of USD's validators); *rendered*: in that cache, the "
+        "visible meshes' box at the first frame over the input's box (axes sorted; smallest and largest ratio), and "
+        "the volume the meshes visible at the last frame enclose over the full-resolution solid's (every piece's "
+        "render surface: off where a piece's surface is not its tets' volume, see the piece-geometry section).",
         table,
         "The checks alone (`validate_surface`: closedness, manifold edges, winding, self-crossings) on the "
         "noisy sphere, after the crossing kernel's one-time compilation:",
