@@ -144,71 +144,18 @@ class Simulation:
             raise
 
     def _build(self, scene, arch, single_scale, world):
-        from .dynamics import DynamicsOptions, World, WorldCapacity
+        from .scene_setup import dynamics_options, furnish_world, prepare_objects, world_capacity
 
         sim = scene.simulation
         # The arch first: preparing a breakable body runs kernels (its SPH neighbour lists),
         # and the first kernel fixes the process's arch. A World given brings its own.
         if world is None or arch is not None:
             runtime.init(arch or sim.arch)
-
-        t0 = time.perf_counter()
-        prepared = []
-        for obj in scene.objects:
-            interrupts.check()
-            model, report = obj.prepare() if self._prepare is None else self._prepare(obj)
-            prepared.append((obj, model))
-            self.prepare_reports.append(report)
-            if obj.breakable and self.fracture_enabled:
-                # The SPH neighbour lists are part of a breakable body's static model (the
-                # paper's preprocessing, built by prepare_body; here for a model from a
-                # ``prepare`` callable); its fragments' are restricted from them.
-                from .fracture.neighbors import model_neighbor_lists, smoothing_length
-
-                model_neighbor_lists(model, smoothing_length(model, obj.fracture))
-                if obj.fracture.stress_model == "fem":  # its stiffness, factorised once
-                    from .fracture.fem import elastic_body_of
-
-                    elastic_body_of(model, obj.material)
-        self.prepare_seconds = time.perf_counter() - t0
-
-        breakable = [m for o, m in prepared if o.breakable and self.fracture_enabled]
-        # Fragments add crack faces, so their boundary layers hold more particles than the
-        # parent's: room for about four times the breakable bodies' boundary particles.
-        particles_now = sum(
-            (m.surface_particle_count if (single_scale or sim.single_scale) else m.boundary_particle_count)
-            for _, m in prepared
-        )
-        extra = sum(4 * m.boundary_particle_count + m.surface_particle_count for m in breakable)
-        capacity = WorldCapacity(
-            max_bodies=max(64, len(prepared) + 256 * len(breakable)),
-            max_boundary_particles=max(1024, particles_now + extra),
-            # 4 per particle of that room: the scenes peak far below it (13 rings with
-            # fracture: 5,693 contacts against 205k), and each contact slot costs ~220 B
-            # (the 1M-particle scaling case peaked at 3.2 GB with 8 per particle).
-            max_contacts=max(65536, 4 * (particles_now + extra)),
-            max_static_boxes=max(4, sum(c.type == "box" for c in scene.colliders)),
-        )
-        overrides = {} if single_scale is None else {"single_scale": bool(single_scale)}
-        thresholds = [o.fracture.impact_force_threshold for o, _ in prepared if o.breakable]
-        overrides["record_force_threshold"] = min(thresholds) if thresholds else 0.0
-        options = DynamicsOptions.from_simulation(sim, **overrides)
-        if world is None:
-            self.world = World(capacity, options, arch=arch or sim.arch)
-        else:
-            for name in ("max_bodies", "max_boundary_particles", "max_static_boxes"):
-                if getattr(world.capacity, name) < getattr(capacity, name):
-                    raise ValueError(f"the World given has {name}={getattr(world.capacity, name)}, this scene "
-                                     f"needs {getattr(capacity, name)}")
-            world.clear()
-            world.set_options(options)
-            self.world = world
-        for c in scene.colliders:
-            if c.type == "ground":
-                self.world.add_ground(c.height, friction=c.friction, restitution=c.restitution)
-            else:
-                self.world.add_static_box(c.center, c.half_extents, c.orientation, friction=c.friction,
-                                          restitution=c.restitution)
+        prepared, self.prepare_seconds = prepare_objects(scene, fracture=self.fracture_enabled,
+                                                         prepare=self._prepare)
+        self.prepare_reports = [p.report for p in prepared]
+        self.world = furnish_world(scene, world_capacity(scene, prepared, single_scale=single_scale),
+                                   dynamics_options(scene, single_scale=single_scale), arch=arch, world=world)
         if self.output_path is not None:
             from .io.recorder import CacheRecorder
 
@@ -216,20 +163,21 @@ class Simulation:
             self.recorder = CacheRecorder(self.output_path, fps=sim.fps, checkpoint_every=out.checkpoint_every,
                                           checkpoint_seconds=out.checkpoint_seconds, records=self.records,
                                           lock=self._lock)
-        for (obj, model), report in zip(prepared, self.prepare_reports):
+        for p in prepared:
+            obj, model = p.obj, p.model
             body = self.world.add_body(
                 model, obj.position, obj.orientation, obj.linear_velocity, obj.angular_velocity,
                 friction=obj.friction, restitution=obj.restitution,
-                breakable=obj.breakable and self.fracture_enabled,
+                breakable=p.breakable,
                 young_modulus=obj.material.young_modulus, poisson_ratio=obj.material.poisson_ratio,
             )
             self.records[body] = BodyRecord(
                 name=obj.name, model=model, root=model, material=obj.material, fracture=obj.fracture,
-                particles=obj.particles, breakable=obj.breakable and self.fracture_enabled,
+                particles=obj.particles, breakable=p.breakable,
                 friction=obj.friction, restitution=obj.restitution,
             )
             if self.recorder is not None:
-                self.recorder.prepare_body(self.records[body], report)
+                self.recorder.prepare_body(self.records[body], p.report)
         self.initial_mass = sum(r.model.mass for r in self.records.values())
         self._dynamics_seconds_at_start = dict(self.world.stats.seconds)  # a reused World keeps counting
         self.table1 = dict(

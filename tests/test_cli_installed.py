@@ -60,12 +60,19 @@ def test_bench_help_runs_outside_a_checkout(installed):
     assert "--scene" in done.stdout and "thirteen_rings" in done.stdout
 
 
-def test_a_built_in_scene_runs_from_any_folder_and_writes_its_cache_there(installed):
+@pytest.fixture(scope="module")
+def ran(installed):
+    """The installed copy's 3-frame ``run single_ring`` from its working folder: (process, cache)."""
     site, work, env = installed
     done = subprocess.run([str(ENTRY), "run", "single_ring", "--frames", "3", "-q"], cwd=work, env=env,
                           capture_output=True, text=True, timeout=600)
+    return done, work / "single_ring.usdc"  # the scene's output.path, in the current folder
+
+
+def test_a_built_in_scene_runs_from_any_folder_and_writes_its_cache_there(installed, ran):
+    site, work, env = installed
+    done, cache = ran
     assert done.returncode == 0, done.stderr
-    cache = work / "single_ring.usdc"  # the scene's output.path, in the current folder
     assert cache.is_file(), (done.stdout, sorted(work.iterdir()))
     assert check_cache(cache) == []
     stage = Usd.Stage.Open(str(cache))
@@ -74,3 +81,30 @@ def test_a_built_in_scene_runs_from_any_folder_and_writes_its_cache_there(instal
     assert stage.GetEndTimeCode() == 3
     written = [p for p in site.rglob("*") if p.is_file() and p.suffix not in (".py", ".toml")]
     assert written == []  # nothing written into the installed package
+
+
+BLENDER_PYTHON = ROOT / ".venv-blender" / "bin" / "python"
+
+
+@pytest.mark.blender
+def test_render_runs_outside_a_checkout(installed, ran):
+    """The add-on and the script Blender runs ship in the package: ``taichi-frac render`` of the
+    cache above, with only the Blender Python named, imports it through the add-on and writes
+    the frame asked for, at the size asked for (the add-on's own tests check what it draws)."""
+    if not BLENDER_PYTHON.exists():
+        pytest.skip(f"no Blender environment at {BLENDER_PYTHON} (scripts/test.sh makes it)")
+    site, work, env = installed
+    done, cache = ran
+    assert done.returncode == 0, done.stderr
+    renders = work / "renders"
+    shown = subprocess.run([str(ENTRY), "render", str(cache), "--frames", "3", "-o", str(renders),
+                            "--resolution", "96x64", "--samples", "1"], cwd=work,
+                           env=dict(env, TAICHI_FRAC_BLENDER_PYTHON=str(BLENDER_PYTHON)),
+                           capture_output=True, text=True, timeout=600)
+    assert shown.returncode == 0, shown.stdout[-2000:] + shown.stderr[-2000:]
+    from PIL import Image
+    import numpy as np
+
+    image = np.asarray(Image.open(renders / "frame_0003.png").convert("RGB"), dtype=float)
+    assert image.shape == (64, 96, 3)
+    assert image.std() > 1.0  # a picture, not a blank

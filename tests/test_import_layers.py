@@ -12,7 +12,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "taichi_frac"
 LAYERS = [
     ("cli", 0), ("__main__", 0), ("commands", 0), ("sweep", 0), ("bench", 0),
     ("simulation", 1),
-    ("io", 2), ("fracture.stage", 2),
+    ("io", 2), ("fracture.stage", 2), ("scene_setup", 2),
     ("scenes", 3), ("geometry.prepare", 3), ("geometry.piece_surface", 3), ("geometry.piece_checks", 3),
     ("fracture", 4),
     ("dynamics", 5),

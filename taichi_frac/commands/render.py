@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
-RENDER_SCRIPT = REPO / "blender_addon" / "render_cache.py"
+RENDER_SCRIPT = Path(__file__).resolve().parents[1] / "blender_addon" / "render_cache.py"
 
 
 def _frames(text: str) -> str:

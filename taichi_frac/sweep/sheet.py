@@ -19,7 +19,7 @@ from pathlib import Path
 from . import results
 from .variants import Variant
 
-THUMBNAIL_SCRIPT = Path(__file__).resolve().parents[2] / "blender_addon" / "render_thumbnails.py"
+THUMBNAIL_SCRIPT = Path(__file__).resolve().parents[1] / "blender_addon" / "render_thumbnails.py"
 SHEET_NAME = "sheet.png"
 
 
@@ -32,8 +32,6 @@ def render_thumbnails(jobs: list[tuple[Path, Path]], *, resolution: str, samples
     if not python.exists():
         raise RuntimeError(f"no Blender Python at {python} (set TAICHI_FRAC_BLENDER_PYTHON, or run the sweep "
                            "with --no-sheet)")
-    if not THUMBNAIL_SCRIPT.exists():
-        raise RuntimeError(f"{THUMBNAIL_SCRIPT} not found: the contact sheet needs a checkout of taichi-frac")
     with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as fh:
         json.dump([[str(c), str(p)] for c, p in jobs], fh)
     env = dict(os.environ)

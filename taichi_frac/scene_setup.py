@@ -1,0 +1,118 @@
+"""A scene's bodies prepared and a World sized and furnished for them: what a
+:class:`~taichi_frac.simulation.Simulation` does before its first frame.
+
+Three steps, each usable alone (a bench that reuses one World across scenes calls the last
+two with its own):
+
+1. :func:`prepare_objects`: every object's mesh → tets → :class:`~taichi_frac.model.BodyModel`
+   (``SceneObject.prepare``, cached on disk), with a breakable body's SPH neighbour lists
+   (and the FEM stiffness when that stress model is chosen) built once, here, as the paper's
+   preprocessing;
+2. :func:`world_capacity` and :func:`dynamics_options`: how much room the World needs once
+   the breakable bodies have split, and the solver settings of the scene;
+3. :func:`furnish_world`: a new World, or the one given cleared and checked against that
+   room, with the scene's ground and static boxes.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+from . import interrupts
+
+__all__ = ["PreparedObject", "dynamics_options", "furnish_world", "prepare_objects", "world_capacity"]
+
+
+@dataclass(frozen=True)
+class PreparedObject:
+    """One scene object with its static model. ``breakable``: the object breaks in this run
+    (it is breakable and the run has fracture on)."""
+
+    obj: object  # scenes.SceneObject
+    model: object  # model.BodyModel
+    report: object  # geometry.prepare.PrepareReport
+    breakable: bool
+
+
+def prepare_objects(scene, *, fracture: bool = True, prepare=None) -> tuple[list[PreparedObject], float]:
+    """Every object of ``scene`` prepared, in order, and the seconds it took. ``prepare``:
+    callable(SceneObject) -> (BodyModel, PrepareReport) used instead of ``obj.prepare()``
+    (a sweep worker's memo). Ctrl-C is honoured between objects."""
+    t0 = time.perf_counter()
+    prepared = []
+    for obj in scene.objects:
+        interrupts.check()
+        model, report = obj.prepare() if prepare is None else prepare(obj)
+        breakable = bool(obj.breakable and fracture)
+        if breakable:
+            # The SPH neighbour lists are part of a breakable body's static model (built by
+            # prepare_body; here again for a model from a ``prepare`` callable, where it is a
+            # no-op if they are there); its fragments' are restricted from them.
+            from .fracture.neighbors import model_neighbor_lists, smoothing_length
+
+            model_neighbor_lists(model, smoothing_length(model, obj.fracture))
+            if obj.fracture.stress_model == "fem":  # its stiffness, factorised once
+                from .fracture.fem import elastic_body_of
+
+                elastic_body_of(model, obj.material)
+        prepared.append(PreparedObject(obj, model, report, breakable))
+    return prepared, time.perf_counter() - t0
+
+
+def world_capacity(scene, prepared: list[PreparedObject], *, single_scale: bool | None = None):
+    """The :class:`~taichi_frac.dynamics.WorldCapacity` the scene needs, with room for its
+    breakable bodies' pieces: fragments add crack faces, so their boundary layers hold more
+    particles than the parent's (room for about four times the breakable bodies' boundary
+    particles)."""
+    from .dynamics import WorldCapacity
+
+    single = single_scale if single_scale is not None else scene.simulation.single_scale
+    particles_now = sum(p.model.surface_particle_count if single else p.model.boundary_particle_count
+                        for p in prepared)
+    breakable = [p.model for p in prepared if p.breakable]
+    extra = sum(4 * m.boundary_particle_count + m.surface_particle_count for m in breakable)
+    return WorldCapacity(
+        max_bodies=max(64, len(prepared) + 256 * len(breakable)),
+        max_boundary_particles=max(1024, particles_now + extra),
+        # 4 per particle of that room: the scenes peak far below it (13 rings with fracture:
+        # 5,693 contacts against 205k), and each contact slot costs ~220 B (the 1M-particle
+        # scaling case peaked at 3.2 GB with 8 per particle).
+        max_contacts=max(65536, 4 * (particles_now + extra)),
+        max_static_boxes=max(4, sum(c.type == "box" for c in scene.colliders)),
+    )
+
+
+def dynamics_options(scene, *, single_scale: bool | None = None):
+    """The scene's solver settings as :class:`~taichi_frac.dynamics.DynamicsOptions`; impacts
+    are recorded from the lowest force threshold of its breakable objects (0 if none)."""
+    from .dynamics import DynamicsOptions
+
+    overrides = {} if single_scale is None else {"single_scale": bool(single_scale)}
+    thresholds = [o.fracture.impact_force_threshold for o in scene.objects if o.breakable]
+    overrides["record_force_threshold"] = min(thresholds) if thresholds else 0.0
+    return DynamicsOptions.from_simulation(scene.simulation, **overrides)
+
+
+def furnish_world(scene, capacity, options, *, arch: str | None = None, world=None):
+    """A World with ``capacity`` and ``options`` holding the scene's ground and static boxes
+    (no bodies yet). ``world``: one to reuse (its kernels are compiled already), cleared
+    first; ValueError naming the field when it has less room than ``capacity``."""
+    from .dynamics import World
+
+    if world is None:
+        world = World(capacity, options, arch=arch or scene.simulation.arch)
+    else:
+        for name in ("max_bodies", "max_boundary_particles", "max_static_boxes"):
+            if getattr(world.capacity, name) < getattr(capacity, name):
+                raise ValueError(f"the World given has {name}={getattr(world.capacity, name)}, this scene "
+                                 f"needs {getattr(capacity, name)}")
+        world.clear()
+        world.set_options(options)
+    for c in scene.colliders:
+        if c.type == "ground":
+            world.add_ground(c.height, friction=c.friction, restitution=c.restitution)
+        else:
+            world.add_static_box(c.center, c.half_extents, c.orientation, friction=c.friction,
+                                 restitution=c.restitution)
+    return world
