@@ -83,6 +83,8 @@ def _table(report) -> str:
     if report.input_extents and report.tet_extents:
         ratio = ", ".join(f"{t / i:.3f}" if i > 0 else "-" for t, i in zip(report.tet_extents, report.input_extents))
         rows.append(("extents kept (x, y, z)", ratio))
+    if report.surface_deviation is not None:
+        rows.append(("farthest surface point", f"{report.surface_deviation:.3g} m from the simulated solid"))
     if report.repair_steps:
         rows.append(("repair", "; ".join(report.repair_steps)))
     width = max(len(k) for k, _ in rows)

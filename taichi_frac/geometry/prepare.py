@@ -25,13 +25,13 @@ from ..options import Material, ParticleOptions, material_preset
 from .bounded import DEFAULT_PREPARE_SECONDS, StepClock, StepShareExceeded
 from .meshio_in import check_or_repair, is_tet_file, load_surface, load_tet_mesh, unit_scale
 from .primitives import make_primitive, parse_primitive_spec
-from .simplify import simplified_tet_surfaces
+from .simplify import deviation_points, simplified_tet_surfaces, surface_deviation
 from .tetra import BACKENDS, TetMesh, regular_tet_edge, tetrahedralize
-from .topology import dihedral_angles_deg, signed_volumes
+from .topology import boundary_faces, dihedral_angles_deg, signed_volumes
 from .validate import MeshError
 
 #: Bump when meshing changes so old cache entries are not reused.
-CACHE_VERSION = 2
+CACHE_VERSION = 3
 
 #: A primitive's surface edge = this x the edge of a regular tet of the target particle
 #: volume. Finer surfaces push the tet count above the target (the surface alone forces
@@ -86,6 +86,10 @@ class PrepareReport:
     tet_extents: list = field(default_factory=list)
     #: Whether ``surface`` is closed at full resolution (False: the best surface there was).
     surface_closed: bool = True
+    #: Largest distance [m] from a point of ``surface`` (its vertices, at most 50,000) to the
+    #: tets' boundary: how far the simulated solid strays from the artist's (None for
+    #: tet-mesh files).
+    surface_deviation: float | None = None
 
     def as_dict(self) -> dict:
         return {k: v for k, v in self.__dict__.items() if k not in ("surface", "tet_surface")}
@@ -365,6 +369,11 @@ def prepare_body(
         t3 = time.perf_counter()
         model_neighbor_lists(model, float(smoothing_length_factor) * model.spacing)
         timings["neighbours"] = time.perf_counter() - t3
+    deviation = None
+    if surface is not None:
+        # Measured on the tets themselves, so a part lost anywhere (decimation, the mesher)
+        # shows as a distance of the order of that part's length.
+        deviation = surface_deviation(deviation_points(surface), tm.vertices, boundary_faces(tm.tets)[0])
     # The simulated solid is measured against the artist's full-resolution surface.
     reference_volume = float(surface.volume) if surface is not None else tm.surface_volume
     extents = np.ptp(tm.vertices, axis=0)
@@ -398,5 +407,6 @@ def prepare_body(
                        else (surface.extents.tolist() if surface is not None else extents.tolist())),
         tet_extents=extents.tolist(),
         surface_closed=surface is None or bool(surface.is_watertight and surface.is_winding_consistent),
+        surface_deviation=deviation,
     )
     return model, report

@@ -93,6 +93,13 @@ def _meshfix(vertices: np.ndarray, faces: np.ndarray):
     return np.asarray(fixer.points, dtype=np.float64), np.asarray(fixer.faces, dtype=np.int64)
 
 
+def _meshfix_each(pieces: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`_meshfix` on each (vertices, faces) piece, in one bounded step: one forked child
+    for all the pieces instead of one each (33 children for the beetle's shells, seconds on
+    a loaded machine)."""
+    return [_meshfix(v, f) for v, f in pieces]
+
+
 def _manifold_union(shells: list[tuple[np.ndarray, np.ndarray]]):
     """Exact union (manifold3d, float64) of closed outward shells [(vertices, faces)].
     Returns (vertices, faces)."""
@@ -260,7 +267,7 @@ def repair_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, clock: StepCloc
     if len(pairs):
         within = pairs[label[pairs[:, 0]] == label[pairs[:, 1]]]
         crossing_faces[within.reshape(-1)] = True
-    shells, oriented = [], []
+    shells, oriented, to_close = [], [], []
     closed_count = fixed_count = flipped = 0
     for index, faces_of in enumerate(_groups(label, count)):
         part = mesh.submesh([faces_of], append=True, repair=False)
@@ -283,16 +290,16 @@ def repair_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, clock: StepCloc
             cut = mesh.submesh([faces_of[~crossing_faces[faces_of]]], append=True, repair=False)
             piece_count, piece_label = shell_labels(cut.faces)
             pieces = [cut.submesh([g], append=True, repair=False) for g in _groups(piece_label, piece_count)]
-        for piece in pieces:
-            v, f = clock.run("close shells (pymeshfix)", _meshfix, piece.vertices, piece.faces)
-            closed = trimesh.Trimesh(v, f, process=True)
-            if len(closed.faces) and closed.is_watertight and closed.volume < 0:
-                closed.invert()
-            # A sheet with no inside (a fin, a single face) closes to nothing: the kept-volume
-            # measure below says whether anything with an inside went missing.
-            if len(closed.faces) and _is_closed(closed) and closed.volume > 0:
-                shells.append((np.asarray(closed.vertices), np.asarray(closed.faces)))
+        to_close.extend((np.asarray(piece.vertices), np.asarray(piece.faces)) for piece in pieces)
         fixed_count += 1
+    for v, f in (clock.run("close shells (pymeshfix)", _meshfix_each, to_close) if to_close else []):
+        closed = trimesh.Trimesh(v, f, process=True)
+        if len(closed.faces) and closed.is_watertight and closed.volume < 0:
+            closed.invert()
+        # A sheet with no inside (a fin, a single face) closes to nothing: the kept-volume
+        # measure below says whether anything with an inside went missing.
+        if len(closed.faces) and _is_closed(closed) and closed.volume > 0:
+            shells.append((np.asarray(closed.vertices), np.asarray(closed.faces)))
     if flipped:
         report.add(f"made the winding consistent and outward in {flipped} shells")
     if fixed_count:

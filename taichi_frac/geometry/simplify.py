@@ -15,6 +15,12 @@ Decimation and relaxation shrink convex regions a little and round sharp edges, 
 copy's vertices finally move along their normals by the uniform offset (volume difference /
 area) that gives it the input's volume back (to 1e-4). The full-resolution surface stays the
 artist's (``PrepareReport.surface``); only the simulation sees the copy.
+
+A thin part (a cow's tail, a handle) can decimate into the body next to it; removing the
+crossings then cuts the part away, and its volume is too small for any volume check to see
+(the cow's tail: 7 % of its length, 0.01 % of its volume). So every copy is also held to a
+distance: no point of the input may lie farther than ``MAX_DEVIATION`` particle spacings from
+the copy (:func:`surface_deviation`); a copy that strays is replaced by a finer one.
 """
 
 from __future__ import annotations
@@ -36,13 +42,51 @@ FINER_FACTOR = 1.0
 VOLUME_TOLERANCE = 0.005
 #: Fewest triangles a simplified copy keeps (a coarser copy loses the shape, not just detail).
 MIN_FACES = 500
+#: Largest distance from a point of the input to the copy, in particle spacings
+#: (:func:`particle_spacing`). Decimating to the target's spacing moves the surface by up to
+#: 0.6 spacings (where shells were united); a lost thin part lies its length away (the cow's
+#: tail: 2.4 spacings).
+MAX_DEVIATION = 1.0
+#: Input points the deviation is measured at: every vertex up to this count, else a random
+#: subset of this size (a lost part has many vertices; one is enough to see it).
+DEVIATION_SAMPLES = 50_000
+#: Copies :func:`simplify_to_faces` tries, each with 1.15x the faces of the last (up to 3.5x).
+RETRIES = 10
+
+
+def particle_spacing(volume: float, target_particles: int) -> float:
+    """Edge [m] of a regular tet of ``volume`` / ``target_particles`` [m^3]: the spacing of
+    the physics particles."""
+    return (6.0 * math.sqrt(2.0) * volume / target_particles) ** (1.0 / 3.0)
+
+
+def deviation_points(mesh: trimesh.Trimesh, samples: int = DEVIATION_SAMPLES, seed: int = 0) -> np.ndarray:
+    """(P,3) [m] points of ``mesh`` at which :func:`surface_deviation` measures: its vertices,
+    or ``samples`` of them at random plus the six at the ends of its bounding box."""
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    if len(vertices) <= samples:
+        return vertices
+    pick = np.random.default_rng(seed).choice(len(vertices), samples, replace=False)
+    ends = np.concatenate([vertices.argmin(axis=0), vertices.argmax(axis=0)])
+    return vertices[np.union1d(pick, ends)]
+
+
+def surface_deviation(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Largest distance [m] from ``points`` (P,3) to the triangles ``faces`` of ``vertices``
+    (libigl's AABB tree): how far the input's surface lies from a copy of it."""
+    import igl
+
+    squared, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(points, dtype=np.float64),
+                                                    np.ascontiguousarray(vertices, dtype=np.float64),
+                                                    np.ascontiguousarray(faces, dtype=np.int64))
+    return float(np.sqrt(np.max(squared))) if len(squared) else 0.0
 
 
 def target_face_count(volume: float, area: float, target_particles: int) -> int:
     """Triangles of a surface of ``area`` [m^2] at the spacing of ``target_particles`` tets
     filling ``volume`` [m^3]: area / (an equilateral triangle of EDGE_FACTOR x the regular tet's
     edge)."""
-    edge = EDGE_FACTOR * (6.0 * math.sqrt(2.0) * volume / target_particles) ** (1.0 / 3.0)
+    edge = EDGE_FACTOR * particle_spacing(volume, target_particles)
     return max(MIN_FACES, int(round(area / (math.sqrt(3.0) / 4.0 * edge**2))))
 
 
@@ -59,14 +103,27 @@ def _decimate(vertices: np.ndarray, faces: np.ndarray, face_count: int):
     return np.asarray(v, dtype=np.float64) * size + centre, np.asarray(f, dtype=np.int64)
 
 
+def _closest_points(vertices: np.ndarray, faces: np.ndarray):
+    """A function (P,3) -> (P,3) [m]: the closest points on the triangles ``faces`` of
+    ``vertices``, through one libigl AABB tree built here (trimesh's R-tree took 8 s to build
+    on 1.3M faces; the AABB tree a third of that)."""
+    import igl
+
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    tree = igl.AABB()
+    tree.init(vertices, faces)
+    return lambda points: tree.squared_distance(vertices, faces, np.ascontiguousarray(points, dtype=np.float64))[2]
+
+
 def relax_tangentially(mesh: trimesh.Trimesh, iterations: int = 4, step: float = 0.5,
                        crease_deg: float = 60.0, max_turn_deg: float = 25.0,
                        reference: trimesh.Trimesh | None = None) -> trimesh.Trimesh:
     """Equalise edge lengths without changing the shape: each vertex moves ``step`` of the way
     to its neighbours' mean, in its tangent plane, then onto the ``reference`` surface (the
     finer surface ``mesh`` was decimated from; default ``mesh`` itself).
-    Vertices on creases (faces meeting at more than ``crease_deg``) stay, so sharp edges stay
-    sharp; a move that would turn a face by more than ``max_turn_deg`` is undone, so no face
+    Vertices on creases (faces meeting at more than ``crease_deg``) and the outermost vertex on
+    each axis stay, so sharp edges stay sharp and the bounding box does not shrink; a move that would turn a face by more than ``max_turn_deg`` is undone, so no face
     folds over."""
     import scipy.sparse as sp
 
@@ -81,14 +138,19 @@ def relax_tangentially(mesh: trimesh.Trimesh, iterations: int = 4, step: float =
     movable = np.ones(n, dtype=bool)
     sharp = mesh.face_adjacency_angles > np.radians(crease_deg)
     movable[np.unique(mesh.face_adjacency_edges[sharp])] = False
+    # The copy's outermost vertex on each axis stays too: sliding off a tip (an ear, a horn)
+    # shrank the cow's width by 1.5 %.
+    movable[np.concatenate([mesh.vertices.argmin(axis=0), mesh.vertices.argmax(axis=0)])] = False
     cos_turn = np.cos(np.radians(max_turn_deg))
+    surface = reference or mesh
+    onto = _closest_points(surface.vertices, surface.faces)
     for _ in range(iterations):
         before = relaxed.vertices.copy()
         normals_before = relaxed.face_normals.copy()
         move = adjacency @ before / degree - before
         normal = relaxed.vertex_normals
         move -= np.einsum("ij,ij->i", move, normal)[:, None] * normal
-        moved, _, _ = trimesh.proximity.closest_point(reference or mesh, before + step * move)
+        moved = onto(before + step * move)
         relaxed.vertices = np.where(movable[:, None], moved, before)
         for _ in range(5):  # undo the moves around faces that turned too far
             turned = np.einsum("ij,ij->i", relaxed.face_normals, normals_before) < cos_turn
@@ -111,44 +173,73 @@ def restore_volume(mesh: trimesh.Trimesh, volume: float, passes: int = 2) -> tri
     return mesh
 
 
-def simplify_to_faces(mesh: trimesh.Trimesh, face_count: int, clock=None, reference_volume: float | None = None):
-    """A closed, non-crossing copy of ``mesh`` [m] decimated to about ``face_count`` faces,
-    relaxed, with ``reference_volume`` (default: the mesh's) [m^3], or None.
+def _copy_at(mesh: trimesh.Trimesh, count: int, volume: float, near, clock=None, relax: bool = True):
+    """One decimation of ``mesh`` to ``count`` faces, relaxed (``relax``) and given ``volume``
+    [m^3] back: (copy, how) when it comes out closed, non-crossing, within
+    :data:`VOLUME_TOLERANCE` of ``volume`` and ``near`` the input, else None."""
+    if clock is not None:
+        v, f = clock.run("simplify (fast-simplification)", _decimate, mesh.vertices, mesh.faces, count)
+    else:
+        v, f = _decimate(mesh.vertices, mesh.faces, count)
+    copy = trimesh.Trimesh(v, f, process=True)
+    if not (copy.is_watertight and copy.is_winding_consistent and copy.volume > 0
+            and abs(copy.volume / volume - 1.0) < 0.2):
+        return None
+    relaxed = relax_tangentially(copy, reference=mesh) if relax else copy
+    # Restoring the volume can push thin walls through each other: then the copy as it is, if
+    # its volume is within VOLUME_TOLERANCE; the unrelaxed copy is the last resort (its thin
+    # triangles make more tets than asked for).
+    candidates = [(restore_volume(copy, volume), "volume restored"), (copy, "as decimated")]
+    if relax:
+        candidates[:0] = [(restore_volume(relaxed, volume), "relaxed, volume restored"), (relaxed, "relaxed")]
+    for candidate, how in candidates:
+        if abs(candidate.volume / volume - 1.0) > VOLUME_TOLERANCE:
+            continue
+        if len(self_intersections(candidate.vertices, candidate.faces)) == 0 and near(candidate):
+            return candidate, how
+    # Thin parts (legs, ears) decimated into each other: MeshFix removes the crossings (and,
+    # when it cuts a thin part away, the distance bound refuses the result).
+    cleaned = _meshfix_copy(restore_volume(relaxed, volume), clock)
+    if cleaned is not None and abs(cleaned.volume / volume - 1.0) < 0.05:
+        cleaned = restore_volume(cleaned, volume)
+        if (abs(cleaned.volume / volume - 1.0) <= VOLUME_TOLERANCE
+                and len(self_intersections(cleaned.vertices, cleaned.faces)) == 0 and near(cleaned)):
+            return cleaned, ("relaxed, " if relax else "") + "crossings removed by pymeshfix, volume restored"
+    return None
 
-    Returns (copy, how) or None. A copy that comes out open, self-crossing or off in volume
-    is retried with 1.15x the triangles, up to six times; if all fail, None (the mesher then
-    gets the full surface and the count follows the surface, as the report will show).
+
+def simplify_to_faces(mesh: trimesh.Trimesh, face_count: int, clock=None, reference_volume: float | None = None,
+                      max_deviation: float | None = None, reference_points: np.ndarray | None = None,
+                      finer: trimesh.Trimesh | None = None, relax: bool = True):
+    """A closed, non-crossing copy of ``mesh`` [m] decimated to about ``face_count`` faces,
+    relaxed, with ``reference_volume`` (default: the mesh's) [m^3], and no point of
+    ``reference_points`` (default: :func:`deviation_points` of ``mesh``) farther than
+    ``max_deviation`` [m] from it (None: no bound), or None.
+
+    Returns (copy, how) or None. A copy that comes out open, self-crossing, off in volume or
+    too far from the input is first made again from ``finer`` (the surface ``mesh`` was itself
+    decimated from, if any: a staged copy can have merged what the full surface keeps apart),
+    then retried with 1.15x the triangles, up to :data:`RETRIES` times, while that is still
+    fewer than the surface has; if all fail, None (the mesher then gets the full surface and
+    the count follows the surface, as the report will show).
     """
     volume = float(mesh.volume if reference_volume is None else reference_volume)
+    if max_deviation is not None and reference_points is None:
+        reference_points = deviation_points(mesh if finer is None else finer)
+
+    def near(candidate) -> bool:
+        return max_deviation is None or surface_deviation(reference_points, candidate.vertices,
+                                                          candidate.faces) <= max_deviation
+
     count = max(int(face_count), MIN_FACES)
-    for _ in range(6):
-        if count >= len(mesh.faces):
+    for _ in range(RETRIES):
+        sources = [source for source in (mesh, finer) if source is not None and count < len(source.faces)]
+        if not sources:
             return None
-        if clock is not None:
-            v, f = clock.run("simplify (fast-simplification)", _decimate, mesh.vertices, mesh.faces, count)
-        else:
-            v, f = _decimate(mesh.vertices, mesh.faces, count)
-        copy = trimesh.Trimesh(v, f, process=True)
-        if (copy.is_watertight and copy.is_winding_consistent and copy.volume > 0
-                and abs(copy.volume / volume - 1.0) < 0.2):
-            relaxed = relax_tangentially(copy, reference=mesh)
-            # Restoring the volume can push thin walls through each other: then the copy as
-            # it is, if its volume is within VOLUME_TOLERANCE; the unrelaxed copy is the last
-            # resort (its thin triangles make more tets than asked for).
-            for candidate, how in ((restore_volume(relaxed, volume), "relaxed, volume restored"),
-                                   (relaxed, "relaxed"), (restore_volume(copy, volume), "volume restored"),
-                                   (copy, "as decimated")):
-                if abs(candidate.volume / volume - 1.0) > VOLUME_TOLERANCE:
-                    continue
-                if len(self_intersections(candidate.vertices, candidate.faces)) == 0:
-                    return candidate, how
-            # Thin parts (legs, ears) decimated into each other: MeshFix removes the crossings.
-            cleaned = _meshfix_copy(restore_volume(relaxed, volume), clock)
-            if cleaned is not None and abs(cleaned.volume / volume - 1.0) < 0.05:
-                cleaned = restore_volume(cleaned, volume)
-                if (abs(cleaned.volume / volume - 1.0) <= VOLUME_TOLERANCE
-                        and len(self_intersections(cleaned.vertices, cleaned.faces)) == 0):
-                    return cleaned, "relaxed, crossings removed by pymeshfix, volume restored"
+        for source in sources:
+            copy = _copy_at(source, count, volume, near, clock, relax)
+            if copy is not None:
+                return copy
         count = int(count * 1.15)  # (the decimator's output is open at some counts, not at others)
     return None
 
@@ -172,21 +263,24 @@ def simplified_tet_surfaces(mesh: trimesh.Trimesh, target_particles: int, clock=
     by more than 15 % (thin parts, many sharp features), the next has fewer faces, by the
     overshoot to the 2/3 (tets ~ faces^(3/2) where the surface sets the count); three at most.
     A large input is first decimated once to 8x the wanted faces, so later copies start small.
+    Every copy lies within :data:`MAX_DEVIATION` particle spacings of every point of ``mesh``.
     """
     wanted = target_face_count(mesh.volume, mesh.area, target_particles)
     if len(mesh.faces) <= FINER_FACTOR * wanted:
         return
     volume = float(mesh.volume)
+    bound = dict(max_deviation=MAX_DEVIATION * particle_spacing(volume, target_particles),
+                 reference_points=deviation_points(mesh))
     source = mesh
     if len(mesh.faces) > 16 * wanted:
-        staged = simplify_to_faces(mesh, 8 * wanted, clock)
+        # Only decimated further: relaxing it (against the full surface) would buy nothing.
+        staged = simplify_to_faces(mesh, 8 * wanted, clock, relax=False, **bound)
         if staged is not None:
             source = staged[0]
     count = wanted
     for _ in range(3):
-        copy = simplify_to_faces(source, count, clock, reference_volume=volume)
-        if copy is None and source is not mesh:
-            copy = simplify_to_faces(mesh, count, clock)
+        copy = simplify_to_faces(source, count, clock, reference_volume=volume,
+                                 finer=None if source is mesh else mesh, **bound)
         if copy is None:
             return
         tets = yield copy[0], (f"tetrahedralized a copy simplified to the particle spacing: {len(mesh.faces):,} -> "
