@@ -47,6 +47,12 @@ from .surface_attributes import input_corner_normals
 #: what a render shows, far above the boolean library's float64 round-off).
 SLAB_THICKNESS_FACTOR = 2e-4
 
+#: Thickness [particle spacings] of the slab that joins a piece's own parts again where a
+#: crack's slab cut through the piece: three slabs, so it overlaps the parts on both sides.
+WELD_THICKNESS_FACTOR = 3 * SLAB_THICKNESS_FACTOR
+#: Half the side [particle spacings] of the square a weld covers about each crossing.
+WELD_REACH_FACTOR = 1.0
+
 #: How far [particle spacings] a crack's slab reaches from the bond crossing nearest each of
 #: its points: beyond the surface where the plane meets it obliquely.
 SLAB_REACH_FACTOR = 4.0
@@ -57,7 +63,7 @@ MAX_VOTING_FACES = 512
 #: A vote whose winner has less than this share of the area is settled by the tets inside.
 DECISIVE_VOTE = 0.8
 #: How many tets in a part's box that check reads at most.
-MAX_PROBED_TETS = 128
+MAX_PROBED_TETS = 64
 
 #: Parts of the cut solid smaller than this [particle spacings cubed] are dropped: chips
 #: where two slabs' edges cross the surface, far below a render's resolution.
@@ -72,6 +78,11 @@ LOST_VOLUME_SHARE = 0.5
 #: The piece whose part holds a lost piece's tets gets its tets' boundary too when the lost
 #: volume is more than this share of its own tets' volume (else it would carry it along).
 SWALLOWED_VOLUME_SHARE = 0.05
+#: A piece whose render solid reaches farther than this [particle spacings] from its nearest
+#: tet centroid holds another piece's material (the slabs ran past a crack's end or left a
+#: gap): it and the pieces whose tets lie there get their tets' boundary. A flat crack face
+#: through the tets' staircase reaches up to about one tet (edges ~2.2 spacings) past them.
+OVERREACH_FACTOR = 5.0
 
 # Vertex property columns after x, y, z: corner normal (3), UV (2), crack index (-1: the
 # artist's surface).
@@ -233,13 +244,16 @@ def _tangent_frame_of(x: float, y: float, z: float) -> tuple[np.ndarray, np.ndar
 
 
 def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, spacing: float, roughness: float,
-                roughness_scale: float, seed: int, index: int) -> m3.Manifold | None:
+                roughness_scale: float, seed: int, index: int,
+                thickness_factor: float = SLAB_THICKNESS_FACTOR,
+                reach_factor: float = SLAB_REACH_FACTOR) -> m3.Manifold | None:
     """The thin slab on a plane crack over the part of the plane nearer a separating bond
     crossing than any other: ``sites`` (N,3) [m] where bonds cross the plane, ``separating``
     (N,) bool those between different pieces cut by this crack. Each separating site's
     Voronoi cell (in the plane, bounded to SLAB_REACH_FACTOR spacings about it) joins the
     outline, so the slab reaches the surface however obliquely the plane meets it, and stops
-    halfway to the nearest crossing inside one piece. Rough when ``roughness`` > 0."""
+    halfway to the nearest crossing inside one piece. Rough when ``roughness`` > 0;
+    ``thickness_factor`` x ``spacing`` thick, reaching ``reach_factor`` spacings."""
     from scipy.spatial import Voronoi
 
     e1, e2 = tangent_frame(crack.normal)
@@ -247,7 +261,7 @@ def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, 
     flat = np.stack([rel @ e1, rel @ e2], axis=1)  # (N,2)
     if not separating.any():
         return None
-    reach = SLAB_REACH_FACTOR * spacing
+    reach = reach_factor * spacing
     box = np.array([[-reach, -reach], [reach, -reach], [reach, reach], [-reach, reach]])
     # Where a separating crossing is within reach, less where another crossing is nearer.
     outline = m3.CrossSection(list(flat[separating][:, None, :] + box[None]), m3.FillRule.Positive)
@@ -265,7 +279,7 @@ def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, 
     outline = outline.simplify(0.05 * spacing)
     if outline.is_empty():
         return None
-    thickness = SLAB_THICKNESS_FACTOR * spacing
+    thickness = thickness_factor * spacing
     slab = m3.Manifold.extrude(outline, thickness).translate((0.0, 0.0, -0.5 * thickness))
     if roughness > 0:
         slab = slab.refine_to_length(roughness_scale / 3.0)
@@ -305,9 +319,10 @@ def _with_crack_index(slab: m3.Manifold, index: int) -> m3.Manifold:
 
 
 def _separating_cracks(model, bonds, labels, cracks):
-    """For each crack: (sites (N,3) [m], cut (N,) bool): where bonds cross its plane and
-    which of them it cuts; empty when it separates no two pieces (a ring crack: (None, its
-    cuts between pieces))."""
+    """For each crack: (sites (N,3) [m], cut (N,) bool, inside (N,) int): where bonds cross
+    its plane, which of them it cuts, and for a cut between two tets of one piece that piece
+    (else -1); empty when it separates no two pieces (a ring crack: (None, its cuts between
+    pieces, None))."""
     from ..fracture.crack_types import CrackPlane, RingCrack
 
     x = model.particle_position
@@ -323,18 +338,19 @@ def _separating_cracks(model, bonds, labels, cracks):
             offset = hit - crack.point
             cut = cross & (np.einsum("ij,ij->i", offset, offset) <= crack.extent**2)
             if not np.any(cut & separating):
-                per_crack.append((hit[:0], cut[:0]))  # it separates no two pieces: no slit either
+                per_crack.append((hit[:0], cut[:0], labels[:0]))  # it separates no two pieces: no slit either
                 continue
             # Sites: every crossing but those between pieces another crack cut. A cut inside
             # one piece (a merged small piece, a piece joined around) is cut too: that piece
             # then has two shells a slab apart, as a hairline crack would look.
             site = cross & (cut | ~separating)
-            per_crack.append((hit[site], cut[site]))
+            inside_one = np.where(cut & ~separating, labels[bonds[:, 0]], -1)
+            per_crack.append((hit[site], cut[site], inside_one[site]))
         elif isinstance(crack, RingCrack):
             inside_a = np.einsum("ij,ij->i", a - crack.point, a - crack.point) < crack.radius**2
             inside_b = np.einsum("ij,ij->i", b - crack.point, b - crack.point) < crack.radius**2
             cut = (inside_a != inside_b) & separating
-            per_crack.append((None, cut[cut]))  # (the whole sphere: rings run all round)
+            per_crack.append((None, cut[cut], None))  # (the whole sphere: rings run all round)
         else:
             raise TypeError(f"unknown crack type {type(crack).__name__}")
     return per_crack
@@ -371,8 +387,8 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     per_crack = _separating_cracks(model, bonds, labels, cracks)
 
     new_cracks = list(render.cracks)
-    slabs = []
-    for crack, (sites, separating) in zip(cracks, per_crack):
+    slabs, planes = [], []
+    for crack, (sites, separating, inside_one) in zip(cracks, per_crack):
         if not len(separating) or not separating.any():
             continue
         index = len(new_cracks)
@@ -386,7 +402,9 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
             continue
         new_cracks.append(surface)
         slabs.append(_with_crack_index(slab, index))
-    stats = dict(slabs=len(slabs), parts=0, unassigned_parts=0, empty_pieces=0)
+        if isinstance(crack, CrackPlane):
+            planes.append((surface, sites, inside_one, index, slabs[-1]))
+    stats = dict(slabs=len(slabs), parts=0, unassigned_parts=0, empty_pieces=0, welded_pieces=0)
     if slabs:
         cut = m3.Manifold.batch_boolean([render.solid, *slabs], m3.OpType.Subtract)
     else:
@@ -394,13 +412,17 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     every_part = cut.decompose()
     parts = [part for part in every_part if part.volume() >= DUST_VOLUME_FACTOR * spacing**3]
     stats["dust_parts"] = len(every_part) - len(parts)
-    owner = _assign_parts(parts, model, labels, spacing)
-    parts, owner = _carve_missing_pieces(parts, owner, model, fragment_tets)
+    corners = {}  # id(part) -> (part, its vertices (N,3) [m]): read by the vote and the reach check
+    owner = _assign_parts(parts, model, labels, spacing, corners)
+    parts, owner = _carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing)
     stats["parts"] = len(parts)
     stats["carved_pieces"] = int(sum(1 for o in owner if o < -1))
     owner = [-(o + 2) if o < -1 else o for o in owner]
     failed = _failed_pieces(parts, owner, model, fragment_tets)
+    failed |= _overreaching_pieces(parts, owner, model, labels, spacing, corners)
     stats["fallback_pieces"] = len(failed)
+    split_up = {k for k in owner if k >= 0 and k not in failed and owner.count(k) > 1}
+    welds = _weld_bits(render.solid, planes, slabs, split_up, spacing, roughness, roughness_scale, seed)
     pieces = []
     for k, origin in enumerate(np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)):
         mine = [p for p, o in zip(parts, owner) if o == k]
@@ -411,10 +433,47 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
             pieces.append(None)
             stats["empty_pieces"] += 1
             continue
-        solid = mine[0] if len(mine) == 1 else m3.Manifold.compose(mine)
+        if k in welds:
+            # (where a weld meets the artist's surface its faces lie on the parts' own: the
+            # union leaves flat slivers of no volume there, dropped as dust)
+            shells = m3.Manifold.batch_boolean([*mine, *welds[k]], m3.OpType.Add).decompose()
+            solid = m3.Manifold.compose([shell for shell in shells if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3])
+            stats["welded_pieces"] += 1
+        else:
+            solid = mine[0] if len(mine) == 1 else m3.Manifold.compose(mine)
         pieces.append(RenderSolid(solid, tuple(new_cracks), spacing).moved(origin))
     stats["unassigned_parts"] = int(sum(1 for o in owner if o == -1))
     return pieces, stats
+
+
+def _weld_bits(solid: m3.Manifold, planes, slabs, split_up: set, spacing: float, roughness: float,
+               roughness_scale: float, seed: int) -> dict:
+    """Piece -> the bit of the render ``solid`` that joins its parts again where a crack's slab
+    cut through the piece itself (a bond cut between two of its own tets: a merged small piece,
+    a piece joined around the crack's end): the solid within a slab WELD_THICKNESS_FACTOR
+    spacings thick over those crossings (squares WELD_REACH_FACTOR spacings about each), which
+    overlaps the parts on both sides of the hairline, so their union is one shell. The other
+    cracks' ``slabs`` are taken out of it: where a square reaches past another crack into a
+    neighbour, that bit is left apart (a sliver under the dust volume, dropped). Only for the
+    pieces in ``split_up``; ``planes``: (surface, sites, inside, index, slab) of each plane
+    crack's slab."""
+    bits = {}
+    for k in sorted(split_up):
+        welds = []
+        for surface, sites, inside_one, index, own_slab in planes:
+            own = inside_one == k
+            if not own.any():
+                continue
+            weld = _plane_slab(surface, sites[own], np.ones(int(own.sum()), dtype=bool), spacing, roughness,
+                               roughness_scale, seed, index, thickness_factor=WELD_THICKNESS_FACTOR,
+                               reach_factor=WELD_REACH_FACTOR)
+            if weld is not None and not weld.is_empty():
+                others = [slab for slab in slabs if slab is not own_slab]
+                weld = _with_crack_index(weld, index)
+                welds.append(m3.Manifold.batch_boolean([weld, *others], m3.OpType.Subtract) if others else weld)
+        if welds:
+            bits[k] = [solid ^ (m3.Manifold.batch_boolean(welds, m3.OpType.Add) if len(welds) > 1 else welds[0])]
+    return bits
 
 
 def _winding_inside(points: np.ndarray, solid: m3.Manifold) -> np.ndarray:
@@ -444,6 +503,36 @@ def _probe_points(model, tets: np.ndarray) -> np.ndarray:
     return model.particle_position[tets[:: max(1, len(tets) // 16)]]
 
 
+def _overreaching_pieces(parts, owner, model, labels, spacing, corners) -> set[int]:
+    """Pieces whose parts have a vertex farther than OVERREACH_FACTOR spacings from their own
+    nearest tet centroid, and those of the pieces owning the tets nearest those vertices (the
+    material it took) whose tets' volume is less than 1 / SWALLOWED_VOLUME_SHARE times the
+    volume the first rendered beyond its own tets' (else its loss is too small to see).
+    ``corners``: id(part) -> (part, its vertices), where known."""
+    from scipy.spatial import cKDTree
+
+    limit = OVERREACH_FACTOR * spacing
+    everyone = None
+    failed = set()
+    for k in sorted({o for o in owner if o >= 0}):
+        mine = np.nonzero(labels == k)[0]
+        if not len(mine):
+            continue
+        vertices = np.concatenate([corners[id(p)][1] if corners.get(id(p), (None,))[0] is p else
+                                   np.asarray(p.to_mesh64().vert_properties)[:, :3]
+                                   for p, o in zip(parts, owner) if o == k])
+        far = vertices[cKDTree(model.particle_position[mine]).query(vertices)[0] > limit]
+        if not len(far):
+            continue
+        everyone = cKDTree(model.particle_position) if everyone is None else everyone
+        failed.add(k)
+        excess = sum(p.volume() for p, o in zip(parts, owner) if o == k) - float(model.tet_volume[mine].sum())
+        for victim in np.unique(labels[everyone.query(far)[1]]):
+            if victim >= 0 and excess > SWALLOWED_VOLUME_SHARE * float(model.tet_volume[labels == victim].sum()):
+                failed.add(int(victim))
+    return failed
+
+
 def _failed_pieces(parts, owner, model, fragment_tets) -> set[int]:
     """Pieces the cut failed, to be given their tets' boundary: those whose parts hold less
     than LOST_VOLUME_SHARE of their tets' volume (where the slabs leave a gap in the wall
@@ -471,11 +560,13 @@ def _failed_pieces(parts, owner, model, fragment_tets) -> set[int]:
     return failed
 
 
-def _carve_missing_pieces(parts, owner, model, fragment_tets):
+def _carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing):
     """A piece no part went to (a few tets where cracks meet, smaller than the planes can
     resolve) is carved out of the part holding its tets: the part's intersection with the
     convex hull of its tets becomes the piece (owner -(k + 2)), the rest stays. Its faces
-    inside the part are then the hull's planes, not a crack's: counted in the stats."""
+    inside the part are then the hull's planes, not a crack's: counted in the stats. The hull
+    can cut the rest in two or more: the largest stays with its owner, the others are voted
+    for again (a chip beyond the hull belongs to the tets around it)."""
     parts, owner = list(parts), list(owner)
     for k, tets in enumerate(fragment_tets):
         if k in owner or -(k + 2) in owner:
@@ -489,16 +580,21 @@ def _carve_missing_pieces(parts, owner, model, fragment_tets):
         carved = parts[best] ^ hull
         if carved.is_empty():
             continue
-        parts[best] = parts[best] - hull
+        rest = sorted((part for part in (parts[best] - hull).decompose()
+                       if part.volume() >= DUST_VOLUME_FACTOR * spacing**3), key=lambda part: -part.volume())
+        parts[best] = rest[0] if rest else m3.Manifold()  # (the bulk stays its owner's)
+        parts += rest[1:]
+        owner += _assign_parts(rest[1:], model, labels, spacing)
         parts.append(carved)
         owner.append(-(k + 2))
-    return parts, owner
+    keep = [j for j, part in enumerate(parts) if not part.is_empty()]
+    return [parts[j] for j in keep], [owner[j] for j in keep]
 
 
-def _assign_parts(parts, model, labels, spacing) -> list[int]:
+def _assign_parts(parts, model, labels, spacing, corners=None) -> list[int]:
     """The piece (label) each connected part belongs to: an area-weighted vote of its faces,
     each probed a quarter spacing inside the part, for the piece of the nearest tet centroid
-    (-1: dropped tets)."""
+    (-1: dropped tets). Each part's vertices go into ``corners`` (by id) when given."""
     from scipy.spatial import cKDTree
 
     tree = cKDTree(model.particle_position)
@@ -506,6 +602,8 @@ def _assign_parts(parts, model, labels, spacing) -> list[int]:
     for part in parts:
         mesh = part.to_mesh64()
         vp = np.asarray(mesh.vert_properties)[:, :3]
+        if corners is not None:
+            corners[id(part)] = (part, vp)  # (the part kept alive: its id is not reused)
         tri_verts = np.asarray(mesh.tri_verts, dtype=np.int64)
         tri = vp[tri_verts[:: max(1, len(tri_verts) // MAX_VOTING_FACES)]]
         normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
