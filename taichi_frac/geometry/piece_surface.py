@@ -58,7 +58,7 @@ WELD_REACH_FACTOR = 1.0
 SLAB_REACH_FACTOR = 4.0
 
 #: A part's vote reads at most about this many of its faces (evenly spread over its list).
-MAX_VOTING_FACES = 512
+MAX_VOTING_FACES = 256
 
 #: A vote whose winner has less than this share of the area is settled by the tets inside.
 DECISIVE_VOTE = 0.8
@@ -68,6 +68,10 @@ MAX_PROBED_TETS = 64
 #: Parts of the cut solid smaller than this [particle spacings cubed] are dropped: chips
 #: where two slabs' edges cross the surface, far below a render's resolution.
 DUST_VOLUME_FACTOR = 1e-2
+
+#: A piece's parts smaller than this [particle spacings cubed] beside a larger one are
+#: dropped: crumbs where cracks meet, under a third of a tet.
+CRUMB_VOLUME_FACTOR = 0.3
 
 #: Largest gap [particle spacings] between a ring crack's sphere and its polygon.
 SPHERE_SAGITTA_FACTOR = 0.02
@@ -246,14 +250,16 @@ def _tangent_frame_of(x: float, y: float, z: float) -> tuple[np.ndarray, np.ndar
 def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, spacing: float, roughness: float,
                 roughness_scale: float, seed: int, index: int,
                 thickness_factor: float = SLAB_THICKNESS_FACTOR,
-                reach_factor: float = SLAB_REACH_FACTOR) -> m3.Manifold | None:
+                reach_factor: float = SLAB_REACH_FACTOR, apart_from=()) -> m3.Manifold | None:
     """The thin slab on a plane crack over the part of the plane nearer a separating bond
     crossing than any other: ``sites`` (N,3) [m] where bonds cross the plane, ``separating``
     (N,) bool those between different pieces cut by this crack. Each separating site's
     Voronoi cell (in the plane, bounded to SLAB_REACH_FACTOR spacings about it) joins the
     outline, so the slab reaches the surface however obliquely the plane meets it, and stops
     halfway to the nearest crossing inside one piece. Rough when ``roughness`` > 0;
-    ``thickness_factor`` x ``spacing`` thick, reaching ``reach_factor`` spacings."""
+    ``thickness_factor`` x ``spacing`` thick, reaching ``reach_factor`` spacings; kept off
+    the other slabs of the plane cracks ``apart_from`` (CrackSurfaces) by a strip along each
+    one's line through this plane."""
     from scipy.spatial import Voronoi
 
     e1, e2 = tangent_frame(crack.normal)
@@ -276,6 +282,8 @@ def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, 
         cells = [diagram.vertices[region] for region in regions if len(region) >= 3 and -1 not in region]
         if cells:
             outline = outline - m3.CrossSection(cells, m3.FillRule.NonZero)
+    for other in apart_from:
+        outline = outline - _strip_along(crack, other, flat, spacing, thickness_factor, roughness, e1, e2)
     outline = outline.simplify(0.05 * spacing)
     if outline.is_empty():
         return None
@@ -293,6 +301,27 @@ def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, 
         slab = slab.warp_batch(displace)
     frame = np.column_stack([e1, e2, crack.normal, crack.point])  # (3,4): slab frame -> body
     return slab.transform(frame)
+
+
+def _strip_along(crack: CrackSurface, other: CrackSurface, flat: np.ndarray, spacing: float,
+                 thickness_factor: float, roughness: float, e1: np.ndarray, e2: np.ndarray) -> m3.CrossSection:
+    """The strip of ``crack``'s plane (2-D, its tangent frame ``e1``, ``e2``) within which a slab
+    ``thickness_factor`` spacings thick would touch the slab of the plane crack ``other``:
+    along the planes' line, out past the points ``flat`` (N,2) [m]; empty for planes within
+    a degree of parallel (they meet far off)."""
+    a, b = float(e1 @ other.normal), float(e2 @ other.normal)
+    sine = np.hypot(a, b)
+    if sine < np.sin(np.radians(1.0)):
+        return m3.CrossSection()
+    offset = float((other.point - crack.point) @ other.normal)  # the line: a u + b v = offset
+    half = (0.5 * (thickness_factor + SLAB_THICKNESS_FACTOR) * spacing * 2.0 + 2.0 * roughness) / sine
+    centre = np.array([a, b]) * offset / sine**2
+    along = np.array([-b, a]) / sine
+    across = np.array([a, b]) / sine
+    length = float(np.max(np.linalg.norm(flat - centre, axis=1))) + 10.0 * spacing
+    corners = [centre - length * along - half * across, centre + length * along - half * across,
+               centre + length * along + half * across, centre - length * along + half * across]
+    return m3.CrossSection([np.array(corners)], m3.FillRule.NonZero)
 
 
 def _sphere_shell(crack: CrackSurface, spacing: float) -> m3.Manifold:
@@ -403,7 +432,7 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
         new_cracks.append(surface)
         slabs.append(_with_crack_index(slab, index))
         if isinstance(crack, CrackPlane):
-            planes.append((surface, sites, inside_one, index, slabs[-1]))
+            planes.append((surface, sites, inside_one, index))
     stats = dict(slabs=len(slabs), parts=0, unassigned_parts=0, empty_pieces=0, welded_pieces=0)
     if slabs:
         cut = m3.Manifold.batch_boolean([render.solid, *slabs], m3.OpType.Subtract)
@@ -421,11 +450,13 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     failed = _failed_pieces(parts, owner, model, fragment_tets)
     failed |= _overreaching_pieces(parts, owner, model, labels, spacing, corners)
     stats["fallback_pieces"] = len(failed)
-    split_up = {k for k in owner if k >= 0 and k not in failed and owner.count(k) > 1}
-    welds = _weld_bits(render.solid, planes, slabs, split_up, spacing, roughness, roughness_scale, seed)
+    split_up = {k for k in owner if k >= 0 and k not in failed
+                and len(_without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing)) > 1}
+    spheres = [surface for surface in new_cracks[len(render.cracks):] if surface.radius is not None]
+    welds = _weld_bits(render.solid, planes, spheres, split_up, spacing, roughness, roughness_scale, seed)
     pieces = []
     for k, origin in enumerate(np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)):
-        mine = [p for p, o in zip(parts, owner) if o == k]
+        mine = _without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing)
         if k in failed:
             pieces.append(None)
             continue
@@ -446,31 +477,42 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     return pieces, stats
 
 
-def _weld_bits(solid: m3.Manifold, planes, slabs, split_up: set, spacing: float, roughness: float,
+def _without_crumbs(mine, spacing: float) -> list:
+    """A piece's parts less those under CRUMB_VOLUME_FACTOR spacings cubed beside a larger one:
+    wedges where two cracks' slabs cross near the surface, each a separate shell that would
+    travel with the piece, and smaller than its tets."""
+    largest = max((part.volume() for part in mine), default=0.0)
+    return [part for part in mine if part.volume() >= CRUMB_VOLUME_FACTOR * spacing**3 or part.volume() == largest]
+
+
+def _weld_bits(solid: m3.Manifold, planes, spheres, split_up: set, spacing: float, roughness: float,
                roughness_scale: float, seed: int) -> dict:
     """Piece -> the bit of the render ``solid`` that joins its parts again where a crack's slab
     cut through the piece itself (a bond cut between two of its own tets: a merged small piece,
     a piece joined around the crack's end): the solid within a slab WELD_THICKNESS_FACTOR
     spacings thick over those crossings (squares WELD_REACH_FACTOR spacings about each), which
-    overlaps the parts on both sides of the hairline, so their union is one shell. The other
-    cracks' ``slabs`` are taken out of it: where a square reaches past another crack into a
-    neighbour, that bit is left apart (a sliver under the dust volume, dropped). Only for the
-    pieces in ``split_up``; ``planes``: (surface, sites, inside, index, slab) of each plane
-    crack's slab."""
+    overlaps the parts on both sides of the hairline, so their union is one shell. So that a
+    square reaching past another crack does not join the piece to a sliver in its neighbour,
+    the weld keeps off the other plane cracks' lines through its plane (the sliver left
+    beyond is apart, under the crumb volume, dropped), and crossings whose square would reach
+    a ring crack's sphere (``spheres``) are left out; one overlap is enough to join two
+    parts. Only for the pieces in ``split_up``; ``planes``: (surface, sites, inside, index)
+    of each plane crack's slab."""
     bits = {}
     for k in sorted(split_up):
         welds = []
-        for surface, sites, inside_one, index, own_slab in planes:
+        for surface, sites, inside_one, index in planes:
             own = inside_one == k
+            for sphere in spheres:
+                own &= np.abs(sphere.distance(sites)) > np.sqrt(2.0) * WELD_REACH_FACTOR * spacing
             if not own.any():
                 continue
             weld = _plane_slab(surface, sites[own], np.ones(int(own.sum()), dtype=bool), spacing, roughness,
                                roughness_scale, seed, index, thickness_factor=WELD_THICKNESS_FACTOR,
-                               reach_factor=WELD_REACH_FACTOR)
+                               reach_factor=WELD_REACH_FACTOR,
+                               apart_from=[other for other, _, _, _ in planes if other is not surface])
             if weld is not None and not weld.is_empty():
-                others = [slab for slab in slabs if slab is not own_slab]
-                weld = _with_crack_index(weld, index)
-                welds.append(m3.Manifold.batch_boolean([weld, *others], m3.OpType.Subtract) if others else weld)
+                welds.append(_with_crack_index(weld, index))
         if welds:
             bits[k] = [solid ^ (m3.Manifold.batch_boolean(welds, m3.OpType.Add) if len(welds) > 1 else welds[0])]
     return bits
