@@ -230,16 +230,16 @@ def test_a_piece_reaching_far_past_its_tets_gets_its_tets_boundary(box):
     """A part that holds the whole box given to the piece of the tets at x < -0.05 reaches
     half a box past them: that piece and the one whose tets it covers fall back; the parts
     of a plane cut at x = -0.05 do not."""
-    from taichi_frac.geometry.piece_surface import _overreaching_pieces
+    from taichi_frac.geometry.piece_parts import overreaching_pieces
 
     model, report, _ = box
     render = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)
     x = model.particle_position + model.com_in_source
     label = (x[:, 0] >= -0.05).astype(np.int64)
-    assert _overreaching_pieces([render.solid], [0], model, label, model.spacing, {}) == {0, 1}
+    assert overreaching_pieces([render.solid], [0], model, label, model.spacing, {}) == {0, 1}
     plane = -0.05 - model.com_in_source[0]
     halves = [render.solid.trim_by_plane((-1.0, 0.0, 0.0), -plane), render.solid.trim_by_plane((1.0, 0.0, 0.0), plane)]
-    assert _overreaching_pieces(halves, [0, 1], model, label, model.spacing, {}) == set()
+    assert overreaching_pieces(halves, [0, 1], model, label, model.spacing, {}) == set()
 
 
 def test_rough_cracks_fit_together_and_keep_the_outside(box):
