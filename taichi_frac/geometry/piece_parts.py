@@ -26,6 +26,12 @@ SWALLOWED_VOLUME_SHARE = 0.05
 #: gap): it and the pieces whose tets lie there get their tets' boundary. A flat crack face
 #: through the tets' staircase reaches up to about one tet (edges ~2.2 spacings) past them.
 OVERREACH_FACTOR = 5.0
+#: A piece whose parts hold more than (1 + this) times its tets' volume, and more than
+#: GAINED_VOLUME_FACTOR spacings cubed beyond it, holds a neighbour's material within that
+#: reach: it gets its tets' boundary (the flat faces of a piece of a few tets differ from
+#: its staircase by a few tets' volume, under that bound).
+GAINED_VOLUME_SHARE = 0.25
+GAINED_VOLUME_FACTOR = 10.0
 
 
 def _winding_inside(points: np.ndarray, solid: m3.Manifold) -> np.ndarray:
@@ -82,6 +88,30 @@ def overreaching_pieces(parts, owner, model, labels, spacing, corners) -> set[in
         for victim in np.unique(labels[everyone.query(far)[1]]):
             if victim >= 0 and excess > SWALLOWED_VOLUME_SHARE * float(model.tet_volume[labels == victim].sum()):
                 failed.add(int(victim))
+    return failed
+
+
+def overfull_pieces(parts, owner, model, labels, spacing) -> set[int]:
+    """Pieces whose parts hold more than their tets' volume by GAINED_VOLUME_SHARE of it and
+    GAINED_VOLUME_FACTOR spacings cubed, and those of the pieces with tets inside those parts
+    whose tets' volume is less than 1 / SWALLOWED_VOLUME_SHARE times that excess."""
+    failed = set()
+    for k in sorted({o for o in owner if o >= 0}):
+        mine = [part for part, o in zip(parts, owner) if o == k]
+        own = float(model.tet_volume[labels == k].sum())
+        excess = sum(part.volume() for part in mine) - own
+        if excess <= GAINED_VOLUME_SHARE * own or excess <= GAINED_VOLUME_FACTOR * spacing**3:
+            continue
+        failed.add(k)
+        for part in mine:
+            mesh = part.to_mesh64()
+            vertices = np.asarray(mesh.vert_properties)[:, :3]
+            held = _tets_inside(model, vertices.min(axis=0), vertices.max(axis=0),
+                                vertices[np.asarray(mesh.tri_verts, dtype=np.int64)])
+            for victim in np.unique(labels[held]):
+                if victim >= 0 and victim != k and excess > SWALLOWED_VOLUME_SHARE * float(
+                        model.tet_volume[labels == victim].sum()):
+                    failed.add(int(victim))
     return failed
 
 

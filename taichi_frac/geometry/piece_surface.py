@@ -47,7 +47,7 @@ import manifold3d as m3
 import numpy as np
 import trimesh
 
-from .piece_parts import assign_parts, carve_missing_pieces, failed_pieces, overreaching_pieces
+from .piece_parts import assign_parts, carve_missing_pieces, failed_pieces, overfull_pieces, overreaching_pieces
 from .surface_attributes import input_corner_normals
 
 #: Slab thickness as a fraction of the particle spacing: the two pieces of a crack are this
@@ -437,6 +437,7 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     owner = [-(o + 2) if o < -1 else o for o in owner]
     failed = failed_pieces(parts, owner, model, fragment_tets)
     failed |= overreaching_pieces(parts, owner, model, labels, spacing, corners)
+    failed |= overfull_pieces(parts, owner, model, labels, spacing)
     stats["fallback_pieces"] = len(failed)
     split_up = {k for k in owner if k >= 0 and k not in failed
                 and len(_without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing)) > 1}
