@@ -120,7 +120,7 @@ def _mesh_case(ctx: BenchContext):
 
 
 def run(ctx: BenchContext) -> Section:
-    from ..geometry.piece_parts import LOST_VOLUME_SHARE, OVERREACH_FACTOR
+    from ..geometry.piece_parts import GAINED_VOLUME_FACTOR, GAINED_VOLUME_SHARE, LOST_VOLUME_SHARE, OVERREACH_FACTOR
     from .tables import run_scene
 
     t0 = time.perf_counter()
@@ -155,7 +155,8 @@ def run(ctx: BenchContext) -> Section:
         "([docs/guide/fragment-geometry.md](../guide/fragment-geometry.md)). Measured on the live pieces at "
         "the end of each run (a cache written), against the tets' boundary faces the cache held before "
         f"(machine load {load_average()}; the machine was shared). A piece the cut failed (its render solid "
-        f"under {100 * LOST_VOLUME_SHARE:.0f} % of its tets' volume, or reaching more than "
+        f"under {100 * LOST_VOLUME_SHARE:.0f} % of its tets' volume, over it by more than "
+        f"{100 * GAINED_VOLUME_SHARE:.0f} % and {GAINED_VOLUME_FACTOR:.0f} spacings cubed, or reaching more than "
         f"{OVERREACH_FACTOR:.0f} spacings from its nearest tet, or the one that lost that volume to it) and "
         "its later pieces keep their tets' boundary, exact in volume: they are counted in the third column "
         "and left out of the render columns. A flat crack face crosses the tets' staircase, so it lies up to "

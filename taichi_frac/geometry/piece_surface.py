@@ -31,8 +31,9 @@ Where a crack cut bonds inside what stayed one piece (a merged small piece, a pi
 around the crack's end) its slab cuts that piece too; the piece's parts are welded back into
 one shell by the render solid within a slab three times as thick over those crossings. What
 the cut cannot resolve falls back to the tets' boundary, exact in volume: a piece left with
-under half its tets' volume, one whose render solid reaches more than ``piece_parts.OVERREACH_FACTOR``
-spacings past its tets (it holds a neighbour's material), and the neighbour that lost it.
+under half its tets' volume, one whose render solid reaches more than
+``piece_parts.OVERREACH_FACTOR`` spacings past its tets or holds well over their volume (it
+holds a neighbour's material), and the neighbour that lost it (``geometry/piece_parts.py``).
 
 ``crack_roughness`` (FractureOptions) displaces the slabs' faces along the crack normal
 by smooth value noise, the same on both faces, so the two sides of a crack still fit.
