@@ -71,8 +71,8 @@ SLAB_REACH_FACTOR = 4.0
 DUST_VOLUME_FACTOR = 1e-2
 
 #: A piece's parts smaller than this [particle spacings cubed] beside a larger one are
-#: dropped: crumbs where cracks meet, under a third of a tet.
-CRUMB_VOLUME_FACTOR = 0.3
+#: dropped: crumbs where cracks meet, under a mean tet's volume.
+CRUMB_VOLUME_FACTOR = 1.0
 
 #: Largest gap [particle spacings] between a ring crack's sphere and its polygon.
 SPHERE_SAGITTA_FACTOR = 0.02
@@ -249,7 +249,7 @@ def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, 
     ``thickness_factor`` x ``spacing`` thick, reaching ``reach_factor`` spacings; kept off
     the other slabs of the plane cracks ``apart_from`` (CrackSurfaces) by a strip along each
     one's line through this plane."""
-    from scipy.spatial import Voronoi
+    from scipy.spatial import Voronoi, cKDTree
 
     e1, e2 = tangent_frame(crack.normal)
     rel = sites - crack.point
@@ -261,6 +261,11 @@ def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, 
     # Where a separating crossing is within reach, less where another crossing is nearer.
     outline = m3.CrossSection(list(flat[separating][:, None, :] + box[None]), m3.FillRule.Positive)
     if not separating.all():
+        # Only crossings within 2 sqrt(2) reach of a separating one can be the nearest to a
+        # point of its square (the separating one is within sqrt(2) reach of it): the rest
+        # leave the cells over the squares as they are.
+        near = cKDTree(flat[separating]).query(flat, distance_upper_bound=2.9 * reach)[0] <= 2.9 * reach
+        flat, separating = flat[near], separating[near]
         lo, hi = flat.min(axis=0) - 4 * reach, flat.max(axis=0) + 4 * reach
         fence = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
         _, first = np.unique(np.round(flat / (1e-9 * spacing)), axis=0, return_index=True)
@@ -470,7 +475,7 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
 def _without_crumbs(mine, spacing: float) -> list:
     """A piece's parts less those under CRUMB_VOLUME_FACTOR spacings cubed beside a larger one:
     wedges where two cracks' slabs cross near the surface, each a separate shell that would
-    travel with the piece, and smaller than its tets."""
+    travel with the piece, and smaller than a tet."""
     largest = max((part.volume() for part in mine), default=0.0)
     return [part for part in mine if part.volume() >= CRUMB_VOLUME_FACTOR * spacing**3 or part.volume() == largest]
 
