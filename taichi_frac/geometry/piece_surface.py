@@ -27,6 +27,14 @@ of the cut tet faces' projections onto the crack plane, grown by one particle sp
 reaches through the surface. Where a crack ends against another crack the slab runs up to
 one spacing past it, a hairline notch in the piece beyond.
 
+Where a crack cut bonds inside what stayed one piece (a merged small piece, a piece joined
+around the crack's end) its slab cuts that piece too; the piece's parts are welded back into
+one shell by the render solid within a slab three times as thick over those crossings. What
+the cut cannot resolve falls back to the tets' boundary, exact in volume: a piece left with
+under half its tets' volume, one whose render solid reaches more than
+``piece_parts.OVERREACH_FACTOR`` spacings past its tets or holds well over their volume (it
+holds a neighbour's material), and the neighbour that lost it (``geometry/piece_parts.py``).
+
 ``crack_roughness`` (FractureOptions) displaces the slabs' faces along the crack normal
 by smooth value noise, the same on both faces, so the two sides of a crack still fit.
 """
@@ -40,6 +48,7 @@ import manifold3d as m3
 import numpy as np
 import trimesh
 
+from .piece_parts import assign_parts, carve_missing_pieces, failed_pieces, overfull_pieces, overreaching_pieces
 from .surface_attributes import input_corner_normals
 
 #: Slab thickness as a fraction of the particle spacing: the two pieces of a crack are this
@@ -47,31 +56,26 @@ from .surface_attributes import input_corner_normals
 #: what a render shows, far above the boolean library's float64 round-off).
 SLAB_THICKNESS_FACTOR = 2e-4
 
+#: Thickness [particle spacings] of the slab that joins a piece's own parts again where a
+#: crack's slab cut through the piece: three slabs, so it overlaps the parts on both sides.
+WELD_THICKNESS_FACTOR = 3 * SLAB_THICKNESS_FACTOR
+#: Half the side [particle spacings] of the square a weld covers about each crossing.
+WELD_REACH_FACTOR = 1.0
+
 #: How far [particle spacings] a crack's slab reaches from the bond crossing nearest each of
 #: its points: beyond the surface where the plane meets it obliquely.
 SLAB_REACH_FACTOR = 4.0
-
-#: A part's vote reads at most about this many of its faces (evenly spread over its list).
-MAX_VOTING_FACES = 512
-
-#: A vote whose winner has less than this share of the area is settled by the tets inside.
-DECISIVE_VOTE = 0.8
-#: How many tets in a part's box that check reads at most.
-MAX_PROBED_TETS = 128
 
 #: Parts of the cut solid smaller than this [particle spacings cubed] are dropped: chips
 #: where two slabs' edges cross the surface, far below a render's resolution.
 DUST_VOLUME_FACTOR = 1e-2
 
+#: A piece's parts smaller than this [particle spacings cubed] beside a larger one are
+#: dropped: crumbs where cracks meet, under a mean tet's volume.
+CRUMB_VOLUME_FACTOR = 1.0
+
 #: Largest gap [particle spacings] between a ring crack's sphere and its polygon.
 SPHERE_SAGITTA_FACTOR = 0.02
-
-#: A piece whose parts hold less than this share of its tets' volume lost its material to a
-#: neighbour (the slabs left a gap in the wall between them): it gets its tets' boundary.
-LOST_VOLUME_SHARE = 0.5
-#: The piece whose part holds a lost piece's tets gets its tets' boundary too when the lost
-#: volume is more than this share of its own tets' volume (else it would carry it along).
-SWALLOWED_VOLUME_SHARE = 0.05
 
 # Vertex property columns after x, y, z: corner normal (3), UV (2), crack index (-1: the
 # artist's surface).
@@ -233,25 +237,35 @@ def _tangent_frame_of(x: float, y: float, z: float) -> tuple[np.ndarray, np.ndar
 
 
 def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, spacing: float, roughness: float,
-                roughness_scale: float, seed: int, index: int) -> m3.Manifold | None:
+                roughness_scale: float, seed: int, index: int,
+                thickness_factor: float = SLAB_THICKNESS_FACTOR,
+                reach_factor: float = SLAB_REACH_FACTOR, apart_from=()) -> m3.Manifold | None:
     """The thin slab on a plane crack over the part of the plane nearer a separating bond
     crossing than any other: ``sites`` (N,3) [m] where bonds cross the plane, ``separating``
     (N,) bool those between different pieces cut by this crack. Each separating site's
     Voronoi cell (in the plane, bounded to SLAB_REACH_FACTOR spacings about it) joins the
     outline, so the slab reaches the surface however obliquely the plane meets it, and stops
-    halfway to the nearest crossing inside one piece. Rough when ``roughness`` > 0."""
-    from scipy.spatial import Voronoi
+    halfway to the nearest crossing inside one piece. Rough when ``roughness`` > 0;
+    ``thickness_factor`` x ``spacing`` thick, reaching ``reach_factor`` spacings; kept off
+    the other slabs of the plane cracks ``apart_from`` (CrackSurfaces) by a strip along each
+    one's line through this plane."""
+    from scipy.spatial import Voronoi, cKDTree
 
     e1, e2 = tangent_frame(crack.normal)
     rel = sites - crack.point
     flat = np.stack([rel @ e1, rel @ e2], axis=1)  # (N,2)
     if not separating.any():
         return None
-    reach = SLAB_REACH_FACTOR * spacing
+    reach = reach_factor * spacing
     box = np.array([[-reach, -reach], [reach, -reach], [reach, reach], [-reach, reach]])
     # Where a separating crossing is within reach, less where another crossing is nearer.
     outline = m3.CrossSection(list(flat[separating][:, None, :] + box[None]), m3.FillRule.Positive)
     if not separating.all():
+        # Only crossings within 2 sqrt(2) reach of a separating one can be the nearest to a
+        # point of its square (the separating one is within sqrt(2) reach of it): the rest
+        # leave the cells over the squares as they are.
+        near = cKDTree(flat[separating]).query(flat, distance_upper_bound=2.9 * reach)[0] <= 2.9 * reach
+        flat, separating = flat[near], separating[near]
         lo, hi = flat.min(axis=0) - 4 * reach, flat.max(axis=0) + 4 * reach
         fence = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
         _, first = np.unique(np.round(flat / (1e-9 * spacing)), axis=0, return_index=True)
@@ -262,10 +276,12 @@ def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, 
         cells = [diagram.vertices[region] for region in regions if len(region) >= 3 and -1 not in region]
         if cells:
             outline = outline - m3.CrossSection(cells, m3.FillRule.NonZero)
+    for other in apart_from:
+        outline = outline - _strip_along(crack, other, flat, spacing, thickness_factor, roughness, e1, e2)
     outline = outline.simplify(0.05 * spacing)
     if outline.is_empty():
         return None
-    thickness = SLAB_THICKNESS_FACTOR * spacing
+    thickness = thickness_factor * spacing
     slab = m3.Manifold.extrude(outline, thickness).translate((0.0, 0.0, -0.5 * thickness))
     if roughness > 0:
         slab = slab.refine_to_length(roughness_scale / 3.0)
@@ -279,6 +295,27 @@ def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, 
         slab = slab.warp_batch(displace)
     frame = np.column_stack([e1, e2, crack.normal, crack.point])  # (3,4): slab frame -> body
     return slab.transform(frame)
+
+
+def _strip_along(crack: CrackSurface, other: CrackSurface, flat: np.ndarray, spacing: float,
+                 thickness_factor: float, roughness: float, e1: np.ndarray, e2: np.ndarray) -> m3.CrossSection:
+    """The strip of ``crack``'s plane (2-D, its tangent frame ``e1``, ``e2``) within which a slab
+    ``thickness_factor`` spacings thick would touch the slab of the plane crack ``other``:
+    along the planes' line, out past the points ``flat`` (N,2) [m]; empty for planes within
+    a degree of parallel (they meet far off)."""
+    a, b = float(e1 @ other.normal), float(e2 @ other.normal)
+    sine = np.hypot(a, b)
+    if sine < np.sin(np.radians(1.0)):
+        return m3.CrossSection()
+    offset = float((other.point - crack.point) @ other.normal)  # the line: a u + b v = offset
+    half = (0.5 * (thickness_factor + SLAB_THICKNESS_FACTOR) * spacing * 2.0 + 2.0 * roughness) / sine
+    centre = np.array([a, b]) * offset / sine**2
+    along = np.array([-b, a]) / sine
+    across = np.array([a, b]) / sine
+    length = float(np.max(np.linalg.norm(flat - centre, axis=1))) + 10.0 * spacing
+    corners = [centre - length * along - half * across, centre + length * along - half * across,
+               centre + length * along + half * across, centre - length * along + half * across]
+    return m3.CrossSection([np.array(corners)], m3.FillRule.NonZero)
 
 
 def _sphere_shell(crack: CrackSurface, spacing: float) -> m3.Manifold:
@@ -305,9 +342,10 @@ def _with_crack_index(slab: m3.Manifold, index: int) -> m3.Manifold:
 
 
 def _separating_cracks(model, bonds, labels, cracks):
-    """For each crack: (sites (N,3) [m], cut (N,) bool): where bonds cross its plane and
-    which of them it cuts; empty when it separates no two pieces (a ring crack: (None, its
-    cuts between pieces))."""
+    """For each crack: (sites (N,3) [m], cut (N,) bool, inside (N,) int): where bonds cross
+    its plane, which of them it cuts, and for a cut between two tets of one piece that piece
+    (else -1); empty when it separates no two pieces (a ring crack: (None, its cuts between
+    pieces, None))."""
     from ..fracture.crack_types import CrackPlane, RingCrack
 
     x = model.particle_position
@@ -323,18 +361,19 @@ def _separating_cracks(model, bonds, labels, cracks):
             offset = hit - crack.point
             cut = cross & (np.einsum("ij,ij->i", offset, offset) <= crack.extent**2)
             if not np.any(cut & separating):
-                per_crack.append((hit[:0], cut[:0]))  # it separates no two pieces: no slit either
+                per_crack.append((hit[:0], cut[:0], labels[:0]))  # it separates no two pieces: no slit either
                 continue
             # Sites: every crossing but those between pieces another crack cut. A cut inside
             # one piece (a merged small piece, a piece joined around) is cut too: that piece
             # then has two shells a slab apart, as a hairline crack would look.
             site = cross & (cut | ~separating)
-            per_crack.append((hit[site], cut[site]))
+            inside_one = np.where(cut & ~separating, labels[bonds[:, 0]], -1)
+            per_crack.append((hit[site], cut[site], inside_one[site]))
         elif isinstance(crack, RingCrack):
             inside_a = np.einsum("ij,ij->i", a - crack.point, a - crack.point) < crack.radius**2
             inside_b = np.einsum("ij,ij->i", b - crack.point, b - crack.point) < crack.radius**2
             cut = (inside_a != inside_b) & separating
-            per_crack.append((None, cut[cut]))  # (the whole sphere: rings run all round)
+            per_crack.append((None, cut[cut], None))  # (the whole sphere: rings run all round)
         else:
             raise TypeError(f"unknown crack type {type(crack).__name__}")
     return per_crack
@@ -358,7 +397,7 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     Returns (pieces, stats): pieces a list of F RenderSolid or None (the caller then gives the
     piece its tets' boundary, exact in volume); stats a dict of counts (slabs, parts,
     unassigned parts, pieces without a part, ``fallback_pieces``: pieces set to None because
-    the cut failed them, see ``_failed_pieces``).
+    the cut failed them, see ``failed_pieces``).
     """
     from ..fracture.crack_types import CrackPlane
 
@@ -371,8 +410,8 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     per_crack = _separating_cracks(model, bonds, labels, cracks)
 
     new_cracks = list(render.cracks)
-    slabs = []
-    for crack, (sites, separating) in zip(cracks, per_crack):
+    slabs, planes = [], []
+    for crack, (sites, separating, inside_one) in zip(cracks, per_crack):
         if not len(separating) or not separating.any():
             continue
         index = len(new_cracks)
@@ -386,7 +425,9 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
             continue
         new_cracks.append(surface)
         slabs.append(_with_crack_index(slab, index))
-    stats = dict(slabs=len(slabs), parts=0, unassigned_parts=0, empty_pieces=0)
+        if isinstance(crack, CrackPlane):
+            planes.append((surface, sites, inside_one, index))
+    stats = dict(slabs=len(slabs), parts=0, unassigned_parts=0, empty_pieces=0, welded_pieces=0)
     if slabs:
         cut = m3.Manifold.batch_boolean([render.solid, *slabs], m3.OpType.Subtract)
     else:
@@ -394,16 +435,23 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     every_part = cut.decompose()
     parts = [part for part in every_part if part.volume() >= DUST_VOLUME_FACTOR * spacing**3]
     stats["dust_parts"] = len(every_part) - len(parts)
-    owner = _assign_parts(parts, model, labels, spacing)
-    parts, owner = _carve_missing_pieces(parts, owner, model, fragment_tets)
+    corners = {}  # id(part) -> (part, its vertices (N,3) [m]): read by the vote and the reach check
+    owner = assign_parts(parts, model, labels, spacing, corners)
+    parts, owner = carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing)
     stats["parts"] = len(parts)
     stats["carved_pieces"] = int(sum(1 for o in owner if o < -1))
     owner = [-(o + 2) if o < -1 else o for o in owner]
-    failed = _failed_pieces(parts, owner, model, fragment_tets)
+    failed = failed_pieces(parts, owner, model, fragment_tets)
+    failed |= overreaching_pieces(parts, owner, model, labels, spacing, corners)
+    failed |= overfull_pieces(parts, owner, model, labels, spacing)
     stats["fallback_pieces"] = len(failed)
+    split_up = {k for k in owner if k >= 0 and k not in failed
+                and len(_without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing)) > 1}
+    spheres = [surface for surface in new_cracks[len(render.cracks):] if surface.radius is not None]
+    welds = _weld_bits(render.solid, planes, spheres, split_up, spacing, roughness, roughness_scale, seed)
     pieces = []
     for k, origin in enumerate(np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)):
-        mine = [p for p, o in zip(parts, owner) if o == k]
+        mine = _without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing)
         if k in failed:
             pieces.append(None)
             continue
@@ -411,129 +459,58 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
             pieces.append(None)
             stats["empty_pieces"] += 1
             continue
-        solid = mine[0] if len(mine) == 1 else m3.Manifold.compose(mine)
+        if k in welds:
+            # (where a weld meets the artist's surface its faces lie on the parts' own: the
+            # union leaves flat slivers of no volume there, dropped as dust)
+            shells = m3.Manifold.batch_boolean([*mine, *welds[k]], m3.OpType.Add).decompose()
+            solid = m3.Manifold.compose([shell for shell in shells if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3])
+            stats["welded_pieces"] += 1
+        else:
+            solid = mine[0] if len(mine) == 1 else m3.Manifold.compose(mine)
         pieces.append(RenderSolid(solid, tuple(new_cracks), spacing).moved(origin))
     stats["unassigned_parts"] = int(sum(1 for o in owner if o == -1))
     return pieces, stats
 
 
-def _winding_inside(points: np.ndarray, solid: m3.Manifold) -> np.ndarray:
-    """(N,) bool: ``points`` (N,3) inside the closed ``solid``."""
-    from .piece_checks import inside
-
-    mesh = solid.to_mesh64()
-    return inside(points, np.asarray(mesh.vert_properties)[:, :3][np.asarray(mesh.tri_verts, dtype=np.int64)])
-
-
-def _part_holding(points: np.ndarray, parts) -> int | None:
-    """The index of the part holding most of ``points`` (N,3) [m], None when none holds any."""
-    best, best_count = None, 0
-    for j, part in enumerate(parts):
-        box = part.bounding_box()
-        near = np.all((points >= np.asarray(box[:3])) & (points <= np.asarray(box[3:])), axis=1)
-        if not near.any():
-            continue
-        count = int(_winding_inside(points[near], part).sum())
-        if count > best_count:
-            best, best_count = j, count
-    return best
+def _without_crumbs(mine, spacing: float) -> list:
+    """A piece's parts less those under CRUMB_VOLUME_FACTOR spacings cubed beside a larger one:
+    wedges where two cracks' slabs cross near the surface, each a separate shell that would
+    travel with the piece, and smaller than a tet."""
+    largest = max((part.volume() for part in mine), default=0.0)
+    return [part for part in mine if part.volume() >= CRUMB_VOLUME_FACTOR * spacing**3 or part.volume() == largest]
 
 
-def _probe_points(model, tets: np.ndarray) -> np.ndarray:
-    """About 16 of ``tets``' centroids [m], evenly spread over the list."""
-    return model.particle_position[tets[:: max(1, len(tets) // 16)]]
-
-
-def _failed_pieces(parts, owner, model, fragment_tets) -> set[int]:
-    """Pieces the cut failed, to be given their tets' boundary: those whose parts hold less
-    than LOST_VOLUME_SHARE of their tets' volume (where the slabs leave a gap in the wall
-    between two pieces, the part on both sides goes to one of them by the vote and the other
-    keeps only chips), and the piece that got the part holding a lost piece's tets when the
-    volume it gained is more than SWALLOWED_VOLUME_SHARE of its own. A piece with no part at
-    all was carved already (``_carve_missing_pieces``) or has no render solid."""
-    rendered = np.zeros(len(fragment_tets))
-    for part, o in zip(parts, owner):
-        if o >= 0:
-            rendered[o] += part.volume()
-    failed = set()
-    for k, tets in enumerate(fragment_tets):
-        tets = np.asarray(tets, dtype=np.int64)
-        own = float(model.tet_volume[tets].sum())
-        if k not in owner or rendered[k] >= LOST_VOLUME_SHARE * own:
-            continue
-        failed.add(k)
-        holder = _part_holding(_probe_points(model, tets), parts)
-        if holder is None or owner[holder] < 0 or owner[holder] == k:
-            continue
-        taker = owner[holder]
-        if own - rendered[k] > SWALLOWED_VOLUME_SHARE * float(model.tet_volume[np.asarray(fragment_tets[taker])].sum()):
-            failed.add(taker)
-    return failed
-
-
-def _carve_missing_pieces(parts, owner, model, fragment_tets):
-    """A piece no part went to (a few tets where cracks meet, smaller than the planes can
-    resolve) is carved out of the part holding its tets: the part's intersection with the
-    convex hull of its tets becomes the piece (owner -(k + 2)), the rest stays. Its faces
-    inside the part are then the hull's planes, not a crack's: counted in the stats."""
-    parts, owner = list(parts), list(owner)
-    for k, tets in enumerate(fragment_tets):
-        if k in owner or -(k + 2) in owner:
-            continue
-        tets = np.asarray(tets, dtype=np.int64)
-        best = _part_holding(_probe_points(model, tets), parts)
-        if best is None:
-            continue
-        hull = _with_crack_index(
-            m3.Manifold.hull_points(np.ascontiguousarray(model.vertices[model.tets[tets]].reshape(-1, 3))), HULL_FACE)
-        carved = parts[best] ^ hull
-        if carved.is_empty():
-            continue
-        parts[best] = parts[best] - hull
-        parts.append(carved)
-        owner.append(-(k + 2))
-    return parts, owner
-
-
-def _assign_parts(parts, model, labels, spacing) -> list[int]:
-    """The piece (label) each connected part belongs to: an area-weighted vote of its faces,
-    each probed a quarter spacing inside the part, for the piece of the nearest tet centroid
-    (-1: dropped tets)."""
-    from scipy.spatial import cKDTree
-
-    tree = cKDTree(model.particle_position)
-    owners = []
-    for part in parts:
-        mesh = part.to_mesh64()
-        vp = np.asarray(mesh.vert_properties)[:, :3]
-        tri_verts = np.asarray(mesh.tri_verts, dtype=np.int64)
-        tri = vp[tri_verts[:: max(1, len(tri_verts) // MAX_VOTING_FACES)]]
-        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        area = 0.5 * np.linalg.norm(normal, axis=1)
-        normal /= np.maximum(2.0 * area[:, None], 1e-300)
-        probe = tri.mean(axis=1) - 0.25 * spacing * normal
-        _, nearest = tree.query(probe)
-        votes = np.bincount(labels[nearest] + 1, weights=area)
-        if votes.max() < DECISIVE_VOTE * votes.sum() and part.volume() >= spacing**3:
-            # A thin part (three tets across a glass pane) can sit nearer a neighbour's tets
-            # than its own: ask which tets' centroids it holds, by their volume. (Not for
-            # chips under a spacing cubed: a refracture through a piece's hairline shells
-            # leaves dozens, and which side owns one is invisible.)
-            tets = _tets_inside(model, vp.min(axis=0), vp.max(axis=0), vp[tri_verts])
-            if len(tets):
-                votes = np.bincount(labels[tets] + 1, weights=model.tet_volume[tets])
-        owners.append(int(np.argmax(votes)) - 1)
-    return owners
-
-
-def _tets_inside(model, low, high, triangles) -> np.ndarray:
-    """Up to MAX_PROBED_TETS tets (evenly spread over those in the box ``low``..``high``
-    (3,) [m]) whose centroids lie inside the closed surface ``triangles`` (F,3,3) [m]."""
-    from .piece_checks import inside
-
-    in_box = np.nonzero(np.all((model.particle_position >= low) & (model.particle_position <= high), axis=1))[0]
-    in_box = in_box[:: max(1, len(in_box) // MAX_PROBED_TETS)]
-    return in_box[inside(model.particle_position[in_box], triangles)]
+def _weld_bits(solid: m3.Manifold, planes, spheres, split_up: set, spacing: float, roughness: float,
+               roughness_scale: float, seed: int) -> dict:
+    """Piece -> the bit of the render ``solid`` that joins its parts again where a crack's slab
+    cut through the piece itself (a bond cut between two of its own tets: a merged small piece,
+    a piece joined around the crack's end): the solid within a slab WELD_THICKNESS_FACTOR
+    spacings thick over those crossings (squares WELD_REACH_FACTOR spacings about each), which
+    overlaps the parts on both sides of the hairline, so their union is one shell. So that a
+    square reaching past another crack does not join the piece to a sliver in its neighbour,
+    the weld keeps off the other plane cracks' lines through its plane (the sliver left
+    beyond is apart, under the crumb volume, dropped), and crossings whose square would reach
+    a ring crack's sphere (``spheres``) are left out; one overlap is enough to join two
+    parts. Only for the pieces in ``split_up``; ``planes``: (surface, sites, inside, index)
+    of each plane crack's slab."""
+    bits = {}
+    for k in sorted(split_up):
+        welds = []
+        for surface, sites, inside_one, index in planes:
+            own = inside_one == k
+            for sphere in spheres:
+                own &= np.abs(sphere.distance(sites)) > np.sqrt(2.0) * WELD_REACH_FACTOR * spacing
+            if not own.any():
+                continue
+            weld = _plane_slab(surface, sites[own], np.ones(int(own.sum()), dtype=bool), spacing, roughness,
+                               roughness_scale, seed, index, thickness_factor=WELD_THICKNESS_FACTOR,
+                               reach_factor=WELD_REACH_FACTOR,
+                               apart_from=[other for other, _, _, _ in planes if other is not surface])
+            if weld is not None and not weld.is_empty():
+                welds.append(_with_crack_index(weld, index))
+        if welds:
+            bits[k] = [solid ^ (m3.Manifold.batch_boolean(welds, m3.OpType.Add) if len(welds) > 1 else welds[0])]
+    return bits
 
 
 def _face_cracks(corner_crack: np.ndarray, triangles: np.ndarray, cracks, spacing: float) -> np.ndarray:
