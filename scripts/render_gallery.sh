@@ -52,3 +52,8 @@ for source, target in picks.items():
     Image.open(out / source).convert("RGB").save(docs / target, quality=85, optimize=True)
     print(f"wrote {docs / target} ({(docs / target).stat().st_size // 1024} KB)")
 PY
+
+# The test meshes' drops, when `taichi-frac bench meshes` has written their caches.
+if [ -d out/bench/meshes_inputs/caches ]; then
+  .venv/bin/python scripts/render_mesh_drops.py --samples 6
+fi
