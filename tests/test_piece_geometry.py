@@ -263,6 +263,35 @@ def test_a_piece_holding_more_than_its_tets_gets_its_tets_boundary(box):
     assert overfull_pieces(halves(-0.05), [0, 1], model, label, model.spacing) == set()
 
 
+def test_a_plane_through_large_inner_tets_cuts_a_graded_body_in_two():
+    """A box with a finely tessellated ball buried in one end, one surface of two overlapping
+    closed shells (repair unites them, the ball's inside half left out): the mesher grades
+    from tets a few millimetres across at the ball to ones four times the mean spacing in the
+    middle, where bond crossings of a plane lie further apart than a few spacings. The slab
+    must still reach across the whole section: each piece's render volume within 2 % of its
+    tets', none falling back to its tets' boundary."""
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=0.03)
+    ball.apply_translation((-0.1, 0.0, 0.0))
+    surface = trimesh.util.concatenate([trimesh.creation.box(extents=SIZE), ball])
+    model, report = prepare_body(surface, repair=True, max_volume=np.prod(SIZE) / 200, simplify=False,
+                                 use_cache=False)
+    assert report.surface.is_watertight and report.surface.volume < np.prod(SIZE) + ball.volume
+    render = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)
+    normal = np.array([1.0, 0.2, 0.1]) / np.linalg.norm([1.0, 0.2, 0.1])
+    crack = CrackPlane(point=np.array([0.05, 0.0, 0.0]) - model.com_in_source, normal=normal, extent=1.0,
+                       peak_stress=1.0)
+    pieces, renders, counts = _split_and_cut(model, render, [crack])
+    assert len(pieces) == 2 and counts["fallback_pieces"] == 0 and counts["parts"] == 2
+    total = 0.0
+    for piece, solid in zip(pieces, renders):
+        mesh = piece_mesh(solid)
+        _assert_closed(mesh)
+        quality = piece_quality(mesh, piece.model)
+        assert abs(quality["volume_error"]) < 0.02 and quality["shells"] == 1
+        total += signed_volume(mesh.vertices, mesh.faces)
+    assert total == pytest.approx(render.solid.volume(), rel=1e-4)
+
+
 def test_rough_cracks_fit_together_and_keep_the_outside(box):
     model, report, _ = box
     render = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)

@@ -63,8 +63,13 @@ WELD_THICKNESS_FACTOR = 3 * SLAB_THICKNESS_FACTOR
 WELD_REACH_FACTOR = 1.0
 
 #: How far [particle spacings] a crack's slab reaches from the bond crossing nearest each of
-#: its points: beyond the surface where the plane meets it obliquely.
-SLAB_REACH_FACTOR = 4.0
+#: its points: beyond the surface where the plane meets it obliquely, and across the gaps
+#: between crossings where the mesher grades the tets coarse inside (the spacing is their
+#: mean V^(1/3), which the many small surface tets pull down: a teapot's inner tets are
+#: 3-4 spacings across, its crossings up to 11 spacings apart). A gap the slab leaves joins
+#: the two pieces' parts into one. Where a crossing inside one piece is nearer, its Voronoi
+#: cell still stops the slab halfway to it.
+SLAB_REACH_FACTOR = 8.0
 
 #: Parts of the cut solid smaller than this [particle spacings cubed] are dropped: chips
 #: where two slabs' edges cross the surface, far below a render's resolution.
