@@ -156,3 +156,41 @@ def test_a_resting_ring_stands_on_a_few_contacts_that_carry_its_weight():
     assert spread == pytest.approx(0.2, rel=0.1)
     impulse = world.contacts.normal_impulse.to_numpy()[:n][ground].sum()
     assert impulse == pytest.approx(model.mass * 9.81 * 0.002, rel=0.02)
+
+
+def test_rings_stacked_flat_rest_on_their_tubes():
+    """Three tori stacked flat (unbreakable, restitution 0) rest each one tube diameter
+    above the one below (COM heights 25, 75 and 125 mm, exact for the mesh: its vertices
+    at the top and bottom of the tube lie on the true surface), within 0.5 mm per ring,
+    and fall asleep without drifting: the contact between two bodies' patches is their
+    hulls' distance (``surface.hull_pair``). On their spheres each ring stands about 5 mm
+    higher than the one below."""
+    model = ring_model()
+    world = fresh_world(surface_contact=True)
+    world.add_ground(0.0, restitution=0.0)
+    rings = [world.add_body(model, (0, 0, 0.0255 + 0.0505 * k), restitution=0.0) for k in range(3)]
+    for _ in range(50):
+        world.advance(0.02, 10)
+    settled = world.body_state(rings)["position"]
+    for _ in range(25):
+        world.advance(0.02, 10)
+    state = world.body_state(rings)
+    for k in range(3):
+        assert state["position"][k][2] == pytest.approx(0.025 + 0.05 * k, abs=(k + 1) * REST_TOLERANCE)
+    assert np.max(np.abs(state["position"] - settled)) < 1e-4
+    assert state["sleeping"].all()
+
+
+def test_ring_rests_on_a_slab_at_its_minor_radius():
+    """A torus lying flat on a tet-meshed slab (a box-shaped body of many patches) rests
+    at the slab's top plus its minor radius, within 0.5 mm."""
+    mesh = tetrahedralize(trimesh.creation.box((0.4, 0.4, 0.05)), target_tets=1500)
+    slab = build_body_model(mesh.vertices, mesh.tets, 2400.0)
+    model = ring_model()
+    world = fresh_world(surface_contact=True)
+    world.add_ground(0.0, restitution=0.0)
+    world.add_body(slab, (0, 0, 0.025), restitution=0.0)
+    ring = world.add_body(model, (0, 0, 0.0505 + 0.0255), restitution=0.0)
+    for _ in range(50):
+        world.advance(0.02, 10)
+    assert world.body_state([ring])["position"][0][2] == pytest.approx(0.075, abs=REST_TOLERANCE)

@@ -298,6 +298,35 @@ def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) ->
     return dict(rest=float(world.body_state([body])["position"][0][2]), depth=depth)
 
 
+#: Rings in the contact table's stack (``_ring_stack``).
+STACK_RINGS = 5
+
+
+def _ring_stack(ctx: BenchContext, single: bool, surface: bool) -> dict:
+    """``STACK_RINGS`` unbreakable tori (major 0.1, minor 0.025 m) stacked flat, each let
+    down 0.5 mm above the one below, restitution 0, for 2 s: the top ring's centre-of-mass
+    height against exact (one tube diameter a ring), how far any ring moved in the last
+    second, and whether all sleep."""
+    from ..dynamics import DynamicsOptions
+    from .bodies import ring_model
+
+    model = ring_model()
+    world = ctx.world()
+    world.clear()
+    world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
+    world.add_ground(0.0, restitution=0.0)
+    rings = [world.add_body(model, (0, 0, 0.0255 + 0.0505 * k), restitution=0.0) for k in range(STACK_RINGS)]
+    for _ in range(50):
+        world.advance(0.02, 10)
+    settled = world.body_state(rings)["position"]
+    for _ in range(50):
+        world.advance(0.02, 10)
+    state = world.body_state(rings)
+    return dict(top=float(state["position"][-1][2]) - (0.025 + 0.05 * (STACK_RINGS - 1)),
+                drift=float(np.max(np.linalg.norm(state["position"] - settled, axis=1))),
+                asleep=int(state["sleeping"].sum()))
+
+
 #: Runs of each 13-ring mode in the contact table, interleaved; the fastest counts. A mode's
 #: first run in a process compiles its kernels (the collide kernel's contact-patch code,
 #: the fracture stage at the first crack) inside one of its frames, which the mean over 50
@@ -326,6 +355,7 @@ def contact_section(ctx: BenchContext, scene, frames=None) -> str:
     drops = {m[0]: _ring_drop(ctx, m[1], m[2]) for m in CONTACT_MODES}
     flat = {m[0]: _cube_rest(ctx, m[1], m[2], on_edge=False) for m in CONTACT_MODES}
     edge = {m[0]: _cube_rest(ctx, m[1], m[2], on_edge=True) for m in CONTACT_MODES}
+    stacks = {m[0]: _ring_stack(ctx, m[1], m[2]) for m in CONTACT_MODES}
     labels = [m[0] for m in CONTACT_MODES]
     ref = drops[labels[2]]
     rows = [
@@ -335,6 +365,10 @@ def contact_section(ctx: BenchContext, scene, frames=None) -> str:
                                                                   for k in labels],
         [f"0.1 m cube on an edge (0.3 s), COM z − exact {50 * math.sqrt(2):.2f} mm [mm]"]
         + [f"{1e3 * (edge[k]['rest'] - 0.05 * math.sqrt(2)):+.2f}" for k in labels],
+        [f"{STACK_RINGS} tori stacked flat: top COM z − exact {25 + 50 * (STACK_RINGS - 1)}.0 mm [mm] / "
+         "largest move 1-2 s [mm] / asleep at 2 s"]
+        + [f"{1e3 * stacks[k]['top']:+.2f} / {1e3 * stacks[k]['drift']:.2f} / {stacks[k]['asleep']} of {STACK_RINGS}"
+           for k in labels],
         ["ring drop: rebound (e = 0.5, from 0.3 m) [mm], vs single-scale"]
         + [f"{1e3 * drops[k]['rebound']:.1f} ({100 * (drops[k]['rebound'] / max(ref['rebound'], 1e-12) - 1):+.1f} %)"
            for k in labels],

@@ -231,9 +231,10 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
     centre ``local`` [m] in o's frame, rotation ``rot`` o -> world), when their gap is
     within the margin plus the pair's closing (squared: no square root for the ~90 % of
     candidates it rejects) and then the speculative reach of the two points. When either
-    sphere has a contact patch (and not both have normals: ``surface.by_patches``), the
-    contact's normal, depth and point are the patches' (``surface.pair``) and the
-    speculative reach is that of their contact spots."""
+    sphere has a contact patch, the contact's normal, depth and point are the patches'
+    (``surface.pair`` where one has a normal, ``surface.hull_pair``'s hull distance where
+    both have normals) and the speculative reach is that
+    of their contact spots."""
     sphere = particles.grid_sphere[k]
     rj = sphere[3]
     j = particles.grid_slot[k]
@@ -251,8 +252,18 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
         x_a, x_o = xi, xj
         scale = ti.min(ri, rj)
         if ti.static(patches):
-            if surface.by_patches(particles, i, j):
-                n_patch, gap_patch, spot_a, spot_o = surface.pair(bodies, particles, a, i, o, j, n)
+            patched = surface.by_patches(particles, i, j)
+            hulls = surface.by_hulls(particles, i, j)
+            if patched or hulls:
+                n_patch = n
+                gap_patch = gap
+                spot_a = x_a
+                spot_o = x_o
+                if hulls:
+                    n_patch, gap_patch, spot_a, spot_o = surface.hull_pair(
+                        bodies, particles, a, i, o, j, n, margin * mean_r + closing)
+                else:
+                    n_patch, gap_patch, spot_a, spot_o = surface.pair(bodies, particles, a, i, o, j, n)
                 if gap_patch >= -ti.static(surface.TRUSTED_DEPTH) * ti.max(ri, rj):
                     n, gap, x_a, x_o = n_patch, gap_patch, spot_a, spot_o
                     # Where along the surfaces: the smaller patch's spot (a chip on a wide
