@@ -15,7 +15,7 @@ import trimesh
 from taichi_frac.geometry.tetra import tetrahedralize
 from taichi_frac.geometry.contact_patches import contact_patches
 from taichi_frac.model import build_body_model
-from taichi_frac.bench.bodies import box_model, ring_model, single_tet_model
+from taichi_frac.bench.bodies import box_model, ring_model, single_tet_model, stack_rings
 from support.dynamics import fresh_world, rotation
 
 #: Rest heights within this of exact [m] (the bound surface contact is held to).
@@ -165,10 +165,8 @@ def test_rings_stacked_flat_rest_on_their_tubes():
     and fall asleep without drifting: the contact between two bodies' patches is their
     hulls' distance (``surface.hull_pair``). On their spheres each ring stands about 5 mm
     higher than the one below."""
-    model = ring_model()
     world = fresh_world(surface_contact=True)
-    world.add_ground(0.0, restitution=0.0)
-    rings = [world.add_body(model, (0, 0, 0.0255 + 0.0505 * k), restitution=0.0) for k in range(3)]
+    rings = stack_rings(world, ring_model(), 3)
     for _ in range(50):
         world.advance(0.02, 10)
     settled = world.body_state(rings)["position"]

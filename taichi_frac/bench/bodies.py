@@ -48,3 +48,14 @@ def ring_model(pieces: int = 1500, major: float = 0.1, minor: float = 0.025):
 def single_tet_model(edge: float = 0.05):
     vertices = np.array([[0, 0, 0], [edge, 0, 0], [0, edge, 0], [0, 0, edge]], dtype=float)
     return build_body_model(vertices, np.array([[0, 1, 2, 3]]), DENSITY, boundary_group_size=4)
+
+
+def stack_rings(world, model, count: int, minor: float = 0.025) -> list[int]:
+    """``count`` copies of the flat torus ``model`` (tube radius ``minor`` [m]) stacked on a
+    ground at z = 0 added to ``world``, each let down 0.5 mm above the one below it,
+    restitution 0; returns their body ids, lowest first. At rest ring k's centre of mass is
+    at (2k + 1) ``minor``."""
+    world.add_ground(0.0, restitution=0.0)
+    gap = 0.0005
+    return [world.add_body(model, (0, 0, minor + gap + k * (2 * minor + gap)), restitution=0.0)
+            for k in range(count)]

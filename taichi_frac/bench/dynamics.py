@@ -308,14 +308,12 @@ def _ring_stack(ctx: BenchContext, single: bool, surface: bool) -> dict:
     height against exact (one tube diameter a ring), how far any ring moved in the last
     second, and whether all sleep."""
     from ..dynamics import DynamicsOptions
-    from .bodies import ring_model
+    from .bodies import ring_model, stack_rings
 
-    model = ring_model()
     world = ctx.world()
     world.clear()
     world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
-    world.add_ground(0.0, restitution=0.0)
-    rings = [world.add_body(model, (0, 0, 0.0255 + 0.0505 * k), restitution=0.0) for k in range(STACK_RINGS)]
+    rings = stack_rings(world, ring_model(), STACK_RINGS)
     for _ in range(50):
         world.advance(0.02, 10)
     settled = world.body_state(rings)["position"]
