@@ -29,9 +29,9 @@ import math
 
 import taichi as ti
 
+from ..kinematics.frames import tangent_basis
 from . import surface
 
-vec3 = ti.math.vec3
 
 #: Directions across the contact normal along which the outermost contact is kept: eight
 #: (every 45 degrees) outline a ring's circle of contacts within 8 % of its radius.
@@ -87,11 +87,7 @@ def _reduce_group(bodies: ti.template(), particles: ti.template(), contacts: ti.
                 landing = True
     low = contacts.separation[deepest]
     n = contacts.normal[deepest]
-    t1 = vec3(1.0, 0.0, 0.0)
-    if ti.abs(n[0]) > 0.57735:
-        t1 = vec3(0.0, 1.0, 0.0)
-    t1 = (t1 - t1.dot(n) * n).normalized()
-    t2 = n.cross(t1)
+    t1, t2 = tangent_basis(n)
     best = ti.Matrix([[deepest] * DIRECTIONS] * 2, dt=ti.i32)
     score = ti.Matrix([[-1e30] * DIRECTIONS] * 2, dt=ti.f32)
     for k in range(first, end):

@@ -21,6 +21,7 @@ these sweeps include every other contact with its non-penetration target.
 import taichi as ti
 
 from ..collision.narrowphase import GROUND
+from ..kinematics.frames import tangent_basis
 
 vec3 = ti.math.vec3
 mat3 = ti.math.mat3
@@ -179,11 +180,7 @@ def _prepare_contact(bodies: ti.template(), contacts: ti.template(), c):
     contacts.arm_b[c] = arm_b
     # Friction directions t1, t2 (any orthonormal pair across n) and every direction's
     # angular response, so a sweep needs no inertia matrix (Catto 2005; Box2D, Bullet).
-    t1 = vec3(1.0, 0.0, 0.0)
-    if ti.abs(n[0]) > 0.57735:
-        t1 = vec3(0.0, 1.0, 0.0)
-    t1 = (t1 - t1.dot(n) * n).normalized()
-    t2 = n.cross(t1)
+    t1, t2 = tangent_basis(n)
     contacts.tangent1[c] = t1
     contacts.tangent2[c] = t2
     ra_n, ra_1, ra_2, ka = _body_response(bodies, a, arm_a, n, t1, t2)
