@@ -350,21 +350,16 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
     rot_o = bodies.rotation[o]
     x_a = bodies.position[a]
     x_o = bodies.position[o]
-    candidates = ti.Matrix.rows([centre_line, rot_o @ particles.patch_normal[j], -(rot_a @ particles.patch_normal[i])])
-    gaps = candidates @ (x_a - x_o) + lowest3(particles, i, candidates @ rot_a) + lowest3(
-        particles, j, -(candidates @ rot_o))
     normal_i = rot_a @ particles.patch_normal[i]
     normal_j = rot_o @ particles.patch_normal[j]
-    # (a patch's own normal is a candidate when it has one: the separating axis of faces)
-    usable = vec3(1.0, 0.0, 0.0)
-    if normal_j.norm_sqr() > 0.25:
-        usable[1] = 1.0
-    if normal_i.norm_sqr() > 0.25:
-        usable[2] = 1.0
+    # (both patches have a normal, ``by_hulls``: each is a candidate, the separating axis of faces)
+    candidates = ti.Matrix.rows([centre_line, normal_j, -normal_i])
+    gaps = candidates @ (x_a - x_o) + lowest3(particles, i, candidates @ rot_a) + lowest3(
+        particles, j, -(candidates @ rot_o))
     best_gap = gaps[0]
     n = centre_line
     for c in range(1, 3):
-        if usable[c] > 0.0 and gaps[c] > best_gap:
+        if gaps[c] > best_gap:
             best_gap = gaps[c]
             n = vec3(candidates[c, 0], candidates[c, 1], candidates[c, 2])
     shift = (ti.max(-best_gap, 0.0) + ti.static(HULL_SHIFT) * ti.max(particles.radius[i], particles.radius[j])) * n
