@@ -450,13 +450,14 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     failed |= overreaching_pieces(parts, owner, model, labels, spacing, corners)
     failed |= overfull_pieces(parts, owner, model, labels, spacing)
     stats["fallback_pieces"] = len(failed)
-    split_up = {k for k in owner if k >= 0 and k not in failed
-                and len(_without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing)) > 1}
+    # Each piece's parts without its crumbs, once: the welds and the pieces below read them.
+    kept = {k: _without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing) for k in set(owner) if k >= 0}
+    split_up = {k for k, mine in kept.items() if k not in failed and len(mine) > 1}
     spheres = [surface for surface in new_cracks[len(render.cracks):] if surface.radius is not None]
     welds = _weld_bits(render.solid, planes, spheres, split_up, spacing, roughness, roughness_scale, seed)
     pieces = []
     for k, origin in enumerate(np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)):
-        mine = _without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing)
+        mine = kept.get(k, [])
         if k in failed:
             pieces.append(None)
             continue
