@@ -209,13 +209,16 @@ def tetrahedralize(
     volume = float(mesh.volume)
     start = time.perf_counter()
     runs = 0
+    # TetGen with a quality it may relax (copies of artists' surfaces): its default
+    # optimisation, and a count far above the target skips to a looser quality.
+    relaxed_tetgen = relax_quality and backend == "tetgen"
 
     def mesh_once(bound, quality=None):
         nonlocal runs
         runs += 1
         if quality is not None:
             v, t = _tetgen(vertices, faces, bound, quality[1], minratio=quality[0], optimise=False)
-        elif relax_quality and backend == "tetgen":
+        elif relaxed_tetgen:
             # Copies of artists' surfaces: the extra optimisation can grind for minutes there
             # (the beetle's copy: over 20 s a run where TetGen's defaults take 0.6-4 s).
             v, t = _tetgen(vertices, faces, bound, min_dihedral_deg, optimise=False)
@@ -234,14 +237,14 @@ def tetrahedralize(
         bound = overshoot * volume / target_tets
         v, t = mesh_once(bound)
         miss = len(t) / target_tets
-        floor_bound = relax_quality and backend == "tetgen" and miss > _FLOOR_MISS
+        floor_bound = relaxed_tetgen and miss > _FLOOR_MISS
         if abs(miss - 1.0) > tolerance and not floor_bound:
             # Count ~ 1/bound away from the surface-resolution floor: one proportional step.
             retry_bound = bound * miss
             v2, t2 = mesh_once(retry_bound)
             if abs(len(t2) / target_tets - 1.0) < abs(miss - 1.0):
                 v, t, bound = v2, t2, retry_bound
-        if relax_quality and backend == "tetgen" and len(t) > (1.0 + count_tolerance) * target_tets:
+        if relaxed_tetgen and len(t) > (1.0 + count_tolerance) * target_tets:
             # The quality bound forces small tets along short surface features or thin parts
             # whatever the volume bound: trade quality for the count, reported as the min
             # dihedral angle and the sliver count. A looser bound frees the count from the
