@@ -97,7 +97,9 @@ class StepClock:
             return result
         context = multiprocessing.get_context("fork")
         receive, send = context.Pipe(duplex=False)
-        child = context.Process(target=_child, args=(send, function, args, kwargs), daemon=True)
+        # Not a daemon, so a step may start its own bounded steps; the finally below always
+        # stops it.
+        child = context.Process(target=_child, args=(send, function, args, kwargs))
         child.start()
         send.close()
         try:

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
+from .bounded import StepClock
 from .topology import compact_vertices, dihedral_angles_deg, orient_tets, signed_volumes
 from .validate import MeshError
 
@@ -108,9 +109,18 @@ def _native_stdout_silenced_in_scratch_dir():
 
 def _wildmeshing(vertices, faces, max_volume, min_dihedral_deg):
     try:
-        import wildmeshing
+        import wildmeshing  # noqa: F401  (named here so a missing package is reported in this process)
     except ImportError:
         raise MeshError("backend 'wildmeshing' needs the wildmeshing package: pip install wildmeshing") from None
+    # fTetWild starts TBB and OpenMP thread pools, which a forked process inherits broken:
+    # run in this process, every later bounded (forked) step that runs fTetWild would stall.
+    # A child of its own keeps this process free of those pools.
+    return StepClock(name="fTetWild", seconds=None).run("fTetWild", _wildmeshing_here, vertices, faces,
+                                                       max_volume, min_dihedral_deg)
+
+
+def _wildmeshing_here(vertices, faces, max_volume, min_dihedral_deg):
+    import wildmeshing
     diag = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
     # fTetWild sizes by ideal edge length relative to the bounding-box diagonal; a regular
     # tet of volume v has edge (6 sqrt(2) v)^(1/3). Its tets average ~1/2 the ideal volume.
