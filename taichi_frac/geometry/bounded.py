@@ -33,12 +33,14 @@ class StepClock:
         name: what messages call the mesh (the file name).
         seconds: the whole preparation's bound [s] (None: unbounded).
         step_seconds: wall time of each step that ran [s], in order.
+        crash_hint: what the message of a crashed step suggests.
     """
 
     name: str = "mesh"
     seconds: float | None = DEFAULT_PREPARE_SECONDS
     start: float = field(default_factory=time.perf_counter)
     step_seconds: dict = field(default_factory=dict)
+    crash_hint: str = "repair the mesh in a modelling tool or try backend='wildmeshing'"
 
     def remaining(self) -> float | None:
         if self.seconds is None:
@@ -112,7 +114,7 @@ class StepClock:
             except EOFError:
                 child.join(5)
                 raise MeshError(f"{self.name!r}: step '{step}' crashed (exit code {child.exitcode}); "
-                                "repair the mesh in a modelling tool or try backend='wildmeshing'") from None
+                                f"{self.crash_hint}") from None
         finally:
             receive.close()
             if child.is_alive():

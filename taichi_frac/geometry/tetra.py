@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import importlib.util
 import math
 import os
 import sys
@@ -108,15 +109,13 @@ def _native_stdout_silenced_in_scratch_dir():
 
 
 def _wildmeshing(vertices, faces, max_volume, min_dihedral_deg):
-    try:
-        import wildmeshing  # noqa: F401  (named here so a missing package is reported in this process)
-    except ImportError:
-        raise MeshError("backend 'wildmeshing' needs the wildmeshing package: pip install wildmeshing") from None
+    if importlib.util.find_spec("wildmeshing") is None:
+        raise MeshError("backend 'wildmeshing' needs the wildmeshing package: pip install wildmeshing")
     # fTetWild starts TBB and OpenMP thread pools, which a forked process inherits broken:
     # run in this process, every later bounded (forked) step that runs fTetWild would stall.
     # A child of its own keeps this process free of those pools.
-    return StepClock(name="fTetWild", seconds=None).run("fTetWild", _wildmeshing_here, vertices, faces,
-                                                       max_volume, min_dihedral_deg)
+    clock = StepClock(name="mesh", seconds=None, crash_hint="repair the mesh in a modelling tool")
+    return clock.run("fTetWild", _wildmeshing_here, vertices, faces, max_volume, min_dihedral_deg)
 
 
 def _wildmeshing_here(vertices, faces, max_volume, min_dihedral_deg):
