@@ -243,6 +243,30 @@ def test_a_piece_reaching_far_past_its_tets_gets_its_tets_boundary(box):
     assert overreaching_pieces(halves, [0, 1], model, label, model.spacing, {}) == set()
 
 
+def test_a_part_joining_two_pieces_is_divided_by_their_tets(box):
+    """The whole box given to the piece of the tets at x < -0.05, as where the artist's
+    surface joins two pieces across a gap their tets leave open: it reaches half a box past
+    them, so it is divided by the tets' owners. The other piece gets the material nearest its
+    tets farther than FOREIGN_DEPTH_FACTOR spacings from the first's: the box beyond a face
+    one to four spacings past x = -0.05 (the tets' cells are about a spacing across); the
+    two shares are closed, fill the box and reach no farther than the check allows."""
+    from taichi_frac.geometry.piece_parts import FOREIGN_DEPTH_FACTOR, divide_joined_parts, overreaching_pieces
+
+    model, report, _ = box
+    spacing = model.spacing
+    render = render_solid_from_surface(report.surface, model.com_in_source, spacing)
+    x = model.particle_position + model.com_in_source
+    label = (x[:, 0] >= -0.05).astype(np.int64)
+    parts, owner, received = divide_joined_parts([render.solid], [0], model, label, spacing, {})
+    assert received == {1} and sorted(set(owner)) == [0, 1]
+    assert all(part.status() == part.status().NoError and part.genus() == 0 for part in parts)
+    volume = [sum(part.volume() for part, o in zip(parts, owner) if o == k) for k in (0, 1)]
+    assert sum(volume) == pytest.approx(np.prod(SIZE), rel=1e-9)
+    face = -SIZE[0] / 2 + volume[0] / (SIZE[1] * SIZE[2])  # where piece 0's share ends, box frame
+    assert -0.05 + (FOREIGN_DEPTH_FACTOR - 1.5) * spacing < face < -0.05 + (FOREIGN_DEPTH_FACTOR + 1.5) * spacing
+    assert overreaching_pieces(parts, owner, model, label, spacing, {}) == set()
+
+
 def test_a_piece_holding_more_than_its_tets_gets_its_tets_boundary(box):
     """The part up to x = -0.03 given to the piece of the tets at x < -0.05 holds 40 % more
     than its tets (0.02 m of the box's length, 146 spacings cubed, two spacings past them:
@@ -337,12 +361,12 @@ def _struck(model, report, material, options, point, direction, force_scale=400.
     return pieces, renders, counts
 
 
-def _check_struck(pieces, renders, counts, mean_volume_error=0.02, fallback_share=0.1):
+def _check_struck(pieces, renders, counts, mean_volume_error=0.02, fallback_share=0.1, large_volume_error=0.03):
     """At most ``fallback_share`` of the pieces (and at least one) fall back to their tets'
     boundary; every other piece
     closed, manifold, outward; crack faces on their cracks (a ring crack's
     sphere polygon within its sagitta bound); volumes: the pieces of 300 tets or more within
-    3 % of their tets', all pieces' errors (volume-weighted mean) within
+    ``large_volume_error`` of their tets', all pieces' errors (volume-weighted mean) within
     ``mean_volume_error``."""
     assert len(pieces) >= 2, "the impact must break the body"
     assert counts["empty_pieces"] == 0
@@ -355,7 +379,7 @@ def _check_struck(pieces, renders, counts, mean_volume_error=0.02, fallback_shar
         assert quality["watertight"] and quality["outward"], quality
         assert quality["crack_rms_spacings"] < 0.02, quality
         if piece.model.tet_count >= 300:
-            assert abs(quality["volume_error"]) < 0.03, quality
+            assert abs(quality["volume_error"]) < large_volume_error, quality
         errors.append(abs(quality["volume_error"]))
         volumes.append(piece.model.volume)
     assert np.average(errors, weights=volumes) < mean_volume_error
@@ -416,9 +440,12 @@ NO_SPOT = pytest.mark.skipif(not (SHARED_MESHES / "spot.obj").exists(), reason="
 def test_shared_mesh_breaks_into_closed_pieces():
     """Every piece the cut gives a surface is closed, manifold, outward, on its cracks and
     near its tets' volume (a piece the cut fails keeps its tets' boundary, which is all of
-    that by construction); outer corners keep the input's UVs."""
+    that by construction); outer corners keep the input's UVs. The cow's tets fill a
+    simplified copy of its surface and grade from about one spacing at the surface to three
+    or four inside: the full surface's share nearest the largest piece's tets is 7 % under
+    their volume, so its volume is held to 5 %, the mean to 6 %."""
     report, pieces, renders, counts = _spot_struck()
-    _check_struck(pieces, renders, counts, fallback_share=1.0)
+    _check_struck(pieces, renders, counts, fallback_share=1.0, large_volume_error=0.05, mean_volume_error=0.06)
     # Outer UVs are the input's (where the loader kept them): every outer corner's UV lies
     # in the input's UV range.
     uv = getattr(report.surface.visual, "uv", None)
@@ -434,9 +461,6 @@ def test_shared_mesh_breaks_into_closed_pieces():
 
 
 @NO_SPOT
-@pytest.mark.xfail(strict=True, reason="where the full-resolution surface joins two pieces across a gap their "
-                   "tets leave open (a thin part meshed apart), the joined part reaches past either piece's "
-                   "tets and both keep their tets' boundary: 9 of this impact's 11 pieces")
 def test_shared_mesh_pieces_get_cut_surfaces():
     report, pieces, renders, counts = _spot_struck()
     assert counts["fallback_pieces"] <= max(1, len(pieces) // 10)

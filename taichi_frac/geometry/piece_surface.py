@@ -29,8 +29,11 @@ one spacing past it, a hairline notch in the piece beyond.
 
 Where a crack cut bonds inside what stayed one piece (a merged small piece, a piece joined
 around the crack's end) its slab cuts that piece too; the piece's parts are welded back into
-one shell by the render solid within a slab three times as thick over those crossings. What
-the cut cannot resolve falls back to the tets' boundary, exact in volume: a piece left with
+one shell by the render solid within a slab three times as thick over those crossings. A
+part reaching far past its piece's tets (the artist's surface joins two pieces across a gap
+their tets leave open) is divided by the tets' nearest-centroid cells
+(``piece_parts.divide_joined_parts``). What the cut still cannot resolve falls back to the
+tets' boundary, exact in volume: a piece left with
 under half its tets' volume, one whose render solid reaches more than
 ``piece_parts.OVERREACH_FACTOR`` spacings past its tets or holds well over their volume (it
 holds a neighbour's material), and the neighbour that lost it (``geometry/piece_parts.py``).
@@ -48,7 +51,8 @@ import manifold3d as m3
 import numpy as np
 import trimesh
 
-from .piece_parts import assign_parts, carve_missing_pieces, failed_pieces, overfull_pieces, overreaching_pieces
+from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_pieces, overfull_pieces,
+                          overreaching_pieces)
 from .surface_attributes import input_corner_normals
 
 #: Slab thickness as a fraction of the particle spacing: the two pieces of a crack are this
@@ -442,13 +446,17 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     stats["dust_parts"] = len(every_part) - len(parts)
     corners = {}  # id(part) -> (part, its vertices (N,3) [m]): read by the vote and the reach check
     owner = assign_parts(parts, model, labels, spacing, corners)
+    parts, owner, received = divide_joined_parts(parts, owner, model, labels, spacing, corners)
+    stats["pieces_given_divided_parts"] = len(received)
     parts, owner = carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing)
     stats["parts"] = len(parts)
     stats["carved_pieces"] = int(sum(1 for o in owner if o < -1))
     owner = [-(o + 2) if o < -1 else o for o in owner]
     failed = failed_pieces(parts, owner, model, fragment_tets)
     failed |= overreaching_pieces(parts, owner, model, labels, spacing, corners)
-    failed |= overfull_pieces(parts, owner, model, labels, spacing)
+    # (a piece given the material nearest its tets beyond a gap they leave holds more than
+    # them by that gap's volume: not a neighbour's material)
+    failed |= overfull_pieces(parts, owner, model, labels, spacing) - received
     stats["fallback_pieces"] = len(failed)
     # Each piece's parts without its crumbs, once: the welds and the pieces below read them.
     kept = {k: _without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing) for k in set(owner) if k >= 0}
