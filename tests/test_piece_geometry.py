@@ -162,13 +162,17 @@ def test_finite_crack_and_ring_crack_make_closed_pieces_and_cut_again(box):
     assert sum(volumes) == pytest.approx(parent_volume, rel=1e-3)
 
 
-def test_a_piece_the_cut_fails_gets_its_tets_boundary(box):
+def test_a_piece_the_cut_fails_gets_the_surface_nearest_its_tets(box):
     """Where the slabs leave a gap in the wall between two pieces, the part on both sides
     goes to one of them and the other keeps only a chip (here a bead of the artist's surface
-    beside it, a separate shell): both get their tets' boundary instead, exact in volume,
-    and the piece the cut did not fail keeps its render solid. Three pieces of the box:
-    A (x < 0), B (0 < x < 0.04), C (x > 0.04); the wall between A and B gets no slab."""
-    from taichi_frac.io.fragment_mesh import fragment_surface
+    beside it, a separate shell): both are failed, and each gets instead the render solid
+    nearer its own tet centroids than any other piece's, less what the piece the cut did not
+    fail holds. Three pieces of the box: A (x < 0), B (0 < x < 0.04), C (x > 0.04); the wall
+    between A and B gets no slab. Closed form: A and B together fill the box up to C's crack
+    face (x = 0.04 and half a slab; the bead is a crumb), C keeps its cut; A's and B's shares each lie within a
+    cell (a spacing) of their tets' volume across the box's section; their faces between
+    each other lie on no crack (HULL_FACE), those against C on C's crack face."""
+    from taichi_frac.geometry.piece_surface import HULL_FACE
 
     model, report, _ = box
     spacing = model.spacing
@@ -187,20 +191,23 @@ def test_a_piece_the_cut_fails_gets_its_tets_boundary(box):
     leaky = [dataclasses.replace(walls[0], extent=1e-9), walls[1]]  # cuts no bond: no slab
     renders, counts = cut_render_solid(render, model, split.fragment_tets, leaky,
                                        [p.model.com_in_source for p in pieces])
-    order = np.argsort([p.model.com_in_source[0] for p in pieces])  # A, B, C
-    for piece, solid in zip(pieces, renders):
-        if solid is None:  # what the cache then writes (io/recorder.py)
-            vertices, faces, _ = fragment_surface(piece.model, model)
-        else:
-            mesh = piece_mesh(solid)
-            _assert_closed(mesh)
-            vertices, faces = mesh.vertices, mesh.faces
-        assert signed_volume(vertices, faces) == pytest.approx(piece.model.volume, rel=0.02)
-    assert counts["fallback_pieces"] == 2
-    assert renders[order[0]] is None and renders[order[1]] is None and renders[order[2]] is not None
-    # C is the box beyond x = 0.04 less half a slab.
-    mesh = piece_mesh(renders[order[2]])
-    assert signed_volume(mesh.vertices, mesh.faces) == pytest.approx(np.prod(SIZE) * 0.06 / SIZE[0], rel=1e-3)
+    assert counts["fallback_pieces"] == 2 and counts["cell_pieces"] == 2
+    a, b, c = (pieces[i] for i in np.argsort([p.model.com_in_source[0] for p in pieces]))
+    mesh = {id(p): piece_mesh(r) for p, r in zip(pieces, renders)}
+    volume = {}
+    for piece in (a, b, c):
+        _assert_closed(mesh[id(piece)])
+        volume[id(piece)] = signed_volume(mesh[id(piece)].vertices, mesh[id(piece)].faces)
+    section = SIZE[1] * SIZE[2]
+    half_slab = 1e-4 * spacing
+    assert volume[id(c)] == pytest.approx((SIZE[0] / 2 - 0.04 - half_slab) * section, rel=1e-6)
+    # (the bead, a separate shell under a tet's volume, is dropped as a crumb)
+    assert volume[id(a)] + volume[id(b)] == pytest.approx((SIZE[0] / 2 + 0.04 + half_slab) * section, rel=1e-6)
+    for piece in (a, b):
+        assert abs(volume[id(piece)] - piece.model.volume) < spacing * section
+        faces = mesh[id(piece)]
+        assert (faces.face_crack == HULL_FACE).any()
+    assert (mesh[id(b)].face_crack >= 0).any()  # its face against C is C's crack face
 
 
 def test_a_crack_through_a_merged_piece_leaves_it_one_shell(box):

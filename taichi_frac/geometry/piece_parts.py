@@ -231,7 +231,7 @@ FOREIGN_DEPTH_FACTOR = 2.5
 #: Voronoi diagram that divides a part reads the centroids (a cell depends only on its
 #: neighbours, within twice its reach); half of it bounds how far from the part such a
 #: centroid can lie and still reach it.
-LOCAL_DIAGRAM_FACTOR = 6.0
+LOCAL_DIAGRAM_FACTOR = 4.0
 #: How many times the parts cut off are checked and divided again (a part cut off and voted
 #: to a piece can reach past that piece's tets in turn).
 DIVIDE_ROUNDS = 3
@@ -250,93 +250,114 @@ def divide_joined_parts(parts, owner, model, labels, spacing, corners):
     vertices go into ``corners``."""
     from scipy.spatial import cKDTree
 
-    from .piece_checks import inside
-    from .piece_surface import DUST_VOLUME_FACTOR
-
     centroids = model.particle_position
     limit = OVERREACH_FACTOR * spacing
-    trees, everyone = {}, None
+    trees, everyone = {}, cKDTree(centroids)
     parts, owner = list(parts), list(owner)
-    fresh = list(range(len(parts)))  # the parts to check this round
     received = set()
+
+    def divide(j, holding, depth):
+        """Divide part j (see _divide_part); True when it changed, and what it cut off and
+        the rest are then queued in ``cut_off``."""
+        k = owner[j]
+        result = _divide_part(parts[j], k, holding, depth, model, labels, spacing, corners, trees[k])
+        if result is None:
+            return False
+        for index, (bit, vote) in enumerate(zip(*result)):
+            if index == 0:
+                parts[j], owner[j] = bit, vote
+            else:
+                parts.append(bit)
+                owner.append(vote)
+            cut_off.append(j if index == 0 else len(parts) - 1)  # (the rest too: new corners can reach past)
+            if vote != k:
+                received.add(vote)
+        return True
+
+    fresh = list(range(len(parts)))  # the parts to check this round
     for _ in range(DIVIDE_ROUNDS):
         cut_off = []
         for j in fresh:
-            part, k = parts[j], owner[j]
+            k = owner[j]
             if k < 0:
                 continue
             if k not in trees:
                 trees[k] = cKDTree(centroids[labels == k])
-            vertices = _vertices(part, corners)
+            vertices = _vertices(parts[j], corners)
             reach = trees[k].query(vertices)[0]
             if reach.max() <= limit:
                 continue
-            # The cells of the other pieces' centroids nearest the material reaching past the
-            # check (whatever their depth), and those of their centroids in the part's box
-            # farther than FOREIGN_DEPTH_FACTOR spacings from its own.
-            if everyone is None:
-                everyone = cKDTree(centroids)
+            # The cells of the other pieces' centroids nearest the corners reaching past.
             holding = np.unique(everyone.query(vertices[reach > limit])[1])
             holding = holding[(labels[holding] != k) & (labels[holding] >= 0)]
-            if not len(holding):
-                continue
-            low, high = vertices.min(axis=0) - spacing, vertices.max(axis=0) + spacing
-            near = np.nonzero(np.all((centroids >= low) & (centroids <= high), axis=1) & (labels != k)
-                              & (labels >= 0))[0]
-            near = near[trees[k].query(centroids[near])[0] > FOREIGN_DEPTH_FACTOR * spacing]
-            # Only the cells that can reach the part: of centroids inside it, or nearer its
-            # surface than their cell's farthest corner (within LOCAL_DIAGRAM_FACTOR / 2).
-            triangles = vertices[np.asarray(part.to_mesh64().tri_verts, dtype=np.int64)]
-            to_surface = cKDTree(vertices).query(centroids[near])[0]
-            close = to_surface < 0.5 * LOCAL_DIAGRAM_FACTOR * spacing
-            close[~close] = inside(centroids[near[~close]], triangles)
-            near, to_surface = near[close], to_surface[close]  # (the inside test again below: the few left)
-            # The diagram of the centroids about those only: a cell depends on its neighbours
-            # alone, which lie within twice its reach.
-            seeds = np.union1d(near, holding)
-            around = np.nonzero(np.all((centroids >= low - LOCAL_DIAGRAM_FACTOR * spacing)
-                                       & (centroids <= high + LOCAL_DIAGRAM_FACTOR * spacing), axis=1))[0]
-            around = np.union1d(around, seeds)
-            local = around[cKDTree(centroids[seeds]).query(centroids[around])[0] <= LOCAL_DIAGRAM_FACTOR * spacing]
-            cells = _voronoi_cells(centroids[local], spacing)
-            near_local = np.searchsorted(local, near)  # (local is sorted and holds every one of them)
-            touching = to_surface < cells.radius(near_local)
-            touching[~touching] = inside(centroids[near[~touching]], triangles)
-            # Only the cells joined (face to face) to those holding the material reaching past
-            # the check: islands of cells about the depth's edge stay with the part.
-            holding = np.searchsorted(local, holding)
-            near = cells.joined(np.union1d(near_local[touching], holding), holding)
-            foreign = cells.union(near) if len(near) else None
-            if foreign is None:
-                continue
-            # The rest, voted for again, and each other piece's share, its own by construction.
-            bits = [bit for bit in (part - foreign).decompose() if bit.volume() >= DUST_VOLUME_FACTOR * spacing**3]
-            votes = assign_parts(bits, model, labels, spacing, corners)
-            others = np.unique(labels[local[near]])
-            shares = [cells.union(near[labels[local[near]] == other]) for other in others]
-            if any(share is None for share in shares):  # (a degenerate diagram: the bits are voted for)
-                shares, others = [foreign], None
-            for index, share in enumerate(shares):
-                share = [bit for bit in (part ^ share).decompose() if bit.volume() >= DUST_VOLUME_FACTOR * spacing**3]
-                bits += share
-                votes += (assign_parts(share, model, labels, spacing, corners) if others is None
-                          else [int(others[index])] * len(share))
-            if len(bits) == 1 and votes[0] == k:
-                continue
-            for index, (bit, vote) in enumerate(zip(bits, votes)):
-                if index == 0:
-                    parts[j], owner[j] = bit, vote
-                else:
-                    parts.append(bit)
-                    owner.append(vote)
-                if index == 0 or vote != k:  # (the rest too: what it cut can leave new corners past)
-                    cut_off.append(j if index == 0 else len(parts) - 1)
-                if vote != k:
-                    received.add(vote)
+            if len(holding):
+                divide(j, holding, FOREIGN_DEPTH_FACTOR)
         if not cut_off:
             break
         fresh = cut_off
     return parts, owner, received
+
+
+def _divide_part(part, k, holding, depth, model, labels, spacing, corners, own_tree):
+    """Part ``part`` of piece ``k`` less the nearest-centroid cells of other pieces' centroids:
+    those ``holding`` (indices, whatever their depth; None: every cell that reaches the part)
+    and those joined face to face to them of centroids in the part's box farther than
+    ``depth`` spacings from k's (``own_tree``: their KD-tree). Returns (bits, votes): the rest
+    (its parts voted for again) then each other piece's share in its own cells, or None when
+    nothing changes."""
+    from scipy.spatial import cKDTree
+
+    from .piece_checks import inside
+    from .piece_surface import DUST_VOLUME_FACTOR
+
+    centroids = model.particle_position
+    vertices = _vertices(part, corners)
+    low, high = vertices.min(axis=0) - spacing, vertices.max(axis=0) + spacing
+    near = np.nonzero(np.all((centroids >= low) & (centroids <= high), axis=1) & (labels != k) & (labels >= 0))[0]
+    near = near[own_tree.query(centroids[near])[0] > depth * spacing]
+    # Only the cells that can reach the part: of centroids inside it, or nearer its surface
+    # than their cell's farthest corner (within LOCAL_DIAGRAM_FACTOR / 2).
+    triangles = vertices[np.asarray(part.to_mesh64().tri_verts, dtype=np.int64)]
+    to_surface = cKDTree(vertices).query(centroids[near])[0]
+    close = to_surface < 0.5 * LOCAL_DIAGRAM_FACTOR * spacing
+    close[~close] = inside(centroids[near[~close]], triangles)
+    near, to_surface = near[close], to_surface[close]  # (the inside test again below: the few left)
+    seeds = near if holding is None else np.union1d(near, holding)
+    if not len(seeds):
+        return None
+    # The diagram of the centroids about those only: a cell depends on its neighbours alone,
+    # which lie within twice its reach.
+    around = np.nonzero(np.all((centroids >= low - LOCAL_DIAGRAM_FACTOR * spacing)
+                               & (centroids <= high + LOCAL_DIAGRAM_FACTOR * spacing), axis=1))[0]
+    around = np.union1d(around, seeds)
+    local = around[cKDTree(centroids[seeds]).query(centroids[around])[0] <= LOCAL_DIAGRAM_FACTOR * spacing]
+    cells = _voronoi_cells(centroids[local], spacing)
+    near_local = np.searchsorted(local, near)  # (local is sorted and holds every one of them)
+    touching = to_surface < cells.radius(near_local)
+    touching[~touching] = inside(centroids[near[~touching]], triangles)
+    near = near_local[touching]
+    if holding is not None:
+        # Only the cells joined to those holding the corners reaching past: islands of cells
+        # about the depth's edge stay with the part.
+        holding = np.searchsorted(local, holding)
+        near = cells.joined(np.union1d(near, holding), holding)
+    foreign = cells.union(near) if len(near) else None
+    if foreign is None:
+        return None
+    bits = [bit for bit in (part - foreign).decompose() if bit.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+    votes = assign_parts(bits, model, labels, spacing, corners)
+    others = np.unique(labels[local[near]])
+    shares = [cells.union(near[labels[local[near]] == other]) for other in others]
+    if any(share is None for share in shares):  # (a degenerate diagram: the bits are voted for)
+        shares, others = [foreign], None
+    for index, share in enumerate(shares):
+        share = [bit for bit in (part ^ share).decompose() if bit.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+        bits += share
+        votes += (assign_parts(share, model, labels, spacing, corners) if others is None
+                  else [int(others[index])] * len(share))
+    if not bits or (len(bits) == 1 and votes[0] == k):
+        return None
+    return bits, votes
 
 
 def _gained(rendered: float, own: float, spacing: float) -> bool:
@@ -432,3 +453,29 @@ def _voronoi_cells(points: np.ndarray, spacing: float):
             return solid if solid.status() == m3.Error.NoError and not solid.is_empty() else None
 
     return Cells()
+
+
+def nearest_cells_share(solid: m3.Manifold, model, labels, k: int, among, spacing: float):
+    """The part of ``solid`` nearer piece ``k``'s tet centroids than those of any other piece
+    of ``among`` (labels, k's included) and than the other tets farther than
+    FOREIGN_DEPTH_FACTOR spacings from those pieces' (so it reaches at most about that far
+    into the others' material, which the caller takes away): the union of k's cells in the
+    Voronoi diagram of those centroids (HULL_FACE faces), or None where it is degenerate.
+    The surface of a piece the cut failed (``among``: those it failed)."""
+    from scipy.spatial import cKDTree
+
+    centroids = model.particle_position
+    failed = np.isin(labels, list(among))
+    if not np.any(labels == k):
+        return None
+    rest = np.nonzero(~failed)[0]
+    beyond = rest[cKDTree(centroids[failed]).query(centroids[rest])[0] > FOREIGN_DEPTH_FACTOR * spacing]
+    pool = np.union1d(np.nonzero(failed)[0], beyond)
+    mine = centroids[labels == k]
+    # (the diagram about k's centroids only: their cells depend on their neighbours alone)
+    pool = pool[cKDTree(mine).query(centroids[pool])[0] <= LOCAL_DIAGRAM_FACTOR * spacing]
+    region = _voronoi_cells(centroids[pool], spacing).union(np.searchsorted(pool, np.nonzero(labels == k)[0]))
+    if region is None:
+        return None
+    share = solid ^ region
+    return None if share.is_empty() else share

@@ -33,10 +33,12 @@ one shell by the render solid within a slab three times as thick over those cros
 part reaching far past its piece's tets (the artist's surface joins two pieces across a gap
 their tets leave open) is divided by the tets' nearest-centroid cells
 (``piece_parts.divide_joined_parts``). What the cut still cannot resolve falls back to the
-tets' boundary, exact in volume: a piece left with
-under half its tets' volume, one whose render solid reaches more than
-``piece_parts.OVERREACH_FACTOR`` spacings past its tets or holds well over their volume (it
-holds a neighbour's material), and the neighbour that lost it (``geometry/piece_parts.py``).
+solid nearest the piece's tets: a piece left with under half its tets' volume, one whose
+render solid reaches more than ``piece_parts.OVERREACH_FACTOR`` spacings past its tets or
+holds well over their volume (it holds a neighbour's material), and the neighbour that lost
+it (``geometry/piece_parts.py``) get the solid nearer their tet centroids than those of the
+other pieces so failed, less what the other pieces hold: the artist's surface outside, the
+other pieces' crack faces against them, faces between nearest-centroid cells between them.
 
 ``crack_roughness`` (FractureOptions) displaces the slabs' faces along the crack normal
 by smooth value noise, the same on both faces, so the two sides of a crack still fit.
@@ -51,8 +53,8 @@ import manifold3d as m3
 import numpy as np
 import trimesh
 
-from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_pieces, overfull_pieces,
-                          overreaching_pieces)
+from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_pieces, nearest_cells_share,
+                          overfull_pieces, overreaching_pieces)
 from .surface_attributes import input_corner_normals
 
 #: Slab thickness as a fraction of the particle spacing: the two pieces of a crack are this
@@ -405,8 +407,9 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
 
     Returns (pieces, stats): pieces a list of F RenderSolid or None (the caller then gives the
     piece its tets' boundary, exact in volume); stats a dict of counts (slabs, parts,
-    unassigned parts, pieces without a part, ``fallback_pieces``: pieces set to None because
-    the cut failed them, see ``failed_pieces``).
+    unassigned parts, pieces without a part, ``fallback_pieces``: pieces the cut failed, see
+    ``failed_pieces``, of which ``cell_pieces`` got the solid nearest their tets instead
+    (``piece_parts.nearest_cells_share``) and the rest None).
     """
     from ..fracture.crack_types import CrackPlane
 
@@ -436,7 +439,7 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
         slabs.append(_with_crack_index(slab, index))
         if isinstance(crack, CrackPlane):
             planes.append((surface, sites, inside_one, index))
-    stats = dict(slabs=len(slabs), parts=0, unassigned_parts=0, empty_pieces=0, welded_pieces=0)
+    stats = dict(slabs=len(slabs), parts=0, unassigned_parts=0, empty_pieces=0, welded_pieces=0, cell_pieces=0)
     if slabs:
         cut = m3.Manifold.batch_boolean([render.solid, *slabs], m3.OpType.Subtract)
     else:
@@ -467,7 +470,23 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     for k, origin in enumerate(np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)):
         mine = kept.get(k, [])
         if k in failed:
-            pieces.append(None)
+            # Its share of the solid nearest its own tets: the artist's surface outside, the
+            # faces between its tets' cells and its neighbours' inside.
+            share = nearest_cells_share(render.solid, model, labels, k, failed, spacing)
+            if share is not None:
+                # Less what the pieces the cut did not fail hold there: against them its
+                # faces are their crack faces.
+                share = m3.Manifold.batch_boolean([share, *_overlapping(share, [
+                    p for p, o in zip(parts, owner) if o >= 0 and o not in failed])], m3.OpType.Subtract)
+            shells = [] if share is None else _without_crumbs(_near_tets(
+                [shell for shell in share.decompose() if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3],
+                model.particle_position[labels == k], spacing), spacing)
+            if shells:
+                stats["cell_pieces"] += 1
+                solid = shells[0] if len(shells) == 1 else m3.Manifold.compose(shells)
+                pieces.append(RenderSolid(solid, tuple(new_cracks), spacing).moved(origin))
+            else:
+                pieces.append(None)
             continue
         if not mine:
             pieces.append(None)
@@ -484,6 +503,26 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
         pieces.append(RenderSolid(solid, tuple(new_cracks), spacing).moved(origin))
     stats["unassigned_parts"] = int(sum(1 for o in owner if o == -1))
     return pieces, stats
+
+
+def _near_tets(shells, centroids: np.ndarray, spacing: float) -> list:
+    """The ``shells`` with a vertex within OVERREACH_FACTOR spacings of one of ``centroids``
+    (N,3) [m] (a failed piece's cells reach over its neighbours' parts and can hold
+    material no piece kept beyond them)."""
+    from scipy.spatial import cKDTree
+
+    from .piece_parts import OVERREACH_FACTOR
+
+    tree = cKDTree(centroids)
+    return [shell for shell in shells
+            if tree.query(np.asarray(shell.to_mesh64().vert_properties)[:, :3])[0].min() <= OVERREACH_FACTOR * spacing]
+
+
+def _overlapping(solid: m3.Manifold, others) -> list:
+    """The solids of ``others`` whose bounding boxes meet ``solid``'s."""
+    box = np.asarray(solid.bounding_box())
+    return [other for other in others
+            if np.all(np.asarray(other.bounding_box())[:3] <= box[3:]) and np.all(np.asarray(other.bounding_box())[3:] >= box[:3])]
 
 
 def _without_crumbs(mine, spacing: float) -> list:
