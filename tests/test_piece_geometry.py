@@ -253,11 +253,11 @@ def test_a_piece_reaching_far_past_its_tets_gets_its_tets_boundary(box):
 def test_a_part_joining_two_pieces_is_divided_by_their_tets(box):
     """The whole box given to the piece of the tets at x < -0.05, as where the artist's
     surface joins two pieces across a gap their tets leave open: it reaches half a box past
-    them, so it is divided by the tets' owners. The other piece gets the material nearest its
-    tets farther than FOREIGN_DEPTH_FACTOR spacings from the first's: the box beyond a face
-    one to four spacings past x = -0.05 (the tets' cells are about a spacing across); the
-    two shares are closed, fill the box and reach no farther than the check allows."""
-    from taichi_frac.geometry.piece_parts import FOREIGN_DEPTH_FACTOR, divide_joined_parts, overreaching_pieces
+    them, so it is divided by the tets' owners. The part has no crack face, so the other
+    piece gets all the material nearer its tet centroids: the box beyond a face within a
+    cell (1.5 spacings) of x = -0.05; the two shares are closed, fill the box and reach no
+    farther than the check allows."""
+    from taichi_frac.geometry.piece_parts import divide_joined_parts, overreaching_pieces
 
     model, report, _ = box
     spacing = model.spacing
@@ -270,7 +270,7 @@ def test_a_part_joining_two_pieces_is_divided_by_their_tets(box):
     volume = [sum(part.volume() for part, o in zip(parts, owner) if o == k) for k in (0, 1)]
     assert sum(volume) == pytest.approx(np.prod(SIZE), rel=1e-9)
     face = -SIZE[0] / 2 + volume[0] / (SIZE[1] * SIZE[2])  # where piece 0's share ends, box frame
-    assert -0.05 + (FOREIGN_DEPTH_FACTOR - 1.5) * spacing < face < -0.05 + (FOREIGN_DEPTH_FACTOR + 1.5) * spacing
+    assert abs(face + 0.05) < 1.5 * spacing
     assert overreaching_pieces(parts, owner, model, label, spacing, {}) == set()
 
 

@@ -148,11 +148,12 @@ def failed_pieces(parts, owner, model, fragment_tets) -> set[int]:
 
 def carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing):
     """A piece no part went to (a few tets where cracks meet, smaller than the planes can
-    resolve) is carved out of the part holding its tets: the part's intersection with the
-    convex hull of its tets becomes the piece (owner -(k + 2)), the rest stays. Its faces
-    inside the part are then the hull's planes, not a crack's: counted in the stats. The hull
-    can cut the rest in two or more: the largest stays with its owner, the others are voted
-    for again (a chip beyond the hull belongs to the tets around it)."""
+    resolve) is carved out of the part holding its tets: the part's intersection with its
+    tets' nearest-centroid cells (``_own_cells``; where the diagram is degenerate, the convex
+    hull of its tets) becomes the piece (owner -(k + 2)), the rest stays. Its faces inside
+    the part are then the cells', not a crack's: counted in the stats. The carving can cut
+    the rest in two or more: the largest stays with its owner, the others are voted for again
+    (a chip beyond it belongs to the tets around it)."""
     from .piece_surface import DUST_VOLUME_FACTOR, HULL_FACE, _with_crack_index
 
     parts, owner = list(parts), list(owner)
@@ -163,8 +164,10 @@ def carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing):
         best = _part_holding(_probe_points(model, tets), parts)
         if best is None:
             continue
-        hull = _with_crack_index(
-            m3.Manifold.hull_points(np.ascontiguousarray(model.vertices[model.tets[tets]].reshape(-1, 3))), HULL_FACE)
+        hull = _own_cells(model, labels, k, spacing, np.arange(len(labels)))
+        if hull is None:  # (a degenerate diagram)
+            hull = _with_crack_index(m3.Manifold.hull_points(
+                np.ascontiguousarray(model.vertices[model.tets[tets]].reshape(-1, 3))), HULL_FACE)
         carved = parts[best] ^ hull
         if carved.is_empty():
             continue
@@ -173,8 +176,9 @@ def carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing):
         parts[best] = rest[0] if rest else m3.Manifold()  # (the bulk stays its owner's)
         parts += rest[1:]
         owner += assign_parts(rest[1:], model, labels, spacing)
-        parts.append(carved)
-        owner.append(-(k + 2))
+        bits = [bit for bit in carved.decompose() if bit.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+        parts += bits
+        owner += [-(k + 2)] * len(bits)
     keep = [j for j, part in enumerate(parts) if not part.is_empty()]
     return [parts[j] for j in keep], [owner[j] for j in keep]
 
@@ -224,9 +228,13 @@ def _tets_inside(model, low, high, triangles) -> np.ndarray:
 
 #: Where a piece's part reaches past OVERREACH_FACTOR spacings from its tets, the part is
 #: divided by the tets' owners: the cells (nearest-centroid regions) of the other pieces'
-#: tets farther than this [particle spacings] from its own go to those pieces. Nearer ones
-#: are left: along a crack the flat face crosses the tets' staircase by up to a tet.
-FOREIGN_DEPTH_FACTOR = 2.5
+#: tets go to those pieces, except those within this [particle spacings] of its own tets and
+#: of one of its crack faces (the flat face crosses the tets' staircase there).
+FOREIGN_DEPTH_FACTOR = 1.0
+#: How far [particle spacings] the solid given to a piece the cut failed reaches into the
+#: other pieces' cells (what those pieces hold is then taken away: their crack faces bound it;
+#: what they do not hold there, between their crack faces and its cells, is its).
+SHARE_REACH_FACTOR = 2.5
 #: How far [particle spacings] about the centroids whose cells may go to another piece the
 #: Voronoi diagram that divides a part reads the centroids (a cell depends only on its
 #: neighbours, within twice its reach); half of it bounds how far from the part such a
@@ -308,13 +316,26 @@ def _divide_part(part, k, holding, depth, model, labels, spacing, corners, own_t
     from scipy.spatial import cKDTree
 
     from .piece_checks import inside
-    from .piece_surface import DUST_VOLUME_FACTOR
+    from .piece_surface import _CRACK, DUST_VOLUME_FACTOR
 
     centroids = model.particle_position
     vertices = _vertices(part, corners)
     low, high = vertices.min(axis=0) - spacing, vertices.max(axis=0) + spacing
     near = np.nonzero(np.all((centroids >= low) & (centroids <= high), axis=1) & (labels != k) & (labels >= 0))[0]
-    near = near[own_tree.query(centroids[near])[0] > depth * spacing]
+    # A centroid within ``depth`` of k's is left where it is that near one of the part's crack
+    # faces (the flat face crosses the tets' staircase there), taken elsewhere (no crack
+    # between the two pieces' tets there: their cells' faces are the boundary).
+    shallow = np.nonzero(own_tree.query(centroids[near])[0] <= depth * spacing)[0]
+    mesh = part.to_mesh64()
+    props = np.asarray(mesh.vert_properties)
+    tri_verts = np.asarray(mesh.tri_verts, dtype=np.int64)
+    crack_faces = tri_verts[(props[tri_verts, _CRACK] >= 0).all(axis=1)]
+    if len(shallow) and len(crack_faces):
+        import trimesh
+
+        faces = trimesh.Trimesh(props[:, :3], crack_faces, process=False)
+        by_crack = trimesh.proximity.closest_point(faces, centroids[near[shallow]])[1] <= depth * spacing
+        near = np.delete(near, shallow[by_crack])
     # Only the cells that can reach the part: of centroids inside it, or nearer its surface
     # than their cell's farthest corner (within LOCAL_DIAGRAM_FACTOR / 2).
     triangles = vertices[np.asarray(part.to_mesh64().tri_verts, dtype=np.int64)]
@@ -458,7 +479,7 @@ def _voronoi_cells(points: np.ndarray, spacing: float):
 def nearest_cells_share(solid: m3.Manifold, model, labels, k: int, among, spacing: float):
     """The part of ``solid`` nearer piece ``k``'s tet centroids than those of any other piece
     of ``among`` (labels, k's included) and than the other tets farther than
-    FOREIGN_DEPTH_FACTOR spacings from those pieces' (so it reaches at most about that far
+    SHARE_REACH_FACTOR spacings from those pieces' (so it reaches at most about that far
     into the others' material, which the caller takes away): the union of k's cells in the
     Voronoi diagram of those centroids (HULL_FACE faces), or None where it is degenerate.
     The surface of a piece the cut failed (``among``: those it failed)."""
@@ -466,16 +487,25 @@ def nearest_cells_share(solid: m3.Manifold, model, labels, k: int, among, spacin
 
     centroids = model.particle_position
     failed = np.isin(labels, list(among))
-    if not np.any(labels == k):
-        return None
     rest = np.nonzero(~failed)[0]
-    beyond = rest[cKDTree(centroids[failed]).query(centroids[rest])[0] > FOREIGN_DEPTH_FACTOR * spacing]
-    pool = np.union1d(np.nonzero(failed)[0], beyond)
-    mine = centroids[labels == k]
-    # (the diagram about k's centroids only: their cells depend on their neighbours alone)
-    pool = pool[cKDTree(mine).query(centroids[pool])[0] <= LOCAL_DIAGRAM_FACTOR * spacing]
-    region = _voronoi_cells(centroids[pool], spacing).union(np.searchsorted(pool, np.nonzero(labels == k)[0]))
+    beyond = rest[cKDTree(centroids[failed]).query(centroids[rest])[0] > SHARE_REACH_FACTOR * spacing]
+    region = _own_cells(model, labels, k, spacing, np.union1d(np.nonzero(failed)[0], beyond))
     if region is None:
         return None
     share = solid ^ region
     return None if share.is_empty() else share
+
+
+def _own_cells(model, labels, k: int, spacing: float, pool: np.ndarray):
+    """The union of piece ``k``'s tet centroids' cells in the Voronoi diagram of the centroids
+    ``pool`` (indices, sorted, k's among them) about them (HULL_FACE faces), or None where it
+    is degenerate or k has no tets."""
+    from scipy.spatial import cKDTree
+
+    centroids = model.particle_position
+    mine = np.nonzero(labels == k)[0]
+    if not len(mine):
+        return None
+    # (the diagram about k's centroids only: their cells depend on their neighbours alone)
+    pool = pool[cKDTree(centroids[mine]).query(centroids[pool])[0] <= LOCAL_DIAGRAM_FACTOR * spacing]
+    return _voronoi_cells(centroids[pool], spacing).union(np.searchsorted(pool, mine))

@@ -453,7 +453,7 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     stats["pieces_given_divided_parts"] = len(received)
     parts, owner = carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing)
     stats["parts"] = len(parts)
-    stats["carved_pieces"] = int(sum(1 for o in owner if o < -1))
+    stats["carved_pieces"] = len({o for o in owner if o < -1})
     owner = [-(o + 2) if o < -1 else o for o in owner]
     failed = failed_pieces(parts, owner, model, fragment_tets)
     failed |= overreaching_pieces(parts, owner, model, labels, spacing, corners)
