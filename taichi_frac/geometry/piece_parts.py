@@ -315,7 +315,6 @@ def _divide_part(part, k, holding, depth, model, labels, spacing, corners, own_t
     nothing changes."""
     from scipy.spatial import cKDTree
 
-    from .piece_checks import inside
     from .piece_surface import _CRACK, DUST_VOLUME_FACTOR
 
     centroids = model.particle_position
@@ -338,11 +337,10 @@ def _divide_part(part, k, holding, depth, model, labels, spacing, corners, own_t
         near = np.delete(near, shallow[by_crack])
     # Only the cells that can reach the part: of centroids inside it, or nearer its surface
     # than their cell's farthest corner (within LOCAL_DIAGRAM_FACTOR / 2).
-    triangles = vertices[np.asarray(part.to_mesh64().tri_verts, dtype=np.int64)]
     to_surface = cKDTree(vertices).query(centroids[near])[0]
     close = to_surface < 0.5 * LOCAL_DIAGRAM_FACTOR * spacing
-    close[~close] = inside(centroids[near[~close]], triangles)
-    near, to_surface = near[close], to_surface[close]  # (the inside test again below: the few left)
+    close[~close] = _inside_solid(centroids[near[~close]], part, 0.1 * spacing)
+    near, to_surface = near[close], to_surface[close]
     seeds = near if holding is None else np.union1d(near, holding)
     if not len(seeds):
         return None
@@ -355,7 +353,7 @@ def _divide_part(part, k, holding, depth, model, labels, spacing, corners, own_t
     cells = _voronoi_cells(centroids[local], spacing)
     near_local = np.searchsorted(local, near)  # (local is sorted and holds every one of them)
     touching = to_surface < cells.radius(near_local)
-    touching[~touching] = inside(centroids[near[~touching]], triangles)
+    touching[~touching] = _inside_solid(centroids[near[~touching]], part, 0.1 * spacing)
     near = near_local[touching]
     if holding is not None:
         # Only the cells joined to those holding the corners reaching past: islands of cells
@@ -379,6 +377,24 @@ def _divide_part(part, k, holding, depth, model, labels, spacing, corners, own_t
     if not bits or (len(bits) == 1 and votes[0] == k):
         return None
     return bits, votes
+
+
+def _inside_solid(points: np.ndarray, solid: m3.Manifold, size: float) -> np.ndarray:
+    """(N,) bool: ``points`` (N,3) [m], each farther than ``size`` [m] from the surface of the
+    closed ``solid``, inside it: a tetrahedron ``size`` across about each point, all cut by
+    the solid in one boolean (the winding number's cost grows with points times faces)."""
+    from scipy.spatial import cKDTree
+
+    result = np.zeros(len(points), dtype=bool)
+    if not len(points):
+        return result
+    tetrahedron = m3.Manifold.tetrahedron().scale((0.5 * size,) * 3)
+    probes = m3.Manifold.compose([tetrahedron.translate(tuple(point)) for point in points])
+    kept = (solid ^ probes).decompose()
+    if kept:
+        centres = np.array([np.asarray(bit.bounding_box()).reshape(2, 3).mean(axis=0) for bit in kept])
+        result[cKDTree(points).query(centres)[1]] = True
+    return result
 
 
 def _gained(rendered: float, own: float, spacing: float) -> bool:

@@ -84,6 +84,10 @@ DUST_VOLUME_FACTOR = 1e-2
 #: A piece's parts smaller than this [particle spacings cubed] beside a larger one are
 #: dropped: crumbs where cracks meet, under a mean tet's volume.
 CRUMB_VOLUME_FACTOR = 1.0
+#: So are those under this share of its largest part: chips where cracks or the faces of a
+#: divided part's cells cross the surface, which would travel beside the piece as separate
+#: shells (they hold under this share of its volume each).
+CRUMB_VOLUME_SHARE = 0.01
 
 #: Largest gap [particle spacings] between a ring crack's sphere and its polygon.
 SPHERE_SAGITTA_FACTOR = 0.02
@@ -526,11 +530,13 @@ def _overlapping(solid: m3.Manifold, others) -> list:
 
 
 def _without_crumbs(mine, spacing: float) -> list:
-    """A piece's parts less those under CRUMB_VOLUME_FACTOR spacings cubed beside a larger one:
-    wedges where two cracks' slabs cross near the surface, each a separate shell that would
-    travel with the piece, and smaller than a tet."""
+    """A piece's parts less those under CRUMB_VOLUME_FACTOR spacings cubed or CRUMB_VOLUME_SHARE
+    of the largest beside it: wedges where two cracks' slabs cross near the surface, chips
+    where a divided part's cell faces do, each a separate shell that would travel with the
+    piece."""
     largest = max((part.volume() for part in mine), default=0.0)
-    return [part for part in mine if part.volume() >= CRUMB_VOLUME_FACTOR * spacing**3 or part.volume() == largest]
+    least = max(CRUMB_VOLUME_FACTOR * spacing**3, CRUMB_VOLUME_SHARE * largest)
+    return [part for part in mine if part.volume() >= least or part.volume() == largest]
 
 
 def _weld_bits(solid: m3.Manifold, planes, spheres, split_up: set, spacing: float, roughness: float,
