@@ -492,6 +492,29 @@ def _voronoi_cells(points: np.ndarray, spacing: float):
     return Cells()
 
 
+def failed_piece_shells(solid: m3.Manifold, model, labels, k: int, failed, parts, owner, spacing: float) -> list:
+    """The shells of the render ``solid`` (the body's, uncut) that piece ``k``, one the cut
+    ``failed``, gets: its share nearest its tets (``nearest_cells_share``) less the ``parts``
+    of the pieces the cut did not fail (``owner``: each part's piece), so that against them
+    its faces are their crack faces; shells under the dust volume, and those with no vertex
+    within OVERREACH_FACTOR spacings of its tets (material no piece kept beyond its
+    neighbours' parts), left out. Empty where the diagram is degenerate."""
+    from scipy.spatial import cKDTree
+
+    from .piece_surface import DUST_VOLUME_FACTOR
+
+    share = nearest_cells_share(solid, model, labels, k, failed, spacing)
+    if share is None:
+        return []
+    box = np.asarray(share.bounding_box())
+    kept = [p for p, o in zip(parts, owner) if o >= 0 and o not in failed
+            and np.all(np.asarray(p.bounding_box())[:3] <= box[3:]) and np.all(np.asarray(p.bounding_box())[3:] >= box[:3])]
+    share = m3.Manifold.batch_boolean([share, *kept], m3.OpType.Subtract)
+    tree = cKDTree(model.particle_position[labels == k])
+    return [shell for shell in share.decompose() if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3
+            and tree.query(_vertices(shell, {}))[0].min() <= OVERREACH_FACTOR * spacing]
+
+
 def nearest_cells_share(solid: m3.Manifold, model, labels, k: int, among, spacing: float):
     """The part of ``solid`` nearer piece ``k``'s tet centroids than those of any other piece
     of ``among`` (labels, k's included) and than the other tets farther than

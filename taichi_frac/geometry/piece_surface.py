@@ -53,7 +53,7 @@ import manifold3d as m3
 import numpy as np
 import trimesh
 
-from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_pieces, nearest_cells_share,
+from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
                           overfull_pieces, overreaching_pieces)
 from .surface_attributes import input_corner_normals
 
@@ -413,7 +413,7 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     piece its tets' boundary, exact in volume); stats a dict of counts (slabs, parts,
     unassigned parts, pieces without a part, ``fallback_pieces``: pieces the cut failed, see
     ``failed_pieces``, of which ``cell_pieces`` got the solid nearest their tets instead
-    (``piece_parts.nearest_cells_share``) and the rest None).
+    (``piece_parts.failed_piece_shells``) and the rest None).
     """
     from ..fracture.crack_types import CrackPlane
 
@@ -474,17 +474,9 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     for k, origin in enumerate(np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)):
         mine = kept.get(k, [])
         if k in failed:
-            # Its share of the solid nearest its own tets: the artist's surface outside, the
-            # faces between its tets' cells and its neighbours' inside.
-            share = nearest_cells_share(render.solid, model, labels, k, failed, spacing)
-            if share is not None:
-                # Less what the pieces the cut did not fail hold there: against them its
-                # faces are their crack faces.
-                share = m3.Manifold.batch_boolean([share, *_overlapping(share, [
-                    p for p, o in zip(parts, owner) if o >= 0 and o not in failed])], m3.OpType.Subtract)
-            shells = [] if share is None else _without_crumbs(_near_tets(
-                [shell for shell in share.decompose() if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3],
-                model.particle_position[labels == k], spacing), spacing)
+            # Its share of the solid nearest its own tets (see failed_piece_shells).
+            shells = _without_crumbs(failed_piece_shells(render.solid, model, labels, k, failed, parts, owner,
+                                                         spacing), spacing)
             if shells:
                 stats["cell_pieces"] += 1
                 solid = shells[0] if len(shells) == 1 else m3.Manifold.compose(shells)
@@ -507,26 +499,6 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
         pieces.append(RenderSolid(solid, tuple(new_cracks), spacing).moved(origin))
     stats["unassigned_parts"] = int(sum(1 for o in owner if o == -1))
     return pieces, stats
-
-
-def _near_tets(shells, centroids: np.ndarray, spacing: float) -> list:
-    """The ``shells`` with a vertex within OVERREACH_FACTOR spacings of one of ``centroids``
-    (N,3) [m] (a failed piece's cells reach over its neighbours' parts and can hold
-    material no piece kept beyond them)."""
-    from scipy.spatial import cKDTree
-
-    from .piece_parts import OVERREACH_FACTOR
-
-    tree = cKDTree(centroids)
-    return [shell for shell in shells
-            if tree.query(np.asarray(shell.to_mesh64().vert_properties)[:, :3])[0].min() <= OVERREACH_FACTOR * spacing]
-
-
-def _overlapping(solid: m3.Manifold, others) -> list:
-    """The solids of ``others`` whose bounding boxes meet ``solid``'s."""
-    box = np.asarray(solid.bounding_box())
-    return [other for other in others
-            if np.all(np.asarray(other.bounding_box())[:3] <= box[3:]) and np.all(np.asarray(other.bounding_box())[3:] >= box[:3])]
 
 
 def _without_crumbs(mine, spacing: float) -> list:
