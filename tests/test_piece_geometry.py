@@ -66,6 +66,33 @@ def test_edge_counts_and_inside_catch_broken_meshes():
     np.testing.assert_array_equal(inside(points, cube.triangles), [True, True, False, False])
 
 
+def test_voronoi_cells_union_is_the_region_nearest_those_points():
+    """The union of some points' Voronoi cells, built from the diagram's ridges as one mesh,
+    is a closed manifold holding exactly the space nearer those points than the others:
+    against a nearest-neighbour count of 20,000 random samples in a box (three standard
+    errors), and the probes' inside test against the winding number on the same samples."""
+    import manifold3d as m3
+    from scipy.spatial import cKDTree
+
+    from taichi_frac.geometry.piece_parts import _inside_solid, _voronoi_cells
+
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-1.0, 1.0, size=(400, 3))
+    chosen = np.nonzero(np.linalg.norm(points - [0.3, 0.0, 0.0], axis=1) < 0.6)[0]
+    union = _voronoi_cells(points, 0.2).union(chosen)
+    assert union is not None and union.status() == m3.Error.NoError and union.genus() >= 0
+    box = m3.Manifold.cube((1.6, 1.6, 1.6), center=True)
+    samples = rng.uniform(-0.8, 0.8, size=(20000, 3))
+    nearest_chosen = np.isin(cKDTree(points).query(samples)[1], chosen)
+    share = float(nearest_chosen.mean())
+    error = 3.0 * np.sqrt(share * (1 - share) / len(samples))
+    assert (union ^ box).volume() / 1.6**3 == pytest.approx(share, abs=error)
+    mesh = (union ^ box).to_mesh64()
+    triangles = np.asarray(mesh.vert_properties)[:, :3][np.asarray(mesh.tri_verts, dtype=np.int64)]
+    probe = samples[:300]
+    np.testing.assert_array_equal(_inside_solid(probe, union ^ box, 1e-4), inside(probe, triangles))
+
+
 def test_face_with_corners_of_two_origins_gets_the_crack_it_lies_on():
     """Hand-made faces whose corners carry different crack indices (as exact booleans leave
     them where a cut meets a face): a face on crack 0's plane gets 0, one on crack 1's plane
@@ -162,13 +189,17 @@ def test_finite_crack_and_ring_crack_make_closed_pieces_and_cut_again(box):
     assert sum(volumes) == pytest.approx(parent_volume, rel=1e-3)
 
 
-def test_a_piece_the_cut_fails_gets_its_tets_boundary(box):
+def test_a_piece_the_cut_fails_gets_the_surface_nearest_its_tets(box):
     """Where the slabs leave a gap in the wall between two pieces, the part on both sides
     goes to one of them and the other keeps only a chip (here a bead of the artist's surface
-    beside it, a separate shell): both get their tets' boundary instead, exact in volume,
-    and the piece the cut did not fail keeps its render solid. Three pieces of the box:
-    A (x < 0), B (0 < x < 0.04), C (x > 0.04); the wall between A and B gets no slab."""
-    from taichi_frac.io.fragment_mesh import fragment_surface
+    beside it, a separate shell): both are failed, and each gets instead the render solid
+    nearer its own tet centroids than any other piece's, less what the piece the cut did not
+    fail holds. Three pieces of the box: A (x < 0), B (0 < x < 0.04), C (x > 0.04); the wall
+    between A and B gets no slab. Closed form: A and B together fill the box up to C's crack
+    face (x = 0.04 and half a slab; the bead is a crumb), C keeps its cut; A's and B's shares each lie within a
+    cell (a spacing) of their tets' volume across the box's section; their faces between
+    each other lie on no crack (HULL_FACE), those against C on C's crack face."""
+    from taichi_frac.geometry.piece_surface import HULL_FACE
 
     model, report, _ = box
     spacing = model.spacing
@@ -187,20 +218,23 @@ def test_a_piece_the_cut_fails_gets_its_tets_boundary(box):
     leaky = [dataclasses.replace(walls[0], extent=1e-9), walls[1]]  # cuts no bond: no slab
     renders, counts = cut_render_solid(render, model, split.fragment_tets, leaky,
                                        [p.model.com_in_source for p in pieces])
-    order = np.argsort([p.model.com_in_source[0] for p in pieces])  # A, B, C
-    for piece, solid in zip(pieces, renders):
-        if solid is None:  # what the cache then writes (io/recorder.py)
-            vertices, faces, _ = fragment_surface(piece.model, model)
-        else:
-            mesh = piece_mesh(solid)
-            _assert_closed(mesh)
-            vertices, faces = mesh.vertices, mesh.faces
-        assert signed_volume(vertices, faces) == pytest.approx(piece.model.volume, rel=0.02)
-    assert counts["fallback_pieces"] == 2
-    assert renders[order[0]] is None and renders[order[1]] is None and renders[order[2]] is not None
-    # C is the box beyond x = 0.04 less half a slab.
-    mesh = piece_mesh(renders[order[2]])
-    assert signed_volume(mesh.vertices, mesh.faces) == pytest.approx(np.prod(SIZE) * 0.06 / SIZE[0], rel=1e-3)
+    assert counts["fallback_pieces"] == 2 and counts["cell_pieces"] == 2
+    a, b, c = (pieces[i] for i in np.argsort([p.model.com_in_source[0] for p in pieces]))
+    mesh = {id(p): piece_mesh(r) for p, r in zip(pieces, renders)}
+    volume = {}
+    for piece in (a, b, c):
+        _assert_closed(mesh[id(piece)])
+        volume[id(piece)] = signed_volume(mesh[id(piece)].vertices, mesh[id(piece)].faces)
+    section = SIZE[1] * SIZE[2]
+    half_slab = 1e-4 * spacing
+    assert volume[id(c)] == pytest.approx((SIZE[0] / 2 - 0.04 - half_slab) * section, rel=1e-6)
+    # (the bead, a separate shell under a tet's volume, is dropped as a crumb)
+    assert volume[id(a)] + volume[id(b)] == pytest.approx((SIZE[0] / 2 + 0.04 + half_slab) * section, rel=1e-6)
+    for piece in (a, b):
+        assert abs(volume[id(piece)] - piece.model.volume) < spacing * section
+        faces = mesh[id(piece)]
+        assert (faces.face_crack == HULL_FACE).any()
+    assert (mesh[id(b)].face_crack >= 0).any()  # its face against C is C's crack face
 
 
 def test_a_crack_through_a_merged_piece_leaves_it_one_shell(box):
@@ -241,6 +275,30 @@ def test_a_piece_reaching_far_past_its_tets_gets_its_tets_boundary(box):
     plane = -0.05 - model.com_in_source[0]
     halves = [render.solid.trim_by_plane((-1.0, 0.0, 0.0), -plane), render.solid.trim_by_plane((1.0, 0.0, 0.0), plane)]
     assert overreaching_pieces(halves, [0, 1], model, label, model.spacing, {}) == set()
+
+
+def test_a_part_joining_two_pieces_is_divided_by_their_tets(box):
+    """The whole box given to the piece of the tets at x < -0.05, as where the artist's
+    surface joins two pieces across a gap their tets leave open: it reaches half a box past
+    them, so it is divided by the tets' owners. The part has no crack face, so the other
+    piece gets all the material nearer its tet centroids: the box beyond a face within a
+    cell (1.5 spacings) of x = -0.05; the two shares are closed, fill the box and reach no
+    farther than the check allows."""
+    from taichi_frac.geometry.piece_parts import divide_joined_parts, overreaching_pieces
+
+    model, report, _ = box
+    spacing = model.spacing
+    render = render_solid_from_surface(report.surface, model.com_in_source, spacing)
+    x = model.particle_position + model.com_in_source
+    label = (x[:, 0] >= -0.05).astype(np.int64)
+    parts, owner, received = divide_joined_parts([render.solid], [0], model, label, spacing, {})
+    assert received == {1} and sorted(set(owner)) == [0, 1]
+    assert all(part.status() == part.status().NoError and part.genus() == 0 for part in parts)
+    volume = [sum(part.volume() for part, o in zip(parts, owner) if o == k) for k in (0, 1)]
+    assert sum(volume) == pytest.approx(np.prod(SIZE), rel=1e-9)
+    face = -SIZE[0] / 2 + volume[0] / (SIZE[1] * SIZE[2])  # where piece 0's share ends, box frame
+    assert abs(face + 0.05) < 1.5 * spacing
+    assert overreaching_pieces(parts, owner, model, label, spacing, {}) == set()
 
 
 def test_a_piece_holding_more_than_its_tets_gets_its_tets_boundary(box):
@@ -337,12 +395,12 @@ def _struck(model, report, material, options, point, direction, force_scale=400.
     return pieces, renders, counts
 
 
-def _check_struck(pieces, renders, counts, mean_volume_error=0.02, fallback_share=0.1):
+def _check_struck(pieces, renders, counts, mean_volume_error=0.02, fallback_share=0.1, large_volume_error=0.03):
     """At most ``fallback_share`` of the pieces (and at least one) fall back to their tets'
     boundary; every other piece
     closed, manifold, outward; crack faces on their cracks (a ring crack's
     sphere polygon within its sagitta bound); volumes: the pieces of 300 tets or more within
-    3 % of their tets', all pieces' errors (volume-weighted mean) within
+    ``large_volume_error`` of their tets', all pieces' errors (volume-weighted mean) within
     ``mean_volume_error``."""
     assert len(pieces) >= 2, "the impact must break the body"
     assert counts["empty_pieces"] == 0
@@ -355,7 +413,7 @@ def _check_struck(pieces, renders, counts, mean_volume_error=0.02, fallback_shar
         assert quality["watertight"] and quality["outward"], quality
         assert quality["crack_rms_spacings"] < 0.02, quality
         if piece.model.tet_count >= 300:
-            assert abs(quality["volume_error"]) < 0.03, quality
+            assert abs(quality["volume_error"]) < large_volume_error, quality
         errors.append(abs(quality["volume_error"]))
         volumes.append(piece.model.volume)
     assert np.average(errors, weights=volumes) < mean_volume_error
@@ -416,9 +474,12 @@ NO_SPOT = pytest.mark.skipif(not (SHARED_MESHES / "spot.obj").exists(), reason="
 def test_shared_mesh_breaks_into_closed_pieces():
     """Every piece the cut gives a surface is closed, manifold, outward, on its cracks and
     near its tets' volume (a piece the cut fails keeps its tets' boundary, which is all of
-    that by construction); outer corners keep the input's UVs."""
+    that by construction); outer corners keep the input's UVs. The cow's tets fill a
+    simplified copy of its surface and grade from about one spacing at the surface to three
+    or four inside: the full surface's share nearest the largest piece's tets is 7 % under
+    their volume, so its volume is held to 5 %, the mean to 6 %."""
     report, pieces, renders, counts = _spot_struck()
-    _check_struck(pieces, renders, counts, fallback_share=1.0)
+    _check_struck(pieces, renders, counts, fallback_share=1.0, large_volume_error=0.05, mean_volume_error=0.06)
     # Outer UVs are the input's (where the loader kept them): every outer corner's UV lies
     # in the input's UV range.
     uv = getattr(report.surface.visual, "uv", None)
@@ -434,9 +495,6 @@ def test_shared_mesh_breaks_into_closed_pieces():
 
 
 @NO_SPOT
-@pytest.mark.xfail(strict=True, reason="where the full-resolution surface joins two pieces across a gap their "
-                   "tets leave open (a thin part meshed apart), the joined part reaches past either piece's "
-                   "tets and both keep their tets' boundary: 9 of this impact's 11 pieces")
 def test_shared_mesh_pieces_get_cut_surfaces():
     report, pieces, renders, counts = _spot_struck()
     assert counts["fallback_pieces"] <= max(1, len(pieces) // 10)

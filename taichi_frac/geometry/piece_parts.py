@@ -1,5 +1,6 @@
 """Which piece each part of a cut render solid goes to (geometry/piece_surface.py cuts it):
-a vote of its faces for the nearest tets' piece, carving a piece no part went to out of the
+a vote of its faces for the nearest tets' piece, dividing a part that holds two pieces'
+material by their tets' nearest-centroid cells, carving a piece no part went to out of the
 part holding its tets, and the checks that send a piece the cut failed back to its tets'
 boundary. Plain numpy and scipy on the parts' meshes; ``manifold3d`` for their volumes.
 """
@@ -63,10 +64,12 @@ def _probe_points(model, tets: np.ndarray) -> np.ndarray:
 
 def overreaching_pieces(parts, owner, model, labels, spacing, corners) -> set[int]:
     """Pieces whose parts have a vertex farther than OVERREACH_FACTOR spacings from their own
-    nearest tet centroid, and those of the pieces owning the tets nearest those vertices (the
-    material it took) whose tets' volume is less than 1 / SWALLOWED_VOLUME_SHARE times the
-    volume the first rendered beyond its own tets' (else its loss is too small to see).
-    ``corners``: id(part) -> (part, its vertices), where known."""
+    nearest tet centroid and nearer another piece's (a vertex that far from every tet, where
+    the surface has detail the tets leave out, is its nearest piece's), and those of the
+    pieces owning the tets nearest those vertices (the material it took) whose tets' volume
+    is less than 1 / SWALLOWED_VOLUME_SHARE times the volume the first rendered beyond its
+    own tets' (else its loss is too small to see). ``corners``: id(part) -> (part, its
+    vertices), where known."""
     from scipy.spatial import cKDTree
 
     limit = OVERREACH_FACTOR * spacing
@@ -76,16 +79,17 @@ def overreaching_pieces(parts, owner, model, labels, spacing, corners) -> set[in
         mine = np.nonzero(labels == k)[0]
         if not len(mine):
             continue
-        vertices = np.concatenate([corners[id(p)][1] if corners.get(id(p), (None,))[0] is p else
-                                   np.asarray(p.to_mesh64().vert_properties)[:, :3]
-                                   for p, o in zip(parts, owner) if o == k])
+        vertices = np.concatenate([_vertices(p, corners) for p, o in zip(parts, owner) if o == k])
         far = vertices[cKDTree(model.particle_position[mine]).query(vertices)[0] > limit]
         if not len(far):
             continue
         everyone = cKDTree(model.particle_position) if everyone is None else everyone
+        nearest = labels[everyone.query(far)[1]]
+        if np.all(nearest == k):
+            continue
         failed.add(k)
         excess = sum(p.volume() for p, o in zip(parts, owner) if o == k) - float(model.tet_volume[mine].sum())
-        for victim in np.unique(labels[everyone.query(far)[1]]):
+        for victim in np.unique(nearest):
             if victim >= 0 and excess > SWALLOWED_VOLUME_SHARE * float(model.tet_volume[labels == victim].sum()):
                 failed.add(int(victim))
     return failed
@@ -100,7 +104,7 @@ def overfull_pieces(parts, owner, model, labels, spacing) -> set[int]:
         mine = [part for part, o in zip(parts, owner) if o == k]
         own = float(model.tet_volume[labels == k].sum())
         excess = sum(part.volume() for part in mine) - own
-        if excess <= GAINED_VOLUME_SHARE * own or excess <= GAINED_VOLUME_FACTOR * spacing**3:
+        if not _gained(own + excess, own, spacing):
             continue
         failed.add(k)
         for part in mine:
@@ -144,11 +148,12 @@ def failed_pieces(parts, owner, model, fragment_tets) -> set[int]:
 
 def carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing):
     """A piece no part went to (a few tets where cracks meet, smaller than the planes can
-    resolve) is carved out of the part holding its tets: the part's intersection with the
-    convex hull of its tets becomes the piece (owner -(k + 2)), the rest stays. Its faces
-    inside the part are then the hull's planes, not a crack's: counted in the stats. The hull
-    can cut the rest in two or more: the largest stays with its owner, the others are voted
-    for again (a chip beyond the hull belongs to the tets around it)."""
+    resolve) is carved out of the part holding its tets: the part's intersection with its
+    tets' nearest-centroid cells (``_own_cells``; where the diagram is degenerate, the convex
+    hull of its tets) becomes the piece (owner -(k + 2)), the rest stays. Its faces inside
+    the part are then the cells', not a crack's: counted in the stats. The carving can cut
+    the rest in two or more: the largest stays with its owner, the others are voted for again
+    (a chip beyond it belongs to the tets around it)."""
     from .piece_surface import DUST_VOLUME_FACTOR, HULL_FACE, _with_crack_index
 
     parts, owner = list(parts), list(owner)
@@ -159,8 +164,10 @@ def carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing):
         best = _part_holding(_probe_points(model, tets), parts)
         if best is None:
             continue
-        hull = _with_crack_index(
-            m3.Manifold.hull_points(np.ascontiguousarray(model.vertices[model.tets[tets]].reshape(-1, 3))), HULL_FACE)
+        hull = _own_cells(model, labels, k, spacing, np.arange(len(labels)))
+        if hull is None:  # (a degenerate diagram)
+            hull = _with_crack_index(m3.Manifold.hull_points(
+                np.ascontiguousarray(model.vertices[model.tets[tets]].reshape(-1, 3))), HULL_FACE)
         carved = parts[best] ^ hull
         if carved.is_empty():
             continue
@@ -169,8 +176,9 @@ def carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing):
         parts[best] = rest[0] if rest else m3.Manifold()  # (the bulk stays its owner's)
         parts += rest[1:]
         owner += assign_parts(rest[1:], model, labels, spacing)
-        parts.append(carved)
-        owner.append(-(k + 2))
+        bits = [bit for bit in carved.decompose() if bit.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+        parts += bits
+        owner += [-(k + 2)] * len(bits)
     keep = [j for j, part in enumerate(parts) if not part.is_empty()]
     return [parts[j] for j in keep], [owner[j] for j in keep]
 
@@ -216,3 +224,327 @@ def _tets_inside(model, low, high, triangles) -> np.ndarray:
     in_box = np.nonzero(np.all((model.particle_position >= low) & (model.particle_position <= high), axis=1))[0]
     in_box = in_box[:: max(1, len(in_box) // MAX_PROBED_TETS)]
     return in_box[inside(model.particle_position[in_box], triangles)]
+
+
+#: Where a piece's part reaches past OVERREACH_FACTOR spacings from its tets, the part is
+#: divided by the tets' owners: the cells (nearest-centroid regions) of the other pieces'
+#: tets go to those pieces, except those within this [particle spacings] of its own tets and
+#: of one of its crack faces (the flat face crosses the tets' staircase there).
+FOREIGN_DEPTH_FACTOR = 1.0
+#: How far [particle spacings] the solid given to a piece the cut failed reaches into the
+#: other pieces' cells (what those pieces hold is then taken away: their crack faces bound it;
+#: what they do not hold there, between their crack faces and its cells, is its).
+SHARE_REACH_FACTOR = 2.5
+#: How far [particle spacings] about the centroids whose cells may go to another piece the
+#: Voronoi diagram that divides a part reads the centroids (a cell depends only on its
+#: neighbours, within twice its reach); half of it bounds how far from the part such a
+#: centroid can lie and still reach it.
+LOCAL_DIAGRAM_FACTOR = 4.0
+#: How many times the parts cut off are checked and divided again (a part cut off and voted
+#: to a piece can reach past that piece's tets in turn).
+DIVIDE_ROUNDS = 3
+
+
+def divide_joined_parts(parts, owner, model, labels, spacing, corners):
+    """Divide the parts that hold another piece's material (the artist's surface joins two
+    pieces across a gap their tets leave open, or a slab stopped short of the surface): of
+    each part reaching farther than OVERREACH_FACTOR spacings from its owner's tets, the
+    material in the nearest-centroid (Voronoi) cells of other pieces' tets is cut off: the
+    cells holding the corners that reach past, and those joined to them of centroids farther
+    than FOREIGN_DEPTH_FACTOR spacings from the owner's. Each other piece gets the share in
+    its own cells; what is left is voted for again (``assign_parts``). Up to DIVIDE_ROUNDS
+    times, every part this made checked again. The cut faces lie on no crack (HULL_FACE).
+    Returns (parts, owner, the pieces given material cut off another's part); new parts'
+    vertices go into ``corners``."""
+    from scipy.spatial import cKDTree
+
+    centroids = model.particle_position
+    limit = OVERREACH_FACTOR * spacing
+    trees, everyone = {}, cKDTree(centroids)
+    parts, owner = list(parts), list(owner)
+    received = set()
+
+    def divide(j, holding, depth):
+        """Divide part j (see _divide_part); True when it changed, and what it cut off and
+        the rest are then queued in ``cut_off``."""
+        k = owner[j]
+        result = _divide_part(parts[j], k, holding, depth, model, labels, spacing, corners, trees[k])
+        if result is None:
+            return False
+        for index, (bit, vote) in enumerate(zip(*result)):
+            if index == 0:
+                parts[j], owner[j] = bit, vote
+            else:
+                parts.append(bit)
+                owner.append(vote)
+            cut_off.append(j if index == 0 else len(parts) - 1)  # (the rest too: new corners can reach past)
+            if vote != k:
+                received.add(vote)
+        return True
+
+    fresh = list(range(len(parts)))  # the parts to check this round
+    for _ in range(DIVIDE_ROUNDS):
+        cut_off = []
+        for j in fresh:
+            k = owner[j]
+            if k < 0:
+                continue
+            if k not in trees:
+                trees[k] = cKDTree(centroids[labels == k])
+            vertices = _vertices(parts[j], corners)
+            reach = trees[k].query(vertices)[0]
+            if reach.max() <= limit:
+                continue
+            # The cells of the other pieces' centroids nearest the corners reaching past.
+            holding = np.unique(everyone.query(vertices[reach > limit])[1])
+            holding = holding[(labels[holding] != k) & (labels[holding] >= 0)]
+            if len(holding):
+                divide(j, holding, FOREIGN_DEPTH_FACTOR)
+        if not cut_off:
+            break
+        fresh = cut_off
+    return parts, owner, received
+
+
+def _divide_part(part, k, holding, depth, model, labels, spacing, corners, own_tree):
+    """Part ``part`` of piece ``k`` less the nearest-centroid cells of other pieces' centroids:
+    those ``holding`` (indices, whatever their depth; None: every cell that reaches the part)
+    and those joined face to face to them of centroids in the part's box farther than
+    ``depth`` spacings from k's (``own_tree``: their KD-tree). Returns (bits, votes): the rest
+    (its parts voted for again) then each other piece's share in its own cells, or None when
+    nothing changes."""
+    from scipy.spatial import cKDTree
+
+    from .piece_surface import _CRACK, DUST_VOLUME_FACTOR
+
+    centroids = model.particle_position
+    vertices = _vertices(part, corners)
+    low, high = vertices.min(axis=0) - spacing, vertices.max(axis=0) + spacing
+    near = np.nonzero(np.all((centroids >= low) & (centroids <= high), axis=1) & (labels != k) & (labels >= 0))[0]
+    # A centroid within ``depth`` of k's is left where it is that near one of the part's crack
+    # faces (the flat face crosses the tets' staircase there), taken elsewhere (no crack
+    # between the two pieces' tets there: their cells' faces are the boundary).
+    shallow = np.nonzero(own_tree.query(centroids[near])[0] <= depth * spacing)[0]
+    mesh = part.to_mesh64()
+    props = np.asarray(mesh.vert_properties)
+    tri_verts = np.asarray(mesh.tri_verts, dtype=np.int64)
+    crack_faces = tri_verts[(props[tri_verts, _CRACK] >= 0).all(axis=1)]
+    if len(shallow) and len(crack_faces):
+        import trimesh
+
+        faces = trimesh.Trimesh(props[:, :3], crack_faces, process=False)
+        by_crack = trimesh.proximity.closest_point(faces, centroids[near[shallow]])[1] <= depth * spacing
+        near = np.delete(near, shallow[by_crack])
+    # Only the cells that can reach the part: of centroids inside it, or nearer its surface
+    # than their cell's farthest corner (within LOCAL_DIAGRAM_FACTOR / 2).
+    to_surface = cKDTree(vertices).query(centroids[near])[0]
+    close = to_surface < 0.5 * LOCAL_DIAGRAM_FACTOR * spacing
+    close[~close] = _inside_solid(centroids[near[~close]], part, 0.1 * spacing)
+    near, to_surface = near[close], to_surface[close]
+    seeds = near if holding is None else np.union1d(near, holding)
+    if not len(seeds):
+        return None
+    # The diagram of the centroids about those only: a cell depends on its neighbours alone,
+    # which lie within twice its reach.
+    around = np.nonzero(np.all((centroids >= low - LOCAL_DIAGRAM_FACTOR * spacing)
+                               & (centroids <= high + LOCAL_DIAGRAM_FACTOR * spacing), axis=1))[0]
+    around = np.union1d(around, seeds)
+    local = around[cKDTree(centroids[seeds]).query(centroids[around])[0] <= LOCAL_DIAGRAM_FACTOR * spacing]
+    cells = _voronoi_cells(centroids[local], spacing)
+    near_local = np.searchsorted(local, near)  # (local is sorted and holds every one of them)
+    touching = to_surface < cells.radius(near_local)
+    touching[~touching] = _inside_solid(centroids[near[~touching]], part, 0.1 * spacing)
+    near = near_local[touching]
+    if holding is not None:
+        # Only the cells joined to those holding the corners reaching past: islands of cells
+        # about the depth's edge stay with the part.
+        holding = np.searchsorted(local, holding)
+        near = cells.joined(np.union1d(near, holding), holding)
+    foreign = cells.union(near) if len(near) else None
+    if foreign is None:
+        return None
+    bits = [bit for bit in (part - foreign).decompose() if bit.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+    votes = assign_parts(bits, model, labels, spacing, corners)
+    others = np.unique(labels[local[near]])
+    shares = [cells.union(near[labels[local[near]] == other]) for other in others]
+    if any(share is None for share in shares):  # (a degenerate diagram: the bits are voted for)
+        shares, others = [foreign], None
+    for index, share in enumerate(shares):
+        share = [bit for bit in (part ^ share).decompose() if bit.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+        bits += share
+        votes += (assign_parts(share, model, labels, spacing, corners) if others is None
+                  else [int(others[index])] * len(share))
+    if not bits or (len(bits) == 1 and votes[0] == k):
+        return None
+    return bits, votes
+
+
+def _inside_solid(points: np.ndarray, solid: m3.Manifold, size: float) -> np.ndarray:
+    """(N,) bool: ``points`` (N,3) [m], each farther than ``size`` [m] from the surface of the
+    closed ``solid``, inside it: a tetrahedron ``size`` across about each point, all cut by
+    the solid in one boolean (the winding number's cost grows with points times faces)."""
+    from scipy.spatial import cKDTree
+
+    result = np.zeros(len(points), dtype=bool)
+    if not len(points):
+        return result
+    tetrahedron = m3.Manifold.tetrahedron().scale((0.5 * size,) * 3)
+    probes = m3.Manifold.compose([tetrahedron.translate(tuple(point)) for point in points])
+    kept = (solid ^ probes).decompose()
+    if kept:
+        centres = np.array([np.asarray(bit.bounding_box()).reshape(2, 3).mean(axis=0) for bit in kept])
+        result[cKDTree(points).query(centres)[1]] = True
+    return result
+
+
+def _gained(rendered: float, own: float, spacing: float) -> bool:
+    """Whether a piece whose parts hold ``rendered`` [m^3] against its tets' ``own`` [m^3]
+    holds a neighbour's material (GAINED_VOLUME_SHARE and GAINED_VOLUME_FACTOR)."""
+    excess = rendered - own
+    return excess > GAINED_VOLUME_SHARE * own and excess > GAINED_VOLUME_FACTOR * spacing**3
+
+
+def _vertices(part, corners) -> np.ndarray:
+    """(N,3) [m] a part's vertices, from ``corners`` where the vote kept them."""
+    known = corners.get(id(part))
+    return known[1] if known is not None and known[0] is part else np.asarray(part.to_mesh64().vert_properties)[:, :3]
+
+
+def _voronoi_cells(points: np.ndarray, spacing: float):
+    """The Voronoi diagram of ``points`` (N,3) [m] (bounded by a box 20 spacings beyond
+    them, so every point's cell is closed): ``.radius(indices)`` each cell's reach from its
+    point [m]; ``.union(indices)`` the union of those points' cells as one closed manifold
+    (its faces HULL_FACE), or None where qhull's diagram is degenerate there."""
+    from scipy.spatial import Voronoi
+
+    from .piece_surface import _PROPERTY_COUNT, _CRACK, HULL_FACE
+
+    low, high = points.min(axis=0) - 20 * spacing, points.max(axis=0) + 20 * spacing
+    fence = np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1]) for z in (low[2], high[2])])
+    diagram = Voronoi(np.concatenate([points, fence]))
+    regions = [diagram.regions[r] for r in diagram.point_region[:len(points)]]
+    owner_of = np.repeat(np.arange(len(points)), [len(region) for region in regions])
+    reach = np.zeros(len(points))  # (N,) [m] each point's farthest cell corner
+    np.maximum.at(reach, owner_of, np.linalg.norm(diagram.vertices[np.concatenate(regions)] - points[owner_of], axis=1))
+    ridge_points = np.asarray(diagram.ridge_points, dtype=np.int64)
+
+    class Cells:
+        @staticmethod
+        def joined(indices, seeds):
+            """The ``indices`` whose cells connect, through cells of ``indices``, to one of
+            the ``seeds``' cells."""
+            from scipy.sparse import coo_matrix
+            from scipy.sparse.csgraph import connected_components
+
+            chosen = np.zeros(len(diagram.points), dtype=bool)
+            chosen[indices] = True
+            both = ridge_points[chosen[ridge_points[:, 0]] & chosen[ridge_points[:, 1]]]
+            graph = coo_matrix((np.ones(len(both)), (both[:, 0], both[:, 1])), shape=(len(chosen),) * 2)
+            component = connected_components(graph, directed=False)[1]
+            seeded = np.unique(component[np.asarray(seeds, dtype=np.int64)[chosen[seeds]]])
+            return np.asarray(indices)[np.isin(component[indices], seeded)]
+
+        @staticmethod
+        def radius(indices):
+            return reach[indices]
+
+        @staticmethod
+        def union(indices):
+            # The union's boundary is every ridge between a chosen point and one not chosen:
+            # a convex polygon, its corners sorted by angle about its centre and fanned into
+            # triangles facing away from the chosen point; neighbouring ridges share the
+            # diagram's vertices, so the surface is closed.
+            chosen = np.zeros(len(diagram.points), dtype=bool)
+            chosen[np.asarray(indices, dtype=np.int64)] = True
+            rows = np.nonzero(chosen[ridge_points[:, 0]] != chosen[ridge_points[:, 1]])[0]
+            if not len(rows):
+                return None
+            rings = [diagram.ridge_vertices[r] for r in rows]
+            sizes = np.array([len(ring) for ring in rings])
+            corner = np.concatenate(rings).astype(np.int64)
+            if (sizes < 3).any() or (corner < 0).any():
+                return None
+            ridge = np.repeat(np.arange(len(rows)), sizes)
+            a, b = ridge_points[rows, 0], ridge_points[rows, 1]
+            inner = np.where(chosen[a], a, b)
+            normal = diagram.points[np.where(chosen[a], b, a)] - diagram.points[inner]  # out of the union
+            position = diagram.vertices[corner]
+            centre = np.stack([np.bincount(ridge, weights=position[:, k]) for k in range(3)], axis=1) / sizes[:, None]
+            start = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+            e1 = position[start] - centre
+            e2 = np.cross(normal, e1)
+            rel = position - centre[ridge]
+            angle = np.arctan2(np.einsum("ij,ij->i", rel, e2[ridge]), np.einsum("ij,ij->i", rel, e1[ridge]))
+            corner = corner[np.lexsort((angle, ridge))]  # each ring counter-clockwise about its normal
+            fans = sizes - 2  # triangles of each ring: (first, t, t + 1) for t in 1 .. size - 2
+            step = np.arange(fans.sum()) - np.repeat(np.cumsum(fans) - fans, fans) + 1
+            first = np.repeat(start, fans)
+            fan = np.stack([first, first + step, first + step + 1], axis=1)
+            triangles = corner[fan]
+            used, faces = np.unique(triangles, return_inverse=True)
+            props = np.zeros((len(used), _PROPERTY_COUNT))
+            props[:, :3] = diagram.vertices[used]
+            props[:, _CRACK] = HULL_FACE
+            solid = m3.Manifold(m3.Mesh64(vert_properties=props,
+                                          tri_verts=np.ascontiguousarray(faces.reshape(-1, 3), dtype=np.uint64)))
+            return solid if solid.status() == m3.Error.NoError and not solid.is_empty() else None
+
+    return Cells()
+
+
+def failed_piece_shells(solid: m3.Manifold, model, labels, k: int, failed, parts, owner, spacing: float) -> list:
+    """The shells of the render ``solid`` (the body's, uncut) that piece ``k``, one the cut
+    ``failed``, gets: its share nearest its tets (``nearest_cells_share``) less the ``parts``
+    of the pieces the cut did not fail (``owner``: each part's piece), so that against them
+    its faces are their crack faces; shells under the dust volume, and those with no vertex
+    within OVERREACH_FACTOR spacings of its tets (material no piece kept beyond its
+    neighbours' parts), left out. Empty where the diagram is degenerate."""
+    from scipy.spatial import cKDTree
+
+    from .piece_surface import DUST_VOLUME_FACTOR
+
+    share = nearest_cells_share(solid, model, labels, k, failed, spacing)
+    if share is None:
+        return []
+    box = np.asarray(share.bounding_box())
+    kept = [p for p, o in zip(parts, owner) if o >= 0 and o not in failed
+            and np.all(np.asarray(p.bounding_box())[:3] <= box[3:]) and np.all(np.asarray(p.bounding_box())[3:] >= box[:3])]
+    share = m3.Manifold.batch_boolean([share, *kept], m3.OpType.Subtract)
+    tree = cKDTree(model.particle_position[labels == k])
+    return [shell for shell in share.decompose() if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3
+            and tree.query(_vertices(shell, {}))[0].min() <= OVERREACH_FACTOR * spacing]
+
+
+def nearest_cells_share(solid: m3.Manifold, model, labels, k: int, among, spacing: float):
+    """The part of ``solid`` nearer piece ``k``'s tet centroids than those of any other piece
+    of ``among`` (labels, k's included) and than the other tets farther than
+    SHARE_REACH_FACTOR spacings from those pieces' (so it reaches at most about that far
+    into the others' material, which the caller takes away): the union of k's cells in the
+    Voronoi diagram of those centroids (HULL_FACE faces), or None where it is degenerate.
+    The surface of a piece the cut failed (``among``: those it failed)."""
+    from scipy.spatial import cKDTree
+
+    centroids = model.particle_position
+    failed = np.isin(labels, list(among))
+    rest = np.nonzero(~failed)[0]
+    beyond = rest[cKDTree(centroids[failed]).query(centroids[rest])[0] > SHARE_REACH_FACTOR * spacing]
+    region = _own_cells(model, labels, k, spacing, np.union1d(np.nonzero(failed)[0], beyond))
+    if region is None:
+        return None
+    share = solid ^ region
+    return None if share.is_empty() else share
+
+
+def _own_cells(model, labels, k: int, spacing: float, pool: np.ndarray):
+    """The union of piece ``k``'s tet centroids' cells in the Voronoi diagram of the centroids
+    ``pool`` (indices, sorted, k's among them) about them (HULL_FACE faces), or None where it
+    is degenerate or k has no tets."""
+    from scipy.spatial import cKDTree
+
+    centroids = model.particle_position
+    mine = np.nonzero(labels == k)[0]
+    if not len(mine):
+        return None
+    # (the diagram about k's centroids only: their cells depend on their neighbours alone)
+    pool = pool[cKDTree(centroids[mine]).query(centroids[pool])[0] <= LOCAL_DIAGRAM_FACTOR * spacing]
+    return _voronoi_cells(centroids[pool], spacing).union(np.searchsorted(pool, mine))

@@ -29,11 +29,16 @@ one spacing past it, a hairline notch in the piece beyond.
 
 Where a crack cut bonds inside what stayed one piece (a merged small piece, a piece joined
 around the crack's end) its slab cuts that piece too; the piece's parts are welded back into
-one shell by the render solid within a slab three times as thick over those crossings. What
-the cut cannot resolve falls back to the tets' boundary, exact in volume: a piece left with
-under half its tets' volume, one whose render solid reaches more than
-``piece_parts.OVERREACH_FACTOR`` spacings past its tets or holds well over their volume (it
-holds a neighbour's material), and the neighbour that lost it (``geometry/piece_parts.py``).
+one shell by the render solid within a slab three times as thick over those crossings. A
+part reaching far past its piece's tets (the artist's surface joins two pieces across a gap
+their tets leave open) is divided by the tets' nearest-centroid cells
+(``piece_parts.divide_joined_parts``). What the cut still cannot resolve falls back to the
+solid nearest the piece's tets: a piece left with under half its tets' volume, one whose
+render solid reaches more than ``piece_parts.OVERREACH_FACTOR`` spacings past its tets or
+holds well over their volume (it holds a neighbour's material), and the neighbour that lost
+it (``geometry/piece_parts.py``) get the solid nearer their tet centroids than those of the
+other pieces so failed, less what the other pieces hold: the artist's surface outside, the
+other pieces' crack faces against them, faces between nearest-centroid cells between them.
 
 ``crack_roughness`` (FractureOptions) displaces the slabs' faces along the crack normal
 by smooth value noise, the same on both faces, so the two sides of a crack still fit.
@@ -48,7 +53,8 @@ import manifold3d as m3
 import numpy as np
 import trimesh
 
-from .piece_parts import assign_parts, carve_missing_pieces, failed_pieces, overfull_pieces, overreaching_pieces
+from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
+                          overfull_pieces, overreaching_pieces)
 from .surface_attributes import input_corner_normals
 
 #: Slab thickness as a fraction of the particle spacing: the two pieces of a crack are this
@@ -78,6 +84,10 @@ DUST_VOLUME_FACTOR = 1e-2
 #: A piece's parts smaller than this [particle spacings cubed] beside a larger one are
 #: dropped: crumbs where cracks meet, under a mean tet's volume.
 CRUMB_VOLUME_FACTOR = 1.0
+#: So are those under this share of its largest part: chips where cracks or the faces of a
+#: divided part's cells cross the surface, which would travel beside the piece as separate
+#: shells (they hold under this share of its volume each).
+CRUMB_VOLUME_SHARE = 0.01
 
 #: Largest gap [particle spacings] between a ring crack's sphere and its polygon.
 SPHERE_SAGITTA_FACTOR = 0.02
@@ -401,8 +411,9 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
 
     Returns (pieces, stats): pieces a list of F RenderSolid or None (the caller then gives the
     piece its tets' boundary, exact in volume); stats a dict of counts (slabs, parts,
-    unassigned parts, pieces without a part, ``fallback_pieces``: pieces set to None because
-    the cut failed them, see ``failed_pieces``).
+    unassigned parts, pieces without a part, ``fallback_pieces``: pieces the cut failed, see
+    ``failed_pieces``, of which ``cell_pieces`` got the solid nearest their tets instead
+    (``piece_parts.failed_piece_shells``) and the rest None).
     """
     from ..fracture.crack_types import CrackPlane
 
@@ -432,7 +443,7 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
         slabs.append(_with_crack_index(slab, index))
         if isinstance(crack, CrackPlane):
             planes.append((surface, sites, inside_one, index))
-    stats = dict(slabs=len(slabs), parts=0, unassigned_parts=0, empty_pieces=0, welded_pieces=0)
+    stats = dict(slabs=len(slabs), parts=0, unassigned_parts=0, empty_pieces=0, welded_pieces=0, cell_pieces=0)
     if slabs:
         cut = m3.Manifold.batch_boolean([render.solid, *slabs], m3.OpType.Subtract)
     else:
@@ -442,13 +453,17 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     stats["dust_parts"] = len(every_part) - len(parts)
     corners = {}  # id(part) -> (part, its vertices (N,3) [m]): read by the vote and the reach check
     owner = assign_parts(parts, model, labels, spacing, corners)
+    parts, owner, received = divide_joined_parts(parts, owner, model, labels, spacing, corners)
+    stats["pieces_given_divided_parts"] = len(received)
     parts, owner = carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing)
     stats["parts"] = len(parts)
-    stats["carved_pieces"] = int(sum(1 for o in owner if o < -1))
+    stats["carved_pieces"] = len({o for o in owner if o < -1})
     owner = [-(o + 2) if o < -1 else o for o in owner]
     failed = failed_pieces(parts, owner, model, fragment_tets)
     failed |= overreaching_pieces(parts, owner, model, labels, spacing, corners)
-    failed |= overfull_pieces(parts, owner, model, labels, spacing)
+    # (a piece given the material nearest its tets beyond a gap they leave holds more than
+    # them by that gap's volume: not a neighbour's material)
+    failed |= overfull_pieces(parts, owner, model, labels, spacing) - received
     stats["fallback_pieces"] = len(failed)
     # Each piece's parts without its crumbs, once: the welds and the pieces below read them.
     kept = {k: _without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing) for k in set(owner) if k >= 0}
@@ -459,7 +474,15 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     for k, origin in enumerate(np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)):
         mine = kept.get(k, [])
         if k in failed:
-            pieces.append(None)
+            # Its share of the solid nearest its own tets (see failed_piece_shells).
+            shells = _without_crumbs(failed_piece_shells(render.solid, model, labels, k, failed, parts, owner,
+                                                         spacing), spacing)
+            if shells:
+                stats["cell_pieces"] += 1
+                solid = shells[0] if len(shells) == 1 else m3.Manifold.compose(shells)
+                pieces.append(RenderSolid(solid, tuple(new_cracks), spacing).moved(origin))
+            else:
+                pieces.append(None)
             continue
         if not mine:
             pieces.append(None)
@@ -479,11 +502,13 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
 
 
 def _without_crumbs(mine, spacing: float) -> list:
-    """A piece's parts less those under CRUMB_VOLUME_FACTOR spacings cubed beside a larger one:
-    wedges where two cracks' slabs cross near the surface, each a separate shell that would
-    travel with the piece, and smaller than a tet."""
+    """A piece's parts less those under CRUMB_VOLUME_FACTOR spacings cubed or CRUMB_VOLUME_SHARE
+    of the largest beside it: wedges where two cracks' slabs cross near the surface, chips
+    where a divided part's cell faces do, each a separate shell that would travel with the
+    piece."""
     largest = max((part.volume() for part in mine), default=0.0)
-    return [part for part in mine if part.volume() >= CRUMB_VOLUME_FACTOR * spacing**3 or part.volume() == largest]
+    least = max(CRUMB_VOLUME_FACTOR * spacing**3, CRUMB_VOLUME_SHARE * largest)
+    return [part for part in mine if part.volume() >= least or part.volume() == largest]
 
 
 def _weld_bits(solid: m3.Manifold, planes, spheres, split_up: set, spacing: float, roughness: float,
