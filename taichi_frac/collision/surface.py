@@ -232,6 +232,12 @@ def pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centre_lin
 #: the hulls' true separation, so more directions only bring the gap closer to it.
 HULL_ITERATIONS = 6
 
+#: Directions the search tries when it starts from the pair's normal of the last substep
+#: (``hull_pair``'s ``warm``): each substep's search goes on from the last one's result,
+#: and a gap found is kept only where it is wider, so a resting pair's normal converges
+#: over its substeps.
+HULL_WARM_ITERATIONS = 2
+
 #: The search runs on the hulls moved apart along the first direction by their overlap
 #: plus this fraction of the larger sphere's radius (``hull_pair``): moved apart, they
 #: have a closest-point direction even where they overlap.
@@ -246,6 +252,17 @@ HULL_SHIFT = 0.1
 #: of its tube, so the top of a tube can be the rim of a patch whose normal leans 45
 #: degrees: still a contact.
 HULL_CONE = 0.5
+
+#: Two bodies whose gap may close by more than this fraction of their spheres' mean radius
+#: in a substep (the broadphase's bound of the pair's approach) meet on their spheres, not
+#: their hulls (``narrowphase._test_pair``): so fast a pair reaches every sphere of the
+#: other within that closing, and a closest-point search for each of those pairs made the
+#: collision stage five times slower while the 13 rings fell on each other. At rest (the
+#: closing is gravity's |g| dt^2 alone, a tenth of a radius) and at a slow landing the
+#: hulls decide; a pair that meets on its spheres at speed settles onto its surfaces as it
+#: slows. A sphere covers its patch, so its gap is never wider than the patch's: the
+#: spheres meet first, never later.
+HULL_APPROACH = 0.5
 
 #: The gap [m] ``hull_pair`` reports for two patches side by side (``HULL_CONE``): too
 #: wide for any contact.
@@ -325,7 +342,7 @@ def _faces(n, normal_i, normal_j):
 
 
 @ti.func
-def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centre_line, reach):
+def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centre_line, reach, warm):
     """``pair`` for two patches that both have a normal (two curved or flat surfaces):
     the signed distance of their convex hulls, max over unit
     n of the support gap
@@ -342,9 +359,13 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
     stacked rings touch where their tubes meet, whatever the sphere radius. The hulls are
     moved apart along the first direction by their overlap (plus ``HULL_SHIFT`` of a
     radius) so that overlapping hulls have a closest-point direction too; the gaps are
-    measured unmoved. Two patches side by side (``HULL_CONE``) are ``APART``. Where a
-    first gap already exceeds ``reach`` [m] (the most a contact may be made at: the margin
-    and the pair's closing) the search is skipped: the hulls are at least that far apart.
+    measured unmoved. Two patches side by side (``HULL_CONE``) are ``APART``. Once a gap
+    exceeds ``reach`` [m] (the most a contact may be made at: the margin and the pair's
+    closing) the search stops: the hulls are at least that far apart, and no contact
+    spots are computed. ``warm`` (unit, world; zero for none): the pair's normal of the
+    last substep, which replaces the centre line as the first candidate and leaves
+    ``HULL_WARM_ITERATIONS`` steps to improve on it (a resting pair's search took four
+    steps from cold, most of the collision stage's time in a pile).
     Returns ``pair``'s (normal from o into a, gap [m], a's spot, o's spot)."""
     rot_a = bodies.rotation[a]
     rot_o = bodies.rotation[o]
@@ -353,14 +374,24 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
     normal_i = rot_a @ particles.patch_normal[i]
     normal_j = rot_o @ particles.patch_normal[j]
     # (both patches have a normal, ``by_hulls``: each is a candidate, the separating axis of faces)
-    candidates = ti.Matrix.rows([centre_line, normal_j, -normal_i])
-    gaps = candidates @ (x_a - x_o) + lowest3(particles, i, candidates @ rot_a) + lowest3(
-        particles, j, -(candidates @ rot_o))
+    warmed = warm.norm_sqr() > 0.25
+    first = centre_line
+    if warmed:
+        first = warm
+    candidates = ti.Matrix.rows([first, normal_j, -normal_i])
+    lows_a = lowest3(particles, i, candidates @ rot_a)
+    lows_o = lowest3(particles, j, -(candidates @ rot_o))
+    gaps = candidates @ (x_a - x_o) + lows_a + lows_o
+    # (each patch's lowest level along the best n so far, body frame: its contact spot's band)
     best_gap = gaps[0]
-    n = centre_line
+    low_a = lows_a[0]
+    low_o = lows_o[0]
+    n = first
     for c in range(1, 3):
         if gaps[c] > best_gap:
             best_gap = gaps[c]
+            low_a = lows_a[c]
+            low_o = lows_o[c]
             n = vec3(candidates[c, 0], candidates[c, 1], candidates[c, 2])
     shift = (ti.max(-best_gap, 0.0) + ti.static(HULL_SHIFT) * ti.max(particles.radius[i], particles.radius[j])) * n
     p, q = _support_pair(bodies, particles, a, i, o, j, n)
@@ -371,7 +402,9 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
     corner_c = corner_a
     x = corner_a
     searching = best_gap <= reach
-    for _ in range(HULL_ITERATIONS):  # (dynamic: unrolled, each support pass was inlined)
+    for step in range(HULL_ITERATIONS):  # (dynamic: unrolled, each support pass was inlined)
+        if warmed and step >= ti.static(HULL_WARM_ITERATIONS):
+            searching = False
         length = x.norm()
         if searching and length > 1e-12:
             d = x / length
@@ -379,10 +412,13 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
             gap = (p - q).dot(d)
             if gap > best_gap:
                 best_gap = gap
+                low_a = (p - x_a).dot(d)
+                low_o = (x_o - q).dot(d)
                 n = d
             new = p - q + shift
-            # (no support point nearer the origin than x along d: x is the closest point)
-            searching = x.dot(x - new) > 1e-6 * length * length
+            # (no support point nearer the origin than x along d: x is the closest point;
+            # a gap past ``reach`` already rules the contact out, a longer search only widens it)
+            searching = x.dot(x - new) > 1e-6 * length * length and best_gap <= reach
             # The nearest to the origin of the faces the new point makes with the simplex.
             corners = (corner_a, corner_b, corner_c)
             closest = x
@@ -400,10 +436,11 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
             x = closest
     if best_gap > 0.0 and not _faces(n, normal_i, normal_j):
         best_gap = ti.static(APART)
-    low_a = lowest(particles, i, rot_a.transpose() @ n)
-    low_o = lowest(particles, j, -(rot_o.transpose() @ n))
-    spot_a = x_a + rot_a @ contact_spot(particles, i, rot_a.transpose() @ n, low_a)
-    spot_o = x_o + rot_o @ contact_spot(particles, j, -(rot_o.transpose() @ n), low_o)
+    spot_a = x_a
+    spot_o = x_o
+    if best_gap <= reach:  # (past it the caller makes no contact: its spots are not needed)
+        spot_a = x_a + rot_a @ contact_spot(particles, i, rot_a.transpose() @ n, low_a)
+        spot_o = x_o + rot_o @ contact_spot(particles, j, -(rot_o.transpose() @ n), low_o)
     return n, best_gap, spot_a, spot_o
 
 

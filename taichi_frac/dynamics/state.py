@@ -169,7 +169,8 @@ class Particles:
         names the previous one: cache_count (2, P) contacts kept for particle P as the
         querying side; cache_key (2, P, CACHE_SLOTS) partner (particle slot >= 0, -1 - k
         ground plane k, -1000 - k static box k); cache_normal [N s], cache_tangent (vec3,
-        [N s]) their accumulated impulses; cache_stamp (2, P) the store that wrote the
+        [N s]) their accumulated impulses; cache_direction (vec3, partner body frame) a hull
+        contact's normal (``Contacts.direction``); cache_stamp (2, P) the store that wrote the
         particle's entries (only the last store, ``cache_epoch``, is valid; add_body sets
         -1 on a reused slot). Writer: solver.store_impulses; read by the narrowphase when
         the same pair is made again.
@@ -198,6 +199,7 @@ class Particles:
         self.cache_key = ti.field(ti.i32, shape=(2, capacity, CACHE_SLOTS))
         self.cache_normal = ti.field(ti.f32, shape=(2, capacity, CACHE_SLOTS))
         self.cache_tangent = vec3.field(shape=(2, capacity, CACHE_SLOTS))
+        self.cache_direction = vec3.field(shape=(2, capacity, CACHE_SLOTS))
         self.cache_stamp = ti.field(ti.i32, shape=(2, capacity))
         self.parity = ti.field(ti.i32, shape=())
         self.cache_epoch = ti.field(ti.i32, shape=())
