@@ -236,7 +236,7 @@ HULL_ITERATIONS = 6
 #: (``hull_pair``'s ``warm``): each substep's search goes on from the last one's result,
 #: and a gap found is kept only where it is wider, so a resting pair's normal converges
 #: over its substeps.
-HULL_WARM_ITERATIONS = 2
+HULL_WARM_ITERATIONS = 1
 
 #: The search runs on the hulls moved apart along the first direction by their overlap
 #: plus this fraction of the larger sphere's radius (``hull_pair``): moved apart, they
@@ -394,17 +394,18 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
             low_o = lows_o[c]
             n = vec3(candidates[c, 0], candidates[c, 1], candidates[c, 2])
     shift = (ti.max(-best_gap, 0.0) + ti.static(HULL_SHIFT) * ti.max(particles.radius[i], particles.radius[j])) * n
-    p, q = _support_pair(bodies, particles, a, i, o, j, n)
+    steps = ti.select(warmed, ti.static(HULL_WARM_ITERATIONS), ti.static(HULL_ITERATIONS))
+    searching = best_gap <= reach
     # GJK's simplex (up to a triangle of points of the moved hulls' Minkowski difference)
     # and its point closest to the origin.
-    corner_a = p - q + shift
-    corner_b = corner_a
-    corner_c = corner_a
-    x = corner_a
-    searching = best_gap <= reach
-    for step in range(HULL_ITERATIONS):  # (dynamic: unrolled, each support pass was inlined)
-        if warmed and step >= ti.static(HULL_WARM_ITERATIONS):
-            searching = False
+    x = vec3(0.0)
+    if searching:
+        p, q = _support_pair(bodies, particles, a, i, o, j, n)
+        x = p - q + shift
+    corner_a = x
+    corner_b = x
+    corner_c = x
+    for step in range(steps):  # (dynamic: unrolled, each support pass was inlined)
         length = x.norm()
         if searching and length > 1e-12:
             d = x / length
@@ -418,22 +419,23 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
             new = p - q + shift
             # (no support point nearer the origin than x along d: x is the closest point;
             # a gap past ``reach`` already rules the contact out, a longer search only widens it)
-            searching = x.dot(x - new) > 1e-6 * length * length and best_gap <= reach
-            # The nearest to the origin of the faces the new point makes with the simplex.
-            corners = (corner_a, corner_b, corner_c)
-            closest = x
-            near = 1e30
-            for u_index, v_index in ti.static(((0, 1), (0, 2), (1, 2))):
-                u = corners[u_index]
-                v = corners[v_index]
-                y = _closest_on_triangle(new, u, v)  # (new first: exact on a segment when u = v)
-                if y.norm_sqr() < near:
-                    near = y.norm_sqr()
-                    closest = y
-                    corner_a = u
-                    corner_b = v
-                    corner_c = new
-            x = closest
+            searching = x.dot(x - new) > 1e-6 * length * length and best_gap <= reach and step + 1 < steps
+            if searching:
+                # The nearest to the origin of the faces the new point makes with the simplex.
+                corners = (corner_a, corner_b, corner_c)
+                closest = x
+                near = 1e30
+                for u_index, v_index in ti.static(((0, 1), (0, 2), (1, 2))):
+                    u = corners[u_index]
+                    v = corners[v_index]
+                    y = _closest_on_triangle(new, u, v)  # (new first: exact on a segment when u = v)
+                    if y.norm_sqr() < near:
+                        near = y.norm_sqr()
+                        closest = y
+                        corner_a = u
+                        corner_b = v
+                        corner_c = new
+                x = closest
     if best_gap > 0.0 and not _faces(n, normal_i, normal_j):
         best_gap = ti.static(APART)
     spot_a = x_a
