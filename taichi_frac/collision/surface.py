@@ -189,6 +189,19 @@ def manifold(particles: ti.template(), p, axis, low):
 
 
 @ti.func
+def has_facets(particles: ti.template(), p):
+    """Whether sphere ``p``'s patch lies in a few planes (``ContactPatches.facets``): a
+    face's patch, or one folded round a block's edge or corner."""
+    return particles.point_count[p] > 0 and particles.patch_facet[p, 0].norm_sqr() > 0.25
+
+
+@ti.func
+def _facet_rows(particles: ti.template(), p):
+    """Sphere ``p``'s facets as the rows of a mat3 (body frame; zero rows unused)."""
+    return ti.Matrix.rows([particles.patch_facet[p, 0], particles.patch_facet[p, 1], particles.patch_facet[p, 2]])
+
+
+@ti.func
 def pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centre_line):
     """The contact of sphere ``i`` of body ``a`` with sphere ``j`` of body ``o``: (normal
     from o into a (world, unit), gap [m] (< 0: penetration), a's contact spot, o's contact
@@ -197,21 +210,19 @@ def pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centre_lin
     rot_o = bodies.rotation[o]
     x_a = bodies.position[a]
     x_o = bodies.position[o]
-    normal_i = rot_a @ particles.patch_normal[i]
-    normal_j = rot_o @ particles.patch_normal[j]
-    has_i = normal_i.norm_sqr() > 0.25
-    has_j = normal_j.norm_sqr() > 0.25
-    # Rows: the candidate normals (world): the centre line, j's normal, i's reversed. The
-    # centre line only when neither patch has a normal: a patch is backed by its body,
-    # and an oblique line past its rim would let a chip that sank into it out sideways.
+    # Rows: the candidate normals (world): the facets of the patch that has them (j's, or
+    # i's reversed), the separating axes of its planes; the centre line only when neither
+    # has: a patch is backed by its body, and an oblique line past its rim would let a
+    # chip that sank into it out sideways.
     usable = vec3(0.0)
-    if not has_i and not has_j:
-        usable[0] = 1.0
-    candidates = ti.Matrix.rows([centre_line, normal_j, -normal_i])
-    if has_j:
-        usable[1] = 1.0
-    if has_i:
-        usable[2] = 1.0
+    candidates = ti.Matrix.rows([centre_line, vec3(0.0), vec3(0.0)])
+    if has_facets(particles, j):
+        candidates = _facet_rows(particles, j) @ rot_o.transpose()
+    elif has_facets(particles, i):
+        candidates = -(_facet_rows(particles, i) @ rot_a.transpose())
+    for c in ti.static(range(3)):
+        if candidates[c, 0] ** 2 + candidates[c, 1] ** 2 + candidates[c, 2] ** 2 > 0.25:
+            usable[c] = 1.0
     low_a = lowest3(particles, i, candidates @ rot_a)
     low_o = lowest3(particles, j, -(candidates @ rot_o))
     gaps = candidates @ (x_a - x_o) + low_a + low_o
@@ -335,10 +346,30 @@ def _closest_on_triangle(a, b, c):
 
 
 @ti.func
-def _faces(n, normal_i, normal_j):
+def _faces(n, facets_i, facets_j):
     """Whether the contact normal ``n`` (from j's patch into i's) leaves j's patch or
-    enters i's within ``HULL_CONE`` of its normal (world, unit)."""
-    return n.dot(normal_j) >= ti.static(HULL_CONE) or -n.dot(normal_i) >= ti.static(HULL_CONE)
+    enters i's within ``HULL_CONE`` of one of its facets (rows of the world mat3s)."""
+    return (facets_j @ n).max() >= ti.static(HULL_CONE) or (-(facets_i @ n)).max() >= ti.static(HULL_CONE)
+
+
+@ti.func
+def _better(bodies: ti.template(), particles: ti.template(), a, i, o, j, candidates, best_gap, n, low_a, low_o):
+    """The best of the candidate normals (rows of ``candidates``, world; zero rows
+    skipped) and the best so far (``best_gap`` [m] along ``n``, the patches' lowest levels
+    ``low_a``, ``low_o`` along it): (gap, n, low_a, low_o) of the widest gap."""
+    rot_a = bodies.rotation[a]
+    rot_o = bodies.rotation[o]
+    lows_a = lowest3(particles, i, candidates @ rot_a)
+    lows_o = lowest3(particles, j, -(candidates @ rot_o))
+    gaps = candidates @ (bodies.position[a] - bodies.position[o]) + lows_a + lows_o
+    for c in ti.static(range(3)):
+        row = vec3(candidates[c, 0], candidates[c, 1], candidates[c, 2])
+        if row.norm_sqr() > 0.25 and gaps[c] > best_gap:
+            best_gap = gaps[c]
+            low_a = lows_a[c]
+            low_o = lows_o[c]
+            n = row
+    return best_gap, n, low_a, low_o
 
 
 @ti.func
@@ -371,28 +402,25 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
     rot_o = bodies.rotation[o]
     x_a = bodies.position[a]
     x_o = bodies.position[o]
-    normal_i = rot_a @ particles.patch_normal[i]
-    normal_j = rot_o @ particles.patch_normal[j]
-    # (both patches have a normal, ``by_hulls``: each is a candidate, the separating axis of faces)
+    # (both patches have facets, ``by_hulls``: each is a candidate, the separating axes of
+    # their planes; a patch's first facet is its normal where it has one)
+    facets_i = _facet_rows(particles, i) @ rot_a.transpose()
+    facets_j = _facet_rows(particles, j) @ rot_o.transpose()
     warmed = warm.norm_sqr() > 0.25
     first = centre_line
     if warmed:
         first = warm
-    candidates = ti.Matrix.rows([first, normal_j, -normal_i])
-    lows_a = lowest3(particles, i, candidates @ rot_a)
-    lows_o = lowest3(particles, j, -(candidates @ rot_o))
-    gaps = candidates @ (x_a - x_o) + lows_a + lows_o
     # (each patch's lowest level along the best n so far, body frame: its contact spot's band)
-    best_gap = gaps[0]
-    low_a = lows_a[0]
-    low_o = lows_o[0]
-    n = first
-    for c in range(1, 3):
-        if gaps[c] > best_gap:
-            best_gap = gaps[c]
-            low_a = lows_a[c]
-            low_o = lows_o[c]
-            n = vec3(candidates[c, 0], candidates[c, 1], candidates[c, 2])
+    best_gap, n, low_a, low_o = _better(bodies, particles, a, i, o, j, ti.Matrix.rows(
+        [first, vec3(facets_j[0, 0], facets_j[0, 1], facets_j[0, 2]),
+         -vec3(facets_i[0, 0], facets_i[0, 1], facets_i[0, 2])]), -1e30, first, 0.0, 0.0)
+    if particles.patch_normal[i].norm_sqr() < 0.25 or particles.patch_normal[j].norm_sqr() < 0.25:
+        # A folded patch: its other facets too.
+        best_gap, n, low_a, low_o = _better(bodies, particles, a, i, o, j, ti.Matrix.rows(
+            [vec3(facets_j[1, 0], facets_j[1, 1], facets_j[1, 2]), vec3(facets_j[2, 0], facets_j[2, 1], facets_j[2, 2]),
+             -vec3(facets_i[1, 0], facets_i[1, 1], facets_i[1, 2])]), best_gap, n, low_a, low_o)
+        best_gap, n, low_a, low_o = _better(bodies, particles, a, i, o, j, ti.Matrix.rows(
+            [-vec3(facets_i[2, 0], facets_i[2, 1], facets_i[2, 2]), vec3(0.0), vec3(0.0)]), best_gap, n, low_a, low_o)
     shift = (ti.max(-best_gap, 0.0) + ti.static(HULL_SHIFT) * ti.max(particles.radius[i], particles.radius[j])) * n
     steps = ti.select(warmed, ti.static(HULL_WARM_ITERATIONS), ti.static(HULL_ITERATIONS))
     searching = best_gap <= reach
@@ -436,7 +464,7 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
                         corner_b = v
                         corner_c = new
                 x = closest
-    if best_gap > 0.0 and not _faces(n, normal_i, normal_j):
+    if best_gap > 0.0 and not _faces(n, facets_i, facets_j):
         best_gap = ti.static(APART)
     spot_a = x_a
     spot_o = x_o
@@ -455,7 +483,7 @@ def by_hulls(particles: ti.template(), i, j):
     pieces, or patches folded round a block's edges) keep the spheres' contact: with their
     hulls' distance a chip among chips dropped at 10 m/s onto a slab was pushed 3.4 mm
     into it."""
-    return particles.patch_normal[i].norm_sqr() > 0.25 and particles.patch_normal[j].norm_sqr() > 0.25
+    return has_facets(particles, i) and has_facets(particles, j)
 
 
 @ti.func
@@ -465,9 +493,8 @@ def by_patches(particles: ti.template(), i, j):
     folded round a small piece, on a body's face). Two with normals or two without meet
     at their hulls' distance instead (``by_hulls``)."""
     has_patch = particles.point_count[i] > 0 or particles.point_count[j] > 0
-    normals = ti.cast(particles.patch_normal[i].norm_sqr() > 0.25, ti.i32) + ti.cast(
-        particles.patch_normal[j].norm_sqr() > 0.25, ti.i32)
-    return has_patch and normals == 1
+    faceted = ti.cast(has_facets(particles, i), ti.i32) + ti.cast(has_facets(particles, j), ti.i32)
+    return has_patch and faceted == 1
 
 
 @ti.func

@@ -10,6 +10,7 @@ that writes each array.
 import taichi as ti
 
 from ..collision.grid import CELLS_PER_SPHERE
+from ..geometry.contact_patches import MAX_FACETS
 
 vec3 = ti.math.vec3
 vec4 = ti.math.vec4
@@ -177,7 +178,9 @@ class Particles:
         Contact patches (``geometry.contact_patches.ContactPatches``): point_start, point_count (i32) the rows
             of ``surface_point`` holding sphere P's patch (count 0: the sphere is its own
             surface, the contacts are sphere contacts); patch_normal (vec3 body frame,
-            unit outward, or zero where the patch faces every way). surface_point, shape
+            unit outward, or zero where the patch faces every way); patch_facet, shape
+            (capacity, MAX_FACETS): vec3 body frame, the planes its triangles lie in
+            (``ContactPatches.facets``; zero rows unused, all zero: none). surface_point, shape
             (max_surface_points,): vec3 [m] body-frame points of the patches, each body's
             in one contiguous range. Writer: add_body.
         slot_end: one past the highest slot in use.
@@ -188,6 +191,7 @@ class Particles:
         self.point_start = ti.field(ti.i32, shape=capacity)
         self.point_count = ti.field(ti.i32, shape=capacity)
         self.patch_normal = vec3.field(shape=capacity)
+        self.patch_facet = vec3.field(shape=(capacity, MAX_FACETS))
         self.surface_point = vec3.field(shape=max_surface_points)
         self.body = ti.field(ti.i32, shape=capacity)
         self.offset = vec3.field(shape=capacity)

@@ -24,11 +24,18 @@ class ContactPatches:
         normals: (N,3) unit outward normal of each patch (its triangles' area-weighted
             normal), or zeros where the triangles face every way (their summed area normal
             is under ``FLAT_ENOUGH`` of their area: a one-tet chip's closed surface).
+        facets: (N, MAX_FACETS, 3) unit outward normals of the planes a patch's triangles
+            lie in: its normal alone where it has one; for a patch folded round a block's
+            edge or corner, the area-weighted normal of each group of its triangles within
+            ``FACET_ANGLE`` of each other (two or three: the faces it spans); zeros where
+            its triangles need more planes than ``MAX_FACETS`` (a chip's closed surface, a
+            curved piece) and in the unused rows.
     """
 
     offsets: np.ndarray
     points: np.ndarray
     normals: np.ndarray
+    facets: np.ndarray
 
 
 #: A patch has a normal when its triangles' summed area normal is at least this fraction of
@@ -36,6 +43,16 @@ class ContactPatches:
 #: edge: 0.71; a closed tet: 0). A folded patch's mean normal is no face's: a chip landing
 #: beside the edge was pushed along it into the body.
 FLAT_ENOUGH = 0.9
+
+#: Planes a folded patch may span and keep its facets (``ContactPatches.facets``): a block's
+#: edge (two faces) or corner (three). A one-tet chip's four faces are more: it faces every
+#: way, and meets a body on the body's patch (``collision.surface.pair``).
+MAX_FACETS = 3
+
+#: Triangles whose normals are within this angle [rad] of a facet's first (largest)
+#: triangle's lie in that facet (``ContactPatches.facets``): a tet mesh's faces of one flat
+#: side are coplanar to rounding.
+FACET_ANGLE = 0.1
 
 
 def contact_patches(model, member_offsets: np.ndarray, members: np.ndarray) -> ContactPatches:
@@ -59,4 +76,37 @@ def contact_patches(model, member_offsets: np.ndarray, members: np.ndarray) -> C
     length = rows.norm(summed)
     flat = length >= FLAT_ENOUGH * np.maximum(area, 1e-300)
     normals = np.where(flat[:, None], summed / np.where(flat, length, 1.0)[:, None], 0.0)
-    return ContactPatches(offsets=offsets, points=model.vertices[keys % v_count], normals=normals)
+    facets = np.zeros((count, MAX_FACETS, 3))
+    facets[:, 0] = normals
+    folded = np.flatnonzero(~flat & (area > 0.0))
+    if len(folded):
+        unit = area_normal / np.maximum(rows.norm(area_normal), 1e-300)[:, None]
+        by_group = np.argsort(face_group, kind="stable")
+        bounds = np.searchsorted(face_group[by_group], np.arange(count + 1))
+        for g in folded:
+            facets[g] = _facets(area_normal[by_group[bounds[g]:bounds[g + 1]]],
+                                unit[by_group[bounds[g]:bounds[g + 1]]])
+    return ContactPatches(offsets=offsets, points=model.vertices[keys % v_count], normals=normals, facets=facets)
+
+
+def _facets(area_normal: np.ndarray, unit: np.ndarray) -> np.ndarray:
+    """(MAX_FACETS, 3) the facets of one folded patch from its triangles' area normals
+    (T,3) and unit normals (T,3): the triangles grouped by their normals, largest first,
+    each group's summed area normal normalised; all zeros past ``MAX_FACETS`` groups."""
+    order = np.argsort(-rows.norm(area_normal), kind="stable")
+    leaders, sums = [], []
+    cos_limit = np.cos(FACET_ANGLE)
+    for t in order:
+        for k, leader in enumerate(leaders):
+            if unit[t] @ leader >= cos_limit:
+                sums[k] = sums[k] + area_normal[t]
+                break
+        else:
+            if len(leaders) == MAX_FACETS:
+                return np.zeros((MAX_FACETS, 3))
+            leaders.append(unit[t])
+            sums.append(area_normal[t].copy())
+    out = np.zeros((MAX_FACETS, 3))
+    for k, total in enumerate(sums):
+        out[k] = total / np.linalg.norm(total)
+    return out
