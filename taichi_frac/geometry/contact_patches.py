@@ -78,35 +78,41 @@ def contact_patches(model, member_offsets: np.ndarray, members: np.ndarray) -> C
     normals = np.where(flat[:, None], summed / np.where(flat, length, 1.0)[:, None], 0.0)
     facets = np.zeros((count, MAX_FACETS, 3))
     facets[:, 0] = normals
-    folded = np.flatnonzero(~flat & (area > 0.0))
-    if len(folded):
-        unit = area_normal / np.maximum(rows.norm(area_normal), 1e-300)[:, None]
-        by_group = np.argsort(face_group, kind="stable")
-        bounds = np.searchsorted(face_group[by_group], np.arange(count + 1))
-        for g in folded:
-            facets[g] = _facets(area_normal[by_group[bounds[g]:bounds[g + 1]]],
-                                unit[by_group[bounds[g]:bounds[g + 1]]])
+    folded = ~flat & (area > 0.0)
+    on_folded = folded[face_group]
+    if on_folded.any():
+        facets[folded] = _facets(face_group[on_folded], area_normal[on_folded])[np.flatnonzero(folded)]
     return ContactPatches(offsets=offsets, points=model.vertices[keys % v_count], normals=normals, facets=facets)
 
 
-def _facets(area_normal: np.ndarray, unit: np.ndarray) -> np.ndarray:
-    """(MAX_FACETS, 3) the facets of one folded patch from its triangles' area normals
-    (T,3) and unit normals (T,3): the triangles grouped by their normals, largest first,
-    each group's summed area normal normalised; all zeros past ``MAX_FACETS`` groups."""
-    order = np.argsort(-rows.norm(area_normal), kind="stable")
-    leaders, sums = [], []
-    cos_limit = np.cos(FACET_ANGLE)
-    for t in order:
-        for k, leader in enumerate(leaders):
-            if unit[t] @ leader >= cos_limit:
-                sums[k] = sums[k] + area_normal[t]
-                break
-        else:
-            if len(leaders) == MAX_FACETS:
-                return np.zeros((MAX_FACETS, 3))
-            leaders.append(unit[t])
-            sums.append(area_normal[t].copy())
-    out = np.zeros((MAX_FACETS, 3))
-    for k, total in enumerate(sums):
-        out[k] = total / np.linalg.norm(total)
-    return out
+def _facets(group: np.ndarray, area_normal: np.ndarray) -> np.ndarray:
+    """(G, MAX_FACETS, 3) the facets of folded patches from their triangles' groups (T,)
+    (G: one more than the largest) and area normals (T,3): in each patch, the largest
+    triangle not yet in a facet and every such triangle within ``FACET_ANGLE`` of it make
+    the next facet, its summed area normal normalised; all zeros where triangles remain
+    after ``MAX_FACETS`` facets. Every patch at once, a pass a facet."""
+    size = rows.norm(area_normal)
+    order = np.lexsort((-size, group))
+    group, area_normal, size = group[order], area_normal[order], size[order]
+    unit = area_normal / np.maximum(size, 1e-300)[:, None]
+    count = int(group.max()) + 1
+    starts = np.searchsorted(group, np.arange(count))
+    ends = np.searchsorted(group, np.arange(count), side="right")
+    present = ends > starts
+    index = np.arange(len(group))
+    left = np.ones(len(group), dtype=bool)
+    out = np.zeros((count, MAX_FACETS + 1, 3))
+    for k in range(MAX_FACETS + 1):
+        # The first (largest) triangle left in each patch, or none (past its end).
+        first = np.minimum.reduceat(np.where(left, index, len(group)), np.minimum(starts, len(group) - 1))
+        has = present & (first < ends)
+        leader = np.zeros((count, 3))
+        leader[has] = unit[first[has]]
+        member = left & has[group] & (np.einsum("ij,ij->i", unit, leader[group]) >= np.cos(FACET_ANGLE))
+        for d in range(3):
+            out[:, k, d] = np.bincount(group[member], weights=area_normal[member, d], minlength=count)
+        left &= ~member
+    out[np.any(out[:, MAX_FACETS] != 0.0, axis=1)] = 0.0
+    length = rows.norm(out.reshape(-1, 3)).reshape(count, MAX_FACETS + 1)
+    out /= np.maximum(length, 1e-300)[:, :, None]
+    return out[:, :MAX_FACETS]
