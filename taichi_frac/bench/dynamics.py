@@ -298,6 +298,38 @@ def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) ->
     return dict(rest=float(world.body_state([body])["position"][0][2]), depth=depth)
 
 
+#: Tets of the cubes stacked in the contact table (``_cube_on_cube``): a fine cube, whose
+#: patches fold round its edges only there, and a coarse one, all of whose patches fold.
+CUBE_STACK_TETS = (5000, 60)
+
+
+def _cube_on_cube(ctx: BenchContext, single: bool, surface: bool, tets: int) -> float:
+    """A 0.1 m porcelain cube of about ``tets`` tets let down 1 mm above another resting
+    on the ground, offset 10 / 5 mm, restitution 0: the upper one's centre-of-mass height
+    above the lower one's after 1 s, less the exact 0.1 m [m]."""
+    import trimesh
+
+    from ..dynamics import DynamicsOptions
+    from ..geometry.tetra import tetrahedralize
+    from ..model import build_body_model
+
+    mesh = tetrahedralize(trimesh.creation.box((0.1, 0.1, 0.1)), target_tets=tets)
+    model = build_body_model(mesh.vertices, mesh.tets, 2400.0, boundary_group_size=1 if single else 4)
+    world = ctx.world()
+    world.clear()
+    world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
+    world.add_ground(0.0, restitution=0.0)
+    layer = (model.particle_position[model.surface_particles], model.particle_radius[model.surface_particles]) \
+        if single else (model.collision_position, model.boundary_radius)
+    low = -float(np.min(layer[0][:, 2] - layer[1]))
+    bottom = world.add_body(model, (0, 0, low + 1e-3), restitution=0.0)
+    top = world.add_body(model, (0.01, 0.005, 3 * low + 3e-3), restitution=0.0)
+    for _ in range(50):
+        world.advance(0.02, 10)
+    z = world.body_state([bottom, top])["position"][:, 2]
+    return float(z[1] - z[0] - 0.1)
+
+
 #: Rings in the contact table's stack (``_ring_stack``).
 STACK_RINGS = 5
 
@@ -354,6 +386,7 @@ def contact_section(ctx: BenchContext, scene, frames=None) -> str:
     flat = {m[0]: _cube_rest(ctx, m[1], m[2], on_edge=False) for m in CONTACT_MODES}
     edge = {m[0]: _cube_rest(ctx, m[1], m[2], on_edge=True) for m in CONTACT_MODES}
     stacks = {m[0]: _ring_stack(ctx, m[1], m[2]) for m in CONTACT_MODES}
+    cubes = {tets: {m[0]: _cube_on_cube(ctx, m[1], m[2], tets) for m in CONTACT_MODES} for tets in CUBE_STACK_TETS}
     labels = [m[0] for m in CONTACT_MODES]
     ref = drops[labels[2]]
     rows = [
@@ -363,6 +396,8 @@ def contact_section(ctx: BenchContext, scene, frames=None) -> str:
                                                                   for k in labels],
         [f"0.1 m cube on an edge (0.3 s), COM z − exact {50 * math.sqrt(2):.2f} mm [mm]"]
         + [f"{1e3 * (edge[k]['rest'] - 0.05 * math.sqrt(2)):+.2f}" for k in labels],
+        *[[f"0.1 m cube on a cube ({tets} tets each, offset 10 / 5 mm), COM z above the lower − exact 100.0 mm "
+           "[mm]"] + [f"{1e3 * cubes[tets][k]:+.2f}" for k in labels] for tets in CUBE_STACK_TETS],
         [f"{STACK_RINGS} tori stacked flat: top COM z − exact {25 + 50 * (STACK_RINGS - 1)}.0 mm [mm] / "
          "largest move 1-2 s [mm] / asleep at 2 s"]
         + [f"{1e3 * stacks[k]['top']:+.2f} / {1e3 * stacks[k]['drift']:.2f} / {stacks[k]['asleep']} of {STACK_RINGS}"

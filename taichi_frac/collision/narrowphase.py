@@ -53,8 +53,11 @@ class Contacts:
     the impulse cache and the impact records visit them (sorted by querying particle).
     Written by solver.solve_contacts: sweep_order (i32), ``order`` with the contacts
     between bodies first, then those with static colliders.
+    direction (vec3 unit, body b's frame): the contact normal of a hull contact
+    (``surface.hull_pair``), kept in the contact cache to start the same pair's search
+    from next substep; zero for the others.
     Written by reduction.reduce_static_contacts: reduce_mark (i32, scratch: whether the
-    contact is kept).
+    contact is kept, then its slot after the compaction).
     Scalars: count (may exceed capacity: the excess is ``overflow``), overflow (summed over
     an advance, reset by the World), peak (largest count since the World reset it),
     order_epoch (sorts so far).
@@ -90,10 +93,11 @@ class Contacts:
         self.order = ti.field(ti.i32, shape=capacity)
         self.sweep_order = ti.field(ti.i32, shape=capacity)
         self.reduce_mark = ti.field(ti.i32, shape=capacity)
+        self.direction = vec3.field(shape=capacity)
         # (what ``_append`` writes: the fields that moving a contact to another slot moves)
         self.written_by_narrowphase = (self.query, self.key, self.body_a, self.body_b, self.static_index, self.normal,
                                        self.point, self.separation, self.radius, self.friction, self.restitution,
-                                       self.normal_impulse, self.tangent_impulse)
+                                       self.normal_impulse, self.tangent_impulse, self.direction)
         self.order_epoch = ti.field(ti.i32, shape=())
         self.count = ti.field(ti.i32, shape=())
         self.overflow = ti.field(ti.i32, shape=())
@@ -133,23 +137,36 @@ def _speculative(bodies: ti.template(), statics: ti.template(), a, xa, b, xb, n,
 
 
 @ti.func
+def _cached(particles: ti.template(), query, key):
+    """What the contact of particle ``query`` with partner ``key`` kept at the end of the
+    last substep (zeros when it made none): (normal impulse [N s], tangent impulse (vec3
+    [N s]), hull direction (vec3, the partner body's frame))."""
+    previous = particles.parity[None]
+    jn = 0.0
+    jt = vec3(0.0)
+    direction = vec3(0.0)
+    if particles.cache_stamp[previous, query] == particles.cache_epoch[None]:
+        for k in range(particles.cache_count[previous, query]):
+            if particles.cache_key[previous, query, k] == key:
+                jn = particles.cache_normal[previous, query, k]
+                jt = particles.cache_tangent[previous, query, k]
+                direction = particles.cache_direction[previous, query, k]
+    return jn, jt, direction
+
+
+@ti.func
 def _append(contacts: ti.template(), particles: ti.template(), query, key, a, b, static_index, normal, point,
-            separation, radius, friction, restitution):
+            separation, radius, friction, restitution, direction):
+    """``direction``: the hull search's normal in body b's frame (``Contacts.direction``)."""
     c = ti.atomic_add(contacts.count[None], 1)
     if c < contacts.capacity:
         contacts.query[c] = query
         contacts.key[c] = key
         # Warm start: the impulses this pair carried at the end of the last substep.
-        previous = particles.parity[None]
-        jn = 0.0
-        jt = vec3(0.0)
-        if particles.cache_stamp[previous, query] == particles.cache_epoch[None]:
-            for k in range(particles.cache_count[previous, query]):
-                if particles.cache_key[previous, query, k] == key:
-                    jn = particles.cache_normal[previous, query, k]
-                    jt = particles.cache_tangent[previous, query, k]
+        jn, jt, _ = _cached(particles, query, key)
         contacts.normal_impulse[c] = jn
         contacts.tangent_impulse[c] = jt
+        contacts.direction[c] = direction
         contacts.body_a[c] = a
         contacts.body_b[c] = b
         contacts.static_index[c] = static_index
@@ -251,17 +268,20 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
         point = xj + n * (rj + 0.5 * gap)
         x_a, x_o = xi, xj
         scale = ti.min(ri, rj)
+        direction = vec3(0.0)
         if ti.static(patches):
             patched = surface.by_patches(particles, i, j)
-            hulls = surface.by_hulls(particles, i, j)
+            hulls = surface.by_hulls(particles, i, j) and closing <= ti.static(surface.HULL_APPROACH) * mean_r
             if patched or hulls:
                 n_patch = n
                 gap_patch = gap
                 spot_a = x_a
                 spot_o = x_o
                 if hulls:
+                    _, _, warm = _cached(particles, i, j)
                     n_patch, gap_patch, spot_a, spot_o = surface.hull_pair(
-                        bodies, particles, a, i, o, j, n, margin * mean_r + closing)
+                        bodies, particles, a, i, o, j, n, margin * mean_r + closing, rot @ warm)
+                    direction = rot.transpose() @ n_patch
                 else:
                     n_patch, gap_patch, spot_a, spot_o = surface.pair(bodies, particles, a, i, o, j, n)
                 if gap_patch >= -ti.static(surface.TRUSTED_DEPTH) * ti.max(ri, rj):
@@ -276,7 +296,7 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
         if gap < margin * mean_r + _speculative(bodies, statics, a, x_a, o, x_o, n, dt):
             mu = ti.sqrt(bodies.friction[a] * bodies.friction[o])
             e = ti.max(bodies.restitution[a], bodies.restitution[o])
-            _append(contacts, particles, i, j, a, o, -1, n, point, gap, scale, mu, e)
+            _append(contacts, particles, i, j, a, o, -1, n, point, gap, scale, mu, e, direction)
             if bodies.sleeping[o] == 1 and bodies.sleep_timer[a] < sleep_time:
                 bodies.wake_request[o] = 1
 
@@ -348,7 +368,7 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
                 _collider_contacts(bodies, particles, statics, contacts, margin, dt, bounce_speed, i, a, x, patch, n,
                                    gap, point, level, kind, k, key, mu, e)
             elif gap < margin * r + _speculative(bodies, statics, a, x, -1, x, n, dt):
-                _append(contacts, particles, i, key, a, kind, k, n, point, gap, r, mu, e)
+                _append(contacts, particles, i, key, a, kind, k, n, point, gap, r, mu, e, vec3(0.0))
 
 
 @ti.func
@@ -379,7 +399,7 @@ def _collider_contacts(bodies: ti.template(), particles: ti.template(), statics:
             at = spot - 0.5 * g * n
         if g < margin * r + bodies.motion[a] and g < margin * r + _speculative(bodies, statics, a, spot, -1, spot, n,
                                                                               dt):
-            _append(contacts, particles, i, key - m, a, kind, k, n, at, g, r, mu, e)
+            _append(contacts, particles, i, key - m, a, kind, k, n, at, g, r, mu, e, vec3(0.0))
 
 
 @ti.func

@@ -119,7 +119,7 @@ def reduce_static_contacts(bodies: ti.template(), particles: ti.template(), cont
     """Serial: reduce each body's patch contacts with each static collider (module
     docstring) and compact the kept contacts to the front of the buffer, in their slot
     order. Reads ``contacts.order`` (sorted by particle, so one body's contacts are
-    consecutive in it); the caller sorts the compacted contacts again. Skipped when the
+    consecutive in it) and leaves it so for the kept contacts. Skipped when the
     buffer overflowed (the overflow is reported; its contacts are not all here).
     ``margin``: the contact margin (fraction of a sphere's radius); ``bounce_speed``
     [m/s]: the restitution threshold (a landing keeps all its contacts)."""
@@ -144,11 +144,24 @@ def reduce_static_contacts(bodies: ti.template(), particles: ti.template(), cont
             for c in range(n):
                 dropped += ti.cast(contacts.reduce_mark[c] == DROP, ti.i32)
             if dropped > 0:
+                # Compact, each kept contact's new slot left in its old slot's mark (-1:
+                # dropped); then ``order`` with the dropped left out and the slots renamed,
+                # which is the order sorting the kept contacts again gives (the compaction
+                # keeps the slots' order).
                 kept = 0
                 for c in range(n):
                     if contacts.reduce_mark[c] != DROP:
                         if kept != c:
                             for field in ti.static(contacts.written_by_narrowphase):
                                 field[kept] = field[c]
+                        contacts.reduce_mark[c] = kept
                         kept += 1
+                    else:
+                        contacts.reduce_mark[c] = -1
                 contacts.count[None] = kept
+                m = 0
+                for k in range(n):
+                    slot = contacts.reduce_mark[contacts.order[k]]
+                    if slot >= 0:
+                        contacts.order[m] = slot
+                        m += 1

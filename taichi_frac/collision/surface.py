@@ -189,6 +189,19 @@ def manifold(particles: ti.template(), p, axis, low):
 
 
 @ti.func
+def has_facets(particles: ti.template(), p):
+    """Whether sphere ``p``'s patch lies in a few planes (``ContactPatches.facets``): a
+    face's patch, or one folded round a block's edge or corner."""
+    return particles.point_count[p] > 0 and particles.patch_facet[p, 0].norm_sqr() > 0.25
+
+
+@ti.func
+def _facet_rows(particles: ti.template(), p):
+    """Sphere ``p``'s facets as the rows of a mat3 (body frame; zero rows unused)."""
+    return ti.Matrix.rows([particles.patch_facet[p, 0], particles.patch_facet[p, 1], particles.patch_facet[p, 2]])
+
+
+@ti.func
 def pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centre_line):
     """The contact of sphere ``i`` of body ``a`` with sphere ``j`` of body ``o``: (normal
     from o into a (world, unit), gap [m] (< 0: penetration), a's contact spot, o's contact
@@ -197,21 +210,19 @@ def pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centre_lin
     rot_o = bodies.rotation[o]
     x_a = bodies.position[a]
     x_o = bodies.position[o]
-    normal_i = rot_a @ particles.patch_normal[i]
-    normal_j = rot_o @ particles.patch_normal[j]
-    has_i = normal_i.norm_sqr() > 0.25
-    has_j = normal_j.norm_sqr() > 0.25
-    # Rows: the candidate normals (world): the centre line, j's normal, i's reversed. The
-    # centre line only when neither patch has a normal: a patch is backed by its body,
-    # and an oblique line past its rim would let a chip that sank into it out sideways.
+    # Rows: the candidate normals (world): the facets of the patch that has them (j's, or
+    # i's reversed), the separating axes of its planes; the centre line only when neither
+    # has: a patch is backed by its body, and an oblique line past its rim would let a
+    # chip that sank into it out sideways.
     usable = vec3(0.0)
-    if not has_i and not has_j:
-        usable[0] = 1.0
-    candidates = ti.Matrix.rows([centre_line, normal_j, -normal_i])
-    if has_j:
-        usable[1] = 1.0
-    if has_i:
-        usable[2] = 1.0
+    candidates = ti.Matrix.rows([centre_line, vec3(0.0), vec3(0.0)])
+    if has_facets(particles, j):
+        candidates = _facet_rows(particles, j) @ rot_o.transpose()
+    elif has_facets(particles, i):
+        candidates = -(_facet_rows(particles, i) @ rot_a.transpose())
+    for c in ti.static(range(3)):
+        if candidates[c, 0] ** 2 + candidates[c, 1] ** 2 + candidates[c, 2] ** 2 > 0.25:
+            usable[c] = 1.0
     low_a = lowest3(particles, i, candidates @ rot_a)
     low_o = lowest3(particles, j, -(candidates @ rot_o))
     gaps = candidates @ (x_a - x_o) + low_a + low_o
@@ -232,6 +243,12 @@ def pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centre_lin
 #: the hulls' true separation, so more directions only bring the gap closer to it.
 HULL_ITERATIONS = 6
 
+#: Directions the search tries when it starts from the pair's normal of the last substep
+#: (``hull_pair``'s ``warm``): each substep's search goes on from the last one's result,
+#: and a gap found is kept only where it is wider, so a resting pair's normal converges
+#: over its substeps.
+HULL_WARM_ITERATIONS = 1
+
 #: The search runs on the hulls moved apart along the first direction by their overlap
 #: plus this fraction of the larger sphere's radius (``hull_pair``): moved apart, they
 #: have a closest-point direction even where they overlap.
@@ -246,6 +263,17 @@ HULL_SHIFT = 0.1
 #: of its tube, so the top of a tube can be the rim of a patch whose normal leans 45
 #: degrees: still a contact.
 HULL_CONE = 0.5
+
+#: Two bodies whose gap may close by more than this fraction of their spheres' mean radius
+#: in a substep (the broadphase's bound of the pair's approach) meet on their spheres, not
+#: their hulls (``narrowphase._test_pair``): so fast a pair reaches every sphere of the
+#: other within that closing, and a closest-point search for each of those pairs made the
+#: collision stage five times slower while the 13 rings fell on each other. At rest (the
+#: closing is gravity's |g| dt^2 alone, a tenth of a radius) and at a slow landing the
+#: hulls decide; a pair that meets on its spheres at speed settles onto its surfaces as it
+#: slows. A sphere covers its patch, so its gap is never wider than the patch's: the
+#: spheres meet first, never later.
+HULL_APPROACH = 0.5
 
 #: The gap [m] ``hull_pair`` reports for two patches side by side (``HULL_CONE``): too
 #: wide for any contact.
@@ -318,14 +346,34 @@ def _closest_on_triangle(a, b, c):
 
 
 @ti.func
-def _faces(n, normal_i, normal_j):
+def _faces(n, facets_i, facets_j):
     """Whether the contact normal ``n`` (from j's patch into i's) leaves j's patch or
-    enters i's within ``HULL_CONE`` of its normal (world, unit)."""
-    return n.dot(normal_j) >= ti.static(HULL_CONE) or -n.dot(normal_i) >= ti.static(HULL_CONE)
+    enters i's within ``HULL_CONE`` of one of its facets (rows of the world mat3s)."""
+    return (facets_j @ n).max() >= ti.static(HULL_CONE) or (-(facets_i @ n)).max() >= ti.static(HULL_CONE)
 
 
 @ti.func
-def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centre_line, reach):
+def _better(bodies: ti.template(), particles: ti.template(), a, i, o, j, candidates, best_gap, n, low_a, low_o):
+    """The best of the candidate normals (rows of ``candidates``, world; zero rows
+    skipped) and the best so far (``best_gap`` [m] along ``n``, the patches' lowest levels
+    ``low_a``, ``low_o`` along it): (gap, n, low_a, low_o) of the widest gap."""
+    rot_a = bodies.rotation[a]
+    rot_o = bodies.rotation[o]
+    lows_a = lowest3(particles, i, candidates @ rot_a)
+    lows_o = lowest3(particles, j, -(candidates @ rot_o))
+    gaps = candidates @ (bodies.position[a] - bodies.position[o]) + lows_a + lows_o
+    for c in ti.static(range(3)):
+        row = vec3(candidates[c, 0], candidates[c, 1], candidates[c, 2])
+        if row.norm_sqr() > 0.25 and gaps[c] > best_gap:
+            best_gap = gaps[c]
+            low_a = lows_a[c]
+            low_o = lows_o[c]
+            n = row
+    return best_gap, n, low_a, low_o
+
+
+@ti.func
+def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centre_line, reach, warm):
     """``pair`` for two patches that both have a normal (two curved or flat surfaces):
     the signed distance of their convex hulls, max over unit
     n of the support gap
@@ -342,36 +390,50 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
     stacked rings touch where their tubes meet, whatever the sphere radius. The hulls are
     moved apart along the first direction by their overlap (plus ``HULL_SHIFT`` of a
     radius) so that overlapping hulls have a closest-point direction too; the gaps are
-    measured unmoved. Two patches side by side (``HULL_CONE``) are ``APART``. Where a
-    first gap already exceeds ``reach`` [m] (the most a contact may be made at: the margin
-    and the pair's closing) the search is skipped: the hulls are at least that far apart.
+    measured unmoved. Two patches side by side (``HULL_CONE``) are ``APART``. Once a gap
+    exceeds ``reach`` [m] (the most a contact may be made at: the margin and the pair's
+    closing) the search stops: the hulls are at least that far apart, and no contact
+    spots are computed. ``warm`` (unit, world; zero for none): the pair's normal of the
+    last substep, which replaces the centre line as the first candidate and leaves
+    ``HULL_WARM_ITERATIONS`` steps to improve on it (a resting pair's search took four
+    steps from cold, most of the collision stage's time in a pile).
     Returns ``pair``'s (normal from o into a, gap [m], a's spot, o's spot)."""
     rot_a = bodies.rotation[a]
     rot_o = bodies.rotation[o]
     x_a = bodies.position[a]
     x_o = bodies.position[o]
-    normal_i = rot_a @ particles.patch_normal[i]
-    normal_j = rot_o @ particles.patch_normal[j]
-    # (both patches have a normal, ``by_hulls``: each is a candidate, the separating axis of faces)
-    candidates = ti.Matrix.rows([centre_line, normal_j, -normal_i])
-    gaps = candidates @ (x_a - x_o) + lowest3(particles, i, candidates @ rot_a) + lowest3(
-        particles, j, -(candidates @ rot_o))
-    best_gap = gaps[0]
-    n = centre_line
-    for c in range(1, 3):
-        if gaps[c] > best_gap:
-            best_gap = gaps[c]
-            n = vec3(candidates[c, 0], candidates[c, 1], candidates[c, 2])
+    # (both patches have facets, ``by_hulls``: each is a candidate, the separating axes of
+    # their planes; a patch's first facet is its normal where it has one)
+    facets_i = _facet_rows(particles, i) @ rot_a.transpose()
+    facets_j = _facet_rows(particles, j) @ rot_o.transpose()
+    warmed = warm.norm_sqr() > 0.25
+    first = centre_line
+    if warmed:
+        first = warm
+    # (each patch's lowest level along the best n so far, body frame: its contact spot's band)
+    best_gap, n, low_a, low_o = _better(bodies, particles, a, i, o, j, ti.Matrix.rows(
+        [first, vec3(facets_j[0, 0], facets_j[0, 1], facets_j[0, 2]),
+         -vec3(facets_i[0, 0], facets_i[0, 1], facets_i[0, 2])]), -1e30, first, 0.0, 0.0)
+    if particles.patch_normal[i].norm_sqr() < 0.25 or particles.patch_normal[j].norm_sqr() < 0.25:
+        # A folded patch: its other facets too.
+        best_gap, n, low_a, low_o = _better(bodies, particles, a, i, o, j, ti.Matrix.rows(
+            [vec3(facets_j[1, 0], facets_j[1, 1], facets_j[1, 2]), vec3(facets_j[2, 0], facets_j[2, 1], facets_j[2, 2]),
+             -vec3(facets_i[1, 0], facets_i[1, 1], facets_i[1, 2])]), best_gap, n, low_a, low_o)
+        best_gap, n, low_a, low_o = _better(bodies, particles, a, i, o, j, ti.Matrix.rows(
+            [-vec3(facets_i[2, 0], facets_i[2, 1], facets_i[2, 2]), vec3(0.0), vec3(0.0)]), best_gap, n, low_a, low_o)
     shift = (ti.max(-best_gap, 0.0) + ti.static(HULL_SHIFT) * ti.max(particles.radius[i], particles.radius[j])) * n
-    p, q = _support_pair(bodies, particles, a, i, o, j, n)
+    steps = ti.select(warmed, ti.static(HULL_WARM_ITERATIONS), ti.static(HULL_ITERATIONS))
+    searching = best_gap <= reach
     # GJK's simplex (up to a triangle of points of the moved hulls' Minkowski difference)
     # and its point closest to the origin.
-    corner_a = p - q + shift
-    corner_b = corner_a
-    corner_c = corner_a
-    x = corner_a
-    searching = best_gap <= reach
-    for _ in range(HULL_ITERATIONS):  # (dynamic: unrolled, each support pass was inlined)
+    x = vec3(0.0)
+    if searching:
+        p, q = _support_pair(bodies, particles, a, i, o, j, n)
+        x = p - q + shift
+    corner_a = x
+    corner_b = x
+    corner_c = x
+    for step in range(steps):  # (dynamic: unrolled, each support pass was inlined)
         length = x.norm()
         if searching and length > 1e-12:
             d = x / length
@@ -379,31 +441,36 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
             gap = (p - q).dot(d)
             if gap > best_gap:
                 best_gap = gap
+                low_a = (p - x_a).dot(d)
+                low_o = (x_o - q).dot(d)
                 n = d
             new = p - q + shift
-            # (no support point nearer the origin than x along d: x is the closest point)
-            searching = x.dot(x - new) > 1e-6 * length * length
-            # The nearest to the origin of the faces the new point makes with the simplex.
-            corners = (corner_a, corner_b, corner_c)
-            closest = x
-            near = 1e30
-            for u_index, v_index in ti.static(((0, 1), (0, 2), (1, 2))):
-                u = corners[u_index]
-                v = corners[v_index]
-                y = _closest_on_triangle(new, u, v)  # (new first: exact on a segment when u = v)
-                if y.norm_sqr() < near:
-                    near = y.norm_sqr()
-                    closest = y
-                    corner_a = u
-                    corner_b = v
-                    corner_c = new
-            x = closest
-    if best_gap > 0.0 and not _faces(n, normal_i, normal_j):
+            # (no support point nearer the origin than x along d: x is the closest point;
+            # a gap past ``reach`` already rules the contact out, a longer search only widens it)
+            searching = x.dot(x - new) > 1e-6 * length * length and best_gap <= reach and step + 1 < steps
+            if searching:
+                # The nearest to the origin of the faces the new point makes with the simplex.
+                corners = (corner_a, corner_b, corner_c)
+                closest = x
+                near = 1e30
+                for u_index, v_index in ti.static(((0, 1), (0, 2), (1, 2))):
+                    u = corners[u_index]
+                    v = corners[v_index]
+                    y = _closest_on_triangle(new, u, v)  # (new first: exact on a segment when u = v)
+                    if y.norm_sqr() < near:
+                        near = y.norm_sqr()
+                        closest = y
+                        corner_a = u
+                        corner_b = v
+                        corner_c = new
+                x = closest
+    if best_gap > 0.0 and not _faces(n, facets_i, facets_j):
         best_gap = ti.static(APART)
-    low_a = lowest(particles, i, rot_a.transpose() @ n)
-    low_o = lowest(particles, j, -(rot_o.transpose() @ n))
-    spot_a = x_a + rot_a @ contact_spot(particles, i, rot_a.transpose() @ n, low_a)
-    spot_o = x_o + rot_o @ contact_spot(particles, j, -(rot_o.transpose() @ n), low_o)
+    spot_a = x_a
+    spot_o = x_o
+    if best_gap <= reach:  # (past it the caller makes no contact: its spots are not needed)
+        spot_a = x_a + rot_a @ contact_spot(particles, i, rot_a.transpose() @ n, low_a)
+        spot_o = x_o + rot_o @ contact_spot(particles, j, -(rot_o.transpose() @ n), low_o)
     return n, best_gap, spot_a, spot_o
 
 
@@ -416,7 +483,7 @@ def by_hulls(particles: ti.template(), i, j):
     pieces, or patches folded round a block's edges) keep the spheres' contact: with their
     hulls' distance a chip among chips dropped at 10 m/s onto a slab was pushed 3.4 mm
     into it."""
-    return particles.patch_normal[i].norm_sqr() > 0.25 and particles.patch_normal[j].norm_sqr() > 0.25
+    return has_facets(particles, i) and has_facets(particles, j)
 
 
 @ti.func
@@ -426,9 +493,8 @@ def by_patches(particles: ti.template(), i, j):
     folded round a small piece, on a body's face). Two with normals or two without meet
     at their hulls' distance instead (``by_hulls``)."""
     has_patch = particles.point_count[i] > 0 or particles.point_count[j] > 0
-    normals = ti.cast(particles.patch_normal[i].norm_sqr() > 0.25, ti.i32) + ti.cast(
-        particles.patch_normal[j].norm_sqr() > 0.25, ti.i32)
-    return has_patch and normals == 1
+    faceted = ti.cast(has_facets(particles, i), ti.i32) + ti.cast(has_facets(particles, j), ti.i32)
+    return has_patch and faceted == 1
 
 
 @ti.func

@@ -111,10 +111,12 @@ def write_bodies(bodies: ti.template(), particles: ti.template(),
 
 @ti.kernel
 def write_patches(particles: ti.template(), ints: ti.types.ndarray(dtype=ti.i32, ndim=2),
-                  normals: ti.types.ndarray(dtype=ti.f32, ndim=2), points: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+                  normals: ti.types.ndarray(dtype=ti.f32, ndim=2), facets: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                  points: ti.types.ndarray(dtype=ti.f32, ndim=2)):
     """The contact patches of S spheres: ``ints`` (S,4) (particle slot, first row of
     ``surface_point`` for its patch, its point count, the first row of those points in
-    ``points``), ``normals`` (S,3) body frame, ``points`` (P,3) [m] body frame."""
+    ``points``), ``normals`` (S,3) and ``facets`` (S, 3 MAX_FACETS) body frame, ``points``
+    (P,3) [m] body frame."""
     ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for s in range(ints.shape[0]):
         p = ints[s, 0]
@@ -122,6 +124,8 @@ def write_patches(particles: ti.template(), ints: ti.types.ndarray(dtype=ti.i32,
         particles.point_start[p] = start
         particles.point_count[p] = ints[s, 2]
         particles.patch_normal[p] = ti.math.vec3(normals[s, 0], normals[s, 1], normals[s, 2])
+        for f in ti.static(range(particles.patch_facet.shape[1])):
+            particles.patch_facet[p, f] = ti.math.vec3(facets[s, 3 * f], facets[s, 3 * f + 1], facets[s, 3 * f + 2])
         for k in range(ints[s, 2]):
             row = ints[s, 3] + k
             particles.surface_point[start + k] = ti.math.vec3(points[row, 0], points[row, 1], points[row, 2])

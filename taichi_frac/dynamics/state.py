@@ -10,6 +10,7 @@ that writes each array.
 import taichi as ti
 
 from ..collision.grid import CELLS_PER_SPHERE
+from ..geometry.contact_patches import MAX_FACETS
 
 vec3 = ti.math.vec3
 vec4 = ti.math.vec4
@@ -169,14 +170,17 @@ class Particles:
         names the previous one: cache_count (2, P) contacts kept for particle P as the
         querying side; cache_key (2, P, CACHE_SLOTS) partner (particle slot >= 0, -1 - k
         ground plane k, -1000 - k static box k); cache_normal [N s], cache_tangent (vec3,
-        [N s]) their accumulated impulses; cache_stamp (2, P) the store that wrote the
+        [N s]) their accumulated impulses; cache_direction (vec3, partner body frame) a hull
+        contact's normal (``Contacts.direction``); cache_stamp (2, P) the store that wrote the
         particle's entries (only the last store, ``cache_epoch``, is valid; add_body sets
         -1 on a reused slot). Writer: solver.store_impulses; read by the narrowphase when
         the same pair is made again.
         Contact patches (``geometry.contact_patches.ContactPatches``): point_start, point_count (i32) the rows
             of ``surface_point`` holding sphere P's patch (count 0: the sphere is its own
             surface, the contacts are sphere contacts); patch_normal (vec3 body frame,
-            unit outward, or zero where the patch faces every way). surface_point, shape
+            unit outward, or zero where the patch faces every way); patch_facet, shape
+            (capacity, MAX_FACETS): vec3 body frame, the planes its triangles lie in
+            (``ContactPatches.facets``; zero rows unused, all zero: none). surface_point, shape
             (max_surface_points,): vec3 [m] body-frame points of the patches, each body's
             in one contiguous range. Writer: add_body.
         slot_end: one past the highest slot in use.
@@ -187,6 +191,7 @@ class Particles:
         self.point_start = ti.field(ti.i32, shape=capacity)
         self.point_count = ti.field(ti.i32, shape=capacity)
         self.patch_normal = vec3.field(shape=capacity)
+        self.patch_facet = vec3.field(shape=(capacity, MAX_FACETS))
         self.surface_point = vec3.field(shape=max_surface_points)
         self.body = ti.field(ti.i32, shape=capacity)
         self.offset = vec3.field(shape=capacity)
@@ -198,6 +203,7 @@ class Particles:
         self.cache_key = ti.field(ti.i32, shape=(2, capacity, CACHE_SLOTS))
         self.cache_normal = ti.field(ti.f32, shape=(2, capacity, CACHE_SLOTS))
         self.cache_tangent = vec3.field(shape=(2, capacity, CACHE_SLOTS))
+        self.cache_direction = vec3.field(shape=(2, capacity, CACHE_SLOTS))
         self.cache_stamp = ti.field(ti.i32, shape=(2, capacity))
         self.parity = ti.field(ti.i32, shape=())
         self.cache_epoch = ti.field(ti.i32, shape=())

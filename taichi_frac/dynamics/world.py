@@ -230,6 +230,7 @@ class World:
             self.slots.point_range[slot] = (first, len(patch.points))
         body_fields.write_patches(self.particles, np.ascontiguousarray(np.concatenate(ints), dtype=np.int32),
                        np.concatenate([p.normals for p in patches]).astype(np.float32),
+                       np.concatenate([p.facets.reshape(len(p.facets), -1) for p in patches]).astype(np.float32),
                        np.concatenate([p.points for p in patches]).astype(np.float32))
 
     def remove_body(self, body: int) -> None:

@@ -24,11 +24,18 @@ class ContactPatches:
         normals: (N,3) unit outward normal of each patch (its triangles' area-weighted
             normal), or zeros where the triangles face every way (their summed area normal
             is under ``FLAT_ENOUGH`` of their area: a one-tet chip's closed surface).
+        facets: (N, MAX_FACETS, 3) unit outward normals of the planes a patch's triangles
+            lie in: its normal alone where it has one; for a patch folded round a block's
+            edge or corner, the area-weighted normal of each group of its triangles within
+            ``FACET_ANGLE`` of each other (two or three: the faces it spans); zeros where
+            its triangles need more planes than ``MAX_FACETS`` (a chip's closed surface, a
+            curved piece) and in the unused rows.
     """
 
     offsets: np.ndarray
     points: np.ndarray
     normals: np.ndarray
+    facets: np.ndarray
 
 
 #: A patch has a normal when its triangles' summed area normal is at least this fraction of
@@ -36,6 +43,16 @@ class ContactPatches:
 #: edge: 0.71; a closed tet: 0). A folded patch's mean normal is no face's: a chip landing
 #: beside the edge was pushed along it into the body.
 FLAT_ENOUGH = 0.9
+
+#: Planes a folded patch may span and keep its facets (``ContactPatches.facets``): a block's
+#: edge (two faces) or corner (three). A one-tet chip's four faces are more: it faces every
+#: way, and meets a body on the body's patch (``collision.surface.pair``).
+MAX_FACETS = 3
+
+#: Triangles whose normals are within this angle [rad] of a facet's first (largest)
+#: triangle's lie in that facet (``ContactPatches.facets``): a tet mesh's faces of one flat
+#: side are coplanar to rounding.
+FACET_ANGLE = 0.1
 
 
 def contact_patches(model, member_offsets: np.ndarray, members: np.ndarray) -> ContactPatches:
@@ -59,4 +76,43 @@ def contact_patches(model, member_offsets: np.ndarray, members: np.ndarray) -> C
     length = rows.norm(summed)
     flat = length >= FLAT_ENOUGH * np.maximum(area, 1e-300)
     normals = np.where(flat[:, None], summed / np.where(flat, length, 1.0)[:, None], 0.0)
-    return ContactPatches(offsets=offsets, points=model.vertices[keys % v_count], normals=normals)
+    facets = np.zeros((count, MAX_FACETS, 3))
+    facets[:, 0] = normals
+    folded = ~flat & (area > 0.0)
+    on_folded = folded[face_group]
+    if on_folded.any():
+        facets[folded] = _facets(face_group[on_folded], area_normal[on_folded])[np.flatnonzero(folded)]
+    return ContactPatches(offsets=offsets, points=model.vertices[keys % v_count], normals=normals, facets=facets)
+
+
+def _facets(group: np.ndarray, area_normal: np.ndarray) -> np.ndarray:
+    """(G, MAX_FACETS, 3) the facets of folded patches from their triangles' groups (T,)
+    (G: one more than the largest) and area normals (T,3): in each patch, the largest
+    triangle not yet in a facet and every such triangle within ``FACET_ANGLE`` of it make
+    the next facet, its summed area normal normalised; all zeros where triangles remain
+    after ``MAX_FACETS`` facets. Every patch at once, a pass a facet."""
+    size = rows.norm(area_normal)
+    order = np.lexsort((-size, group))
+    group, area_normal, size = group[order], area_normal[order], size[order]
+    unit = area_normal / np.maximum(size, 1e-300)[:, None]
+    count = int(group.max()) + 1
+    starts = np.searchsorted(group, np.arange(count))
+    ends = np.searchsorted(group, np.arange(count), side="right")
+    present = ends > starts
+    index = np.arange(len(group))
+    left = np.ones(len(group), dtype=bool)
+    out = np.zeros((count, MAX_FACETS + 1, 3))
+    for k in range(MAX_FACETS + 1):
+        # The first (largest) triangle left in each patch, or none (past its end).
+        first = np.minimum.reduceat(np.where(left, index, len(group)), np.minimum(starts, len(group) - 1))
+        has = present & (first < ends)
+        leader = np.zeros((count, 3))
+        leader[has] = unit[first[has]]
+        member = left & has[group] & (np.einsum("ij,ij->i", unit, leader[group]) >= np.cos(FACET_ANGLE))
+        for d in range(3):
+            out[:, k, d] = np.bincount(group[member], weights=area_normal[member, d], minlength=count)
+        left &= ~member
+    out[np.any(out[:, MAX_FACETS] != 0.0, axis=1)] = 0.0
+    length = rows.norm(out.reshape(-1, 3)).reshape(count, MAX_FACETS + 1)
+    out /= np.maximum(length, 1e-300)[:, :, None]
+    return out[:, :MAX_FACETS]
