@@ -5,6 +5,7 @@ import dataclasses
 import functools
 from pathlib import Path
 
+import manifold3d as m3
 import numpy as np
 import pytest
 import trimesh
@@ -259,6 +260,32 @@ def test_a_crack_through_a_merged_piece_leaves_it_one_shell(box):
         _assert_closed(mesh)
         assert len(solid.solid.decompose()) == 1
         assert signed_volume(mesh.vertices, mesh.faces) == pytest.approx(volume, rel=1e-6)
+
+
+def test_stray_shells_join_the_main_shell_they_touch():
+    """Hand-placed unit boxes (spacing 1): piece 0's main box has a bit across a slab's gap
+    (joined to it), a bit against piece 1's main box only (it goes to piece 1) and a bit
+    touching nothing (it stays apart). Closed form: the bridge over the 1 x 1 contact fills
+    the gap and no more (it lies inside the boxes elsewhere), so each joined solid is 4^3 + 1."""
+    from taichi_frac.geometry.piece_shells import join_stray_shells
+    from taichi_frac.geometry.piece_surface import _with_crack_index
+
+    def cube(low, high):
+        low, high = np.asarray(low, float), np.asarray(high, float)
+        return _with_crack_index(m3.Manifold.cube(tuple(high - low)).translate(tuple(low)), -1)
+
+    gap = 2e-4
+    own_bit = cube([4 + gap, 0, 0], [5, 1, 1])
+    neighbour_bit = cube([9, 0, 0], [10 - gap, 1, 1])
+    lone_bit = cube([20, 20, 20], [21, 21, 21])
+    solids = {0: m3.Manifold.compose([cube([0, 0, 0], [4, 4, 4]), own_bit, neighbour_bit, lone_bit]),
+              1: cube([10, 0, 0], [14, 4, 4])}
+    joined, moved = join_stray_shells(solids, cube([-1, -1, -1], [30, 30, 30]), 1.0)
+    assert moved == 1
+    shells = sorted(joined[0].decompose(), key=lambda shell: -shell.volume())
+    assert len(shells) == 2 and shells[1].volume() == pytest.approx(1.0, rel=1e-9)
+    assert shells[0].volume() == pytest.approx(65.0, abs=1e-9)
+    assert len(joined[1].decompose()) == 1 and joined[1].volume() == pytest.approx(65.0, abs=1e-9)
 
 
 def test_a_piece_reaching_far_past_its_tets_gets_its_tets_boundary(box):
