@@ -278,9 +278,8 @@ def test_stray_shells_join_the_main_shell_they_touch():
     own_bit = cube([4 + gap, 0, 0], [5, 1, 1])
     neighbour_bit = cube([9, 0, 0], [10 - gap, 1, 1])
     lone_bit = cube([20, 20, 20], [21, 21, 21])
-    solids = {0: m3.Manifold.compose([cube([0, 0, 0], [4, 4, 4]), own_bit, neighbour_bit, lone_bit]),
-              1: cube([10, 0, 0], [14, 4, 4])}
-    joined, moved = join_stray_shells(solids, cube([-1, -1, -1], [30, 30, 30]), 1.0)
+    joined, moved = join_stray_shells({0: [cube([0, 0, 0], [4, 4, 4]), own_bit, neighbour_bit, lone_bit],
+                                       1: [cube([10, 0, 0], [14, 4, 4])]}, 1.0)
     assert moved == 1
     shells = sorted(joined[0].decompose(), key=lambda shell: -shell.volume())
     assert len(shells) == 2 and shells[1].volume() == pytest.approx(1.0, rel=1e-9)

@@ -4,7 +4,7 @@ fly beside it as a separate solid. Crumbs (``without_crumbs``) are dropped; wher
 against its own piece's main shell (across a crack slab's hairline gap or on a shared cell
 face) a thin bridge over that contact joins the two; where it lies against another piece's
 main shell only, it goes to that piece, bridged the same way.
-Plain numpy and trimesh for the contacts; ``manifold3d`` for the bridges.
+Plain numpy for the contacts; ``manifold3d`` for the bridges.
 """
 
 from __future__ import annotations
@@ -27,61 +27,60 @@ CONTACT_GAP_FACTOR = 1e-3
 #: A bit joins a shell it touches over at least this area [particle spacings squared]: less
 #: is an edge or a corner, where a bridge would be a visible neck.
 CONTACT_AREA_FACTOR = 0.1
-#: A bit goes to another piece only where its contact with its own piece's main shell is
-#: under this share of its contact with that piece's.
-OWN_CONTACT_SHARE = 0.25
-#: ... and only where its volume is under this share of that piece's main shell's (a larger
+#: A bit goes to another piece only where its volume is under this share of that piece's main shell's (a larger
 #: bit is its own piece's material: moved, it would change the other's volume by more).
 MOVED_VOLUME_SHARE = 0.1
 
 
-def join_stray_shells(solids: dict, render_solid: m3.Manifold, spacing: float) -> tuple[dict, int]:
-    """Each piece's solid (``solids``: piece -> closed Manifold, the body's frame [m]) with its
-    shells other than the largest joined to the largest shell they touch (CONTACT_AREA_FACTOR),
-    preferring their own piece's (OWN_CONTACT_SHARE): by a bridge, the ``render_solid`` within
-    a prism over the bit's faces that touch that shell (CONTACT_GAP_FACTOR), reaching through
-    the gap into both. Bits that touch no main shell stay. Returns (solids, how many bits
-    moved to another piece)."""
-    shells = {k: sorted(solid.decompose(), key=lambda shell: -shell.volume()) for k, solid in solids.items()}
+def join_stray_shells(shells: dict, spacing: float) -> tuple[dict, int]:
+    """Each piece's solid from its ``shells`` (piece -> closed Manifolds of one shell each,
+    none empty, the body's frame [m]): those other than the largest joined to the largest
+    shell they touch over CONTACT_AREA_FACTOR, their own piece's where they touch it so, else
+    the other piece's they touch most (MOVED_VOLUME_SHARE). The bridge: prisms over the bit's faces that touch
+    that shell (CONTACT_GAP_FACTOR), reaching through the gap into both. Bits that touch no
+    main shell stay. Returns (solids, how many bits moved to another piece)."""
+    from .piece_surface import DUST_VOLUME_FACTOR
+
+    shells = {k: sorted(mine, key=lambda shell: -shell.volume()) for k, mine in shells.items()}
     strays = [(k, bit) for k, mine in shells.items() for bit in mine[1:]]
-    if not strays:
-        return solids, 0
-    mains = {k: mine[0] for k, mine in shells.items() if mine}  # each piece's main shell, joined bits and all
+    mains = {k: mine[0] for k, mine in shells.items()}
     main_triangles = {}  # piece -> its main shell's triangles (F,3,3) [m], once asked for
-    gap = CONTACT_GAP_FACTOR * spacing
+    gap, least = CONTACT_GAP_FACTOR * spacing, CONTACT_AREA_FACTOR * spacing**2
+    joining = {k: [] for k in shells}  # piece -> the bits and bridges its main shell is joined to
     kept = {k: [] for k in shells}
     moved = 0
-    for k, bit in sorted(strays, key=lambda item: -item[1].volume()):
+
+    def contact(mesh, j):
+        """The faces of ``mesh`` touching piece j's main shell and their area [m^2]."""
+        box = np.asarray(mains[j].bounding_box()).reshape(2, 3)
+        if not (np.all(mesh.bounds[0] <= box[1] + gap) and np.all(box[0] <= mesh.bounds[1] + gap)):
+            return np.zeros(0, dtype=np.int64), 0.0
+        if j not in main_triangles:
+            main_triangles[j] = _trimesh(mains[j]).triangles
+        faces = _touching(mesh, main_triangles[j], gap)
+        return faces, float(mesh.area_faces[faces].sum())
+
+    for k, bit in strays:
         mesh = _trimesh(bit)
-        contact = {}
-        for j, main in mains.items():
-            box = np.asarray(main.bounding_box()).reshape(2, 3)
-            if np.all(mesh.bounds[0] <= box[1] + gap) and np.all(box[0] <= mesh.bounds[1] + gap):
-                if j not in main_triangles:
-                    main_triangles[j] = _trimesh(shells[j][0]).triangles
-                contact[j] = _touching(mesh, main_triangles[j], gap)
-        area = {j: float(mesh.area_faces[faces].sum()) for j, faces in contact.items()}
-        least = CONTACT_AREA_FACTOR * spacing**2
-        best = max((j for j in area if j != k and bit.volume() <= MOVED_VOLUME_SHARE * mains[j].volume()),
-                   key=area.get, default=None)
-        if area.get(k, 0.0) >= least and (best is None or area[k] >= OWN_CONTACT_SHARE * area[best]):
-            target = k
-        elif best is not None and area[best] >= least:
-            target = best
-        else:
+        faces, area = contact(mesh, k)
+        target = k
+        if area < least:  # (its own piece first: its tets say the bit is that piece's)
+            others = [(j, *contact(mesh, j)) for j in mains
+                      if j != k and bit.volume() <= MOVED_VOLUME_SHARE * mains[j].volume()]
+            target, faces, area = max(others, key=lambda item: item[2], default=(k, faces, area))
+        if area < least:
             kept[k].append(bit)
             continue
-        joined = _joined(mains[target], bit, _bridge(mesh, contact[target], render_solid, gap), spacing)
-        if joined is None:  # (the gap is no part of the render solid: a stray of the piece that broke)
-            joined = _joined(mains[target], bit, _bridge(mesh, contact[target], None, gap), spacing)
-        if joined is None:
-            kept[k].append(bit)
-            continue
-        mains[target] = joined
+        joining[target] += [bit, _bridge(mesh, faces, gap)]
         moved += target != k
     result = {}
-    for k, solid in solids.items():
-        parts = [mains[k], *kept[k]] if k in mains else [solid]
+    for k in shells:
+        # (where a bridge meets the artist's surface its faces lie on the parts' own: the
+        # union leaves flat slivers of no volume there, dropped as dust)
+        parts = [mains[k], *kept[k]]
+        if joining[k]:
+            main = m3.Manifold.batch_boolean([mains[k], *joining[k]], m3.OpType.Add).decompose()
+            parts[:1] = [shell for shell in main if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3]
         result[k] = parts[0] if len(parts) == 1 else m3.Manifold.compose(parts)
     return result, moved
 
@@ -94,17 +93,6 @@ def without_crumbs(mine, spacing: float) -> list:
     largest = max((part.volume() for part in mine), default=0.0)
     least = max(CRUMB_VOLUME_FACTOR * spacing**3, CRUMB_VOLUME_SHARE * largest)
     return [part for part in mine if part.volume() >= least or part.volume() == largest]
-
-
-def _joined(main: m3.Manifold, bit: m3.Manifold, bridge: m3.Manifold, spacing: float) -> m3.Manifold | None:
-    """The union of ``main``, ``bit`` and ``bridge`` less its dust (where the bridge meets the
-    artist's surface its faces lie on the parts' own: flat slivers of no volume), or None
-    where it is not one shell."""
-    from .piece_surface import DUST_VOLUME_FACTOR
-
-    shells = [shell for shell in m3.Manifold.batch_boolean([main, bit, bridge], m3.OpType.Add).decompose()
-              if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3]
-    return shells[0] if len(shells) == 1 else None
 
 
 def _trimesh(solid: m3.Manifold):
@@ -131,15 +119,23 @@ def _touching(mesh, triangles: np.ndarray, gap: float) -> np.ndarray:
     return np.unique(point[distance <= gap])
 
 
-def _bridge(mesh, faces: np.ndarray, render_solid: m3.Manifold | None, gap: float) -> m3.Manifold:
-    """The ``render_solid`` (None: all) within prisms over ``mesh``'s ``faces``: from ``gap``
-    [m] inside the bit to twice it outside, across the gap into the shell it touches."""
-    from .piece_surface import HULL_FACE, _with_crack_index
+def _bridge(mesh, faces: np.ndarray, gap: float) -> m3.Manifold:
+    """Prisms over ``mesh``'s ``faces`` from ``gap`` [m] inside the bit to twice it outside,
+    across the gap into the shell it touches. Their faces lie on no crack (HULL_FACE, like a
+    carved piece's): in the gap, and where a contact face meets the artist's surface, out of
+    it by at most twice ``gap``."""
+    from .piece_surface import _CRACK, _PROPERTY_COUNT, HULL_FACE
 
     normal = mesh.face_normals[faces][:, None, :]
     corners = mesh.triangles[faces]
-    prisms = [m3.Manifold.hull_points(np.ascontiguousarray(points.reshape(-1, 3)))
-              for points in np.concatenate([corners - gap * normal, corners + 2.0 * gap * normal], axis=1)]
-    # (its faces in the gap lie on no crack: HULL_FACE, like a carved piece's)
-    bridge = _with_crack_index(m3.Manifold.batch_boolean(prisms, m3.OpType.Add), HULL_FACE)
-    return bridge if render_solid is None else render_solid ^ bridge
+    points = np.concatenate([corners - gap * normal, corners + 2.0 * gap * normal], axis=1)  # (P,6,3)
+    props = np.zeros((len(points) * 6, _PROPERTY_COUNT))
+    props[:, :3] = points.reshape(-1, 3)
+    props[:, _CRACK] = HULL_FACE
+    # Each prism: its inner cap, its outer cap, and two triangles a side (the corners are
+    # counter-clockwise about the outward normal, so each side faces away from the prism).
+    one = np.array([[0, 2, 1], [3, 4, 5], [0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [2, 0, 3], [2, 3, 5]])
+    triangles = (one[None] + 6 * np.arange(len(points))[:, None, None]).reshape(-1, 3)
+    prisms = m3.Manifold(m3.Mesh64(vert_properties=props, tri_verts=np.ascontiguousarray(triangles, dtype=np.uint64)))
+    # (one mesh of overlapping prisms is no valid solid: each is taken apart and they are added)
+    return m3.Manifold.batch_boolean(prisms.decompose(), m3.OpType.Add)

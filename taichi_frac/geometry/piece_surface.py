@@ -466,30 +466,26 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     split_up = {k for k, mine in kept.items() if k not in failed and len(mine) > 1}
     spheres = [surface for surface in new_cracks[len(render.cracks):] if surface.radius is not None]
     welds = _weld_bits(render.solid, planes, spheres, split_up, spacing, roughness, roughness_scale, seed)
-    solids = {}  # piece -> its solid, the body's frame
+    shells = {}  # piece -> its shells, the body's frame
     origins = np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)
     for k in range(len(origins)):
         mine = kept.get(k, [])
         if k in failed:
             # Its share of the solid nearest its own tets (see failed_piece_shells).
-            shells = without_crumbs(failed_piece_shells(render.solid, model, labels, k, failed, parts, owner,
-                                                         spacing), spacing)
-            if shells:
-                stats["cell_pieces"] += 1
-                solids[k] = shells[0] if len(shells) == 1 else m3.Manifold.compose(shells)
-            continue
-        if not mine:
+            shells[k] = without_crumbs(failed_piece_shells(render.solid, model, labels, k, failed, parts, owner,
+                                                           spacing), spacing)
+            stats["cell_pieces"] += bool(shells[k])
+        elif not mine:
             stats["empty_pieces"] += 1
-            continue
-        if k in welds:
+        elif k in welds:
             # (where a weld meets the artist's surface its faces lie on the parts' own: the
             # union leaves flat slivers of no volume there, dropped as dust)
-            shells = m3.Manifold.batch_boolean([*mine, *welds[k]], m3.OpType.Add).decompose()
-            solids[k] = m3.Manifold.compose([s for s in shells if s.volume() >= DUST_VOLUME_FACTOR * spacing**3])
+            welded = m3.Manifold.batch_boolean([*mine, *welds[k]], m3.OpType.Add).decompose()
+            shells[k] = [shell for shell in welded if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3]
             stats["welded_pieces"] += 1
         else:
-            solids[k] = mine[0] if len(mine) == 1 else m3.Manifold.compose(mine)
-    solids, stats["shells_moved"] = join_stray_shells(solids, render.solid, spacing)
+            shells[k] = mine
+    solids, stats["shells_moved"] = join_stray_shells({k: mine for k, mine in shells.items() if mine}, spacing)
     pieces = [RenderSolid(solids[k], tuple(new_cracks), spacing).moved(origin) if k in solids else None
               for k, origin in enumerate(origins)]
     stats["unassigned_parts"] = int(sum(1 for o in owner if o == -1))
