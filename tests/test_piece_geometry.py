@@ -421,16 +421,18 @@ def _struck(model, report, material, options, point, direction, force_scale=400.
     return pieces, renders, counts
 
 
-def _check_struck(pieces, renders, counts, mean_volume_error=0.02, fallback_share=0.1, large_volume_error=0.03):
+def _check_struck(pieces, renders, counts, mean_volume_error=0.02, fallback_share=0.1, large_volume_error=0.03,
+                  multi_shell=0):
     """At most ``fallback_share`` of the pieces (and at least one) fall back to their tets'
     boundary; every other piece
     closed, manifold, outward; crack faces on their cracks (a ring crack's
     sphere polygon within its sagitta bound); volumes: the pieces of 300 tets or more within
     ``large_volume_error`` of their tets', all pieces' errors (volume-weighted mean) within
-    ``mean_volume_error``."""
+    ``mean_volume_error``; at most ``multi_shell`` pieces of two or more shells (with stray
+    shells left apart: 7 of the glass wall's 60 pieces, 6 of spot.obj's 11)."""
     assert len(pieces) >= 2, "the impact must break the body"
     assert counts["empty_pieces"] == 0
-    errors, volumes = [], []
+    errors, volumes, shells = [], [], []
     assert counts["fallback_pieces"] <= max(1, int(fallback_share * len(pieces)))
     for piece, solid in zip(pieces, renders):
         if solid is None:  # the cut failed it: the cache writes its tets' boundary
@@ -442,7 +444,9 @@ def _check_struck(pieces, renders, counts, mean_volume_error=0.02, fallback_shar
             assert abs(quality["volume_error"]) < large_volume_error, quality
         errors.append(abs(quality["volume_error"]))
         volumes.append(piece.model.volume)
+        shells.append(quality["shells"])
     assert np.average(errors, weights=volumes) < mean_volume_error
+    assert sum(count > 1 for count in shells) <= multi_shell, shells
 
 
 def _scene_body(path, name):
@@ -478,7 +482,7 @@ def test_glass_wall_struck_by_the_ball():
     # its tets' volume by 4.1 %.
     fracture = dataclasses.replace(obj.fracture, stress_model="sph")
     _check_struck(*_struck(model, report, obj.material, fracture, model.particle_position[centre],
-                           [1.0, 0.0, 0.0], force_scale=4000.0), mean_volume_error=0.04)
+                           [1.0, 0.0, 0.0], force_scale=4000.0), mean_volume_error=0.04, multi_shell=1)
 
 
 @functools.lru_cache(maxsize=1)

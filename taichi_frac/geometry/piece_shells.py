@@ -126,6 +126,7 @@ def _bridge(mesh, faces: np.ndarray, gap: float) -> m3.Manifold:
     it by at most twice ``gap``."""
     from .piece_surface import _CRACK, _PROPERTY_COUNT, HULL_FACE
 
+    faces = faces[mesh.area_faces[faces] > 0.0]  # (a face of no area has no normal to extrude along)
     normal = mesh.face_normals[faces][:, None, :]
     corners = mesh.triangles[faces]
     points = np.concatenate([corners - gap * normal, corners + 2.0 * gap * normal], axis=1)  # (P,6,3)
