@@ -41,7 +41,8 @@ def join_stray_shells(shells: dict, spacing: float) -> tuple[dict, int]:
     main shell stay. Returns (solids, how many bits moved to another piece)."""
     from .piece_surface import DUST_VOLUME_FACTOR
 
-    shells = {k: sorted(mine, key=lambda shell: -shell.volume()) for k, mine in shells.items()}
+    volume = {id(shell): shell.volume() for mine in shells.values() for shell in mine}  # [m^3]
+    shells = {k: sorted(mine, key=lambda shell: -volume[id(shell)]) for k, mine in shells.items()}
     strays = [(k, bit) for k, mine in shells.items() for bit in mine[1:]]
     mains = {k: mine[0] for k, mine in shells.items()}
     main_triangles = {}  # piece -> its main shell's triangles (F,3,3) [m], once asked for
@@ -66,7 +67,7 @@ def join_stray_shells(shells: dict, spacing: float) -> tuple[dict, int]:
         target = k
         if area < least:  # (its own piece first: its tets say the bit is that piece's)
             others = [(j, *contact(mesh, j)) for j in mains
-                      if j != k and bit.volume() <= MOVED_VOLUME_SHARE * mains[j].volume()]
+                      if j != k and volume[id(bit)] <= MOVED_VOLUME_SHARE * volume[id(mains[j])]]
             target, faces, area = max(others, key=lambda item: item[2], default=(k, faces, area))
         if area < least:
             kept[k].append(bit)
