@@ -39,6 +39,8 @@ holds well over their volume (it holds a neighbour's material), and the neighbou
 it (``geometry/piece_parts.py``) get the solid nearer their tet centroids than those of the
 other pieces so failed, less what the other pieces hold: the artist's surface outside, the
 other pieces' crack faces against them, faces between nearest-centroid cells between them.
+A piece's crumbs are dropped and its other stray shells bridged to the main shell they lie
+against, its own or a neighbour's (``piece_shells.join_stray_shells``).
 
 ``crack_roughness`` (FractureOptions) displaces the slabs' faces along the crack normal
 by smooth value noise, the same on both faces, so the two sides of a crack still fit.
@@ -55,6 +57,7 @@ import trimesh
 
 from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
                           overfull_pieces, overreaching_pieces)
+from .piece_shells import join_stray_shells, without_crumbs
 from .surface_attributes import input_corner_normals
 
 #: Slab thickness as a fraction of the particle spacing: the two pieces of a crack are this
@@ -80,14 +83,6 @@ SLAB_REACH_FACTOR = 8.0
 #: Parts of the cut solid smaller than this [particle spacings cubed] are dropped: chips
 #: where two slabs' edges cross the surface, far below a render's resolution.
 DUST_VOLUME_FACTOR = 1e-2
-
-#: A piece's parts smaller than this [particle spacings cubed] beside a larger one are
-#: dropped: crumbs where cracks meet, under a mean tet's volume.
-CRUMB_VOLUME_FACTOR = 1.0
-#: So are those under this share of its largest part: chips where cracks or the faces of a
-#: divided part's cells cross the surface, which would travel beside the piece as separate
-#: shells (they hold under this share of its volume each).
-CRUMB_VOLUME_SHARE = 0.01
 
 #: Largest gap [particle spacings] between a ring crack's sphere and its polygon.
 SPHERE_SAGITTA_FACTOR = 0.02
@@ -413,7 +408,8 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     piece its tets' boundary, exact in volume); stats a dict of counts (slabs, parts,
     unassigned parts, pieces without a part, ``fallback_pieces``: pieces the cut failed, see
     ``failed_pieces``, of which ``cell_pieces`` got the solid nearest their tets instead
-    (``piece_parts.failed_piece_shells``) and the rest None).
+    (``piece_parts.failed_piece_shells``) and the rest None; ``shells_moved``: stray shells
+    joined to another piece, see ``piece_shells.join_stray_shells``).
     """
     from ..fracture.crack_types import CrackPlane
 
@@ -466,49 +462,34 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     failed |= overfull_pieces(parts, owner, model, labels, spacing) - received
     stats["fallback_pieces"] = len(failed)
     # Each piece's parts without its crumbs, once: the welds and the pieces below read them.
-    kept = {k: _without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing) for k in set(owner) if k >= 0}
+    kept = {k: without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing) for k in set(owner) if k >= 0}
     split_up = {k for k, mine in kept.items() if k not in failed and len(mine) > 1}
     spheres = [surface for surface in new_cracks[len(render.cracks):] if surface.radius is not None]
     welds = _weld_bits(render.solid, planes, spheres, split_up, spacing, roughness, roughness_scale, seed)
-    pieces = []
-    for k, origin in enumerate(np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)):
+    shells = {}  # piece -> its shells, the body's frame
+    origins = np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)
+    for k in range(len(origins)):
         mine = kept.get(k, [])
         if k in failed:
             # Its share of the solid nearest its own tets (see failed_piece_shells).
-            shells = _without_crumbs(failed_piece_shells(render.solid, model, labels, k, failed, parts, owner,
-                                                         spacing), spacing)
-            if shells:
-                stats["cell_pieces"] += 1
-                solid = shells[0] if len(shells) == 1 else m3.Manifold.compose(shells)
-                pieces.append(RenderSolid(solid, tuple(new_cracks), spacing).moved(origin))
-            else:
-                pieces.append(None)
-            continue
-        if not mine:
-            pieces.append(None)
+            shells[k] = without_crumbs(failed_piece_shells(render.solid, model, labels, k, failed, parts, owner,
+                                                           spacing), spacing)
+            stats["cell_pieces"] += bool(shells[k])
+        elif not mine:
             stats["empty_pieces"] += 1
-            continue
-        if k in welds:
+        elif k in welds:
             # (where a weld meets the artist's surface its faces lie on the parts' own: the
             # union leaves flat slivers of no volume there, dropped as dust)
-            shells = m3.Manifold.batch_boolean([*mine, *welds[k]], m3.OpType.Add).decompose()
-            solid = m3.Manifold.compose([shell for shell in shells if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3])
+            welded = m3.Manifold.batch_boolean([*mine, *welds[k]], m3.OpType.Add).decompose()
+            shells[k] = [shell for shell in welded if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3]
             stats["welded_pieces"] += 1
         else:
-            solid = mine[0] if len(mine) == 1 else m3.Manifold.compose(mine)
-        pieces.append(RenderSolid(solid, tuple(new_cracks), spacing).moved(origin))
+            shells[k] = mine
+    solids, stats["shells_moved"] = join_stray_shells({k: mine for k, mine in shells.items() if mine}, spacing)
+    pieces = [RenderSolid(solids[k], tuple(new_cracks), spacing).moved(origin) if k in solids else None
+              for k, origin in enumerate(origins)]
     stats["unassigned_parts"] = int(sum(1 for o in owner if o == -1))
     return pieces, stats
-
-
-def _without_crumbs(mine, spacing: float) -> list:
-    """A piece's parts less those under CRUMB_VOLUME_FACTOR spacings cubed or CRUMB_VOLUME_SHARE
-    of the largest beside it: wedges where two cracks' slabs cross near the surface, chips
-    where a divided part's cell faces do, each a separate shell that would travel with the
-    piece."""
-    largest = max((part.volume() for part in mine), default=0.0)
-    least = max(CRUMB_VOLUME_FACTOR * spacing**3, CRUMB_VOLUME_SHARE * largest)
-    return [part for part in mine if part.volume() >= least or part.volume() == largest]
 
 
 def _weld_bits(solid: m3.Manifold, planes, spheres, split_up: set, spacing: float, roughness: float,

@@ -1,0 +1,143 @@
+"""A piece's shells: crumbs dropped, stray bits joined. A bit of a piece apart from its main
+shell (material a divided part's cells gave it beyond a crack's slab, a carved corner) would
+fly beside it as a separate solid. Crumbs (``without_crumbs``) are dropped; where a bit lies
+against its own piece's main shell (across a crack slab's hairline gap or on a shared cell
+face) a thin bridge over that contact joins the two; where it lies against another piece's
+main shell only, it goes to that piece, bridged the same way.
+Plain numpy for the contacts; ``manifold3d`` for the bridges.
+"""
+
+from __future__ import annotations
+
+import manifold3d as m3
+import numpy as np
+
+#: A piece's parts smaller than this [particle spacings cubed] beside a larger one are
+#: dropped: crumbs where cracks meet, under a mean tet's volume.
+CRUMB_VOLUME_FACTOR = 1.0
+#: So are those under this share of its largest part: chips where cracks or the faces of a
+#: divided part's cells cross the surface, which would travel beside the piece as separate
+#: shells (they hold under this share of its volume each).
+CRUMB_VOLUME_SHARE = 0.01
+
+#: Two faces touch when they lie within this [particle spacings] of each other: five crack
+#: slabs' thickness (the hairline gap a slab leaves between two parts), so a bit facing its
+#: piece across that gap touches it.
+CONTACT_GAP_FACTOR = 1e-3
+#: A bit joins a shell it touches over at least this area [particle spacings squared]: less
+#: is an edge or a corner, where a bridge would be a visible neck.
+CONTACT_AREA_FACTOR = 0.1
+#: A bit goes to another piece only where its volume is under this share of that piece's main shell's (a larger
+#: bit is its own piece's material: moved, it would change the other's volume by more).
+MOVED_VOLUME_SHARE = 0.1
+
+
+def join_stray_shells(shells: dict, spacing: float) -> tuple[dict, int]:
+    """Each piece's solid from its ``shells`` (piece -> closed Manifolds of one shell each,
+    none empty, the body's frame [m]): those other than the largest joined to the largest
+    shell they touch over CONTACT_AREA_FACTOR, their own piece's where they touch it so, else
+    the other piece's they touch most (MOVED_VOLUME_SHARE). The bridge: prisms over the bit's faces that touch
+    that shell (CONTACT_GAP_FACTOR), reaching through the gap into both. Bits that touch no
+    main shell stay. Returns (solids, how many bits moved to another piece)."""
+    from .piece_surface import DUST_VOLUME_FACTOR
+
+    volume = {id(shell): shell.volume() for mine in shells.values() for shell in mine}  # [m^3]
+    shells = {k: sorted(mine, key=lambda shell: -volume[id(shell)]) for k, mine in shells.items()}
+    strays = [(k, bit) for k, mine in shells.items() for bit in mine[1:]]
+    mains = {k: mine[0] for k, mine in shells.items()}
+    main_triangles = {}  # piece -> its main shell's triangles (F,3,3) [m], once asked for
+    gap, least = CONTACT_GAP_FACTOR * spacing, CONTACT_AREA_FACTOR * spacing**2
+    joining = {k: [] for k in shells}  # piece -> the bits and bridges its main shell is joined to
+    kept = {k: [] for k in shells}
+    moved = 0
+
+    def contact(mesh, j):
+        """The faces of ``mesh`` touching piece j's main shell and their area [m^2]."""
+        box = np.asarray(mains[j].bounding_box()).reshape(2, 3)
+        if not (np.all(mesh.bounds[0] <= box[1] + gap) and np.all(box[0] <= mesh.bounds[1] + gap)):
+            return np.zeros(0, dtype=np.int64), 0.0
+        if j not in main_triangles:
+            main_triangles[j] = _trimesh(mains[j]).triangles
+        faces = _touching(mesh, main_triangles[j], gap)
+        return faces, float(mesh.area_faces[faces].sum())
+
+    for k, bit in strays:
+        mesh = _trimesh(bit)
+        faces, area = contact(mesh, k)
+        target = k
+        if area < least:  # (its own piece first: its tets say the bit is that piece's)
+            others = [(j, *contact(mesh, j)) for j in mains
+                      if j != k and volume[id(bit)] <= MOVED_VOLUME_SHARE * volume[id(mains[j])]]
+            target, faces, area = max(others, key=lambda item: item[2], default=(k, faces, area))
+        if area < least:
+            kept[k].append(bit)
+            continue
+        joining[target] += [bit, _bridge(mesh, faces, gap)]
+        moved += target != k
+    result = {}
+    for k in shells:
+        # (where a bridge meets the artist's surface its faces lie on the parts' own: the
+        # union leaves flat slivers of no volume there, dropped as dust)
+        parts = [mains[k], *kept[k]]
+        if joining[k]:
+            main = m3.Manifold.batch_boolean([mains[k], *joining[k]], m3.OpType.Add).decompose()
+            parts[:1] = [shell for shell in main if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+        result[k] = parts[0] if len(parts) == 1 else m3.Manifold.compose(parts)
+    return result, moved
+
+
+def without_crumbs(mine, spacing: float) -> list:
+    """A piece's parts less those under CRUMB_VOLUME_FACTOR spacings cubed or CRUMB_VOLUME_SHARE
+    of the largest beside it: wedges where two cracks' slabs cross near the surface, chips
+    where a divided part's cell faces do, each a separate shell that would travel with the
+    piece."""
+    largest = max((part.volume() for part in mine), default=0.0)
+    least = max(CRUMB_VOLUME_FACTOR * spacing**3, CRUMB_VOLUME_SHARE * largest)
+    return [part for part in mine if part.volume() >= least or part.volume() == largest]
+
+
+def _trimesh(solid: m3.Manifold):
+    import trimesh
+
+    mesh = solid.to_mesh64()
+    return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts, dtype=np.int64),
+                           process=False)
+
+
+def _touching(mesh, triangles: np.ndarray, gap: float) -> np.ndarray:
+    """Indices of ``mesh``'s faces whose centres lie within ``gap`` [m] of the surface of
+    ``triangles`` (F,3,3) [m]: each centre measured to the triangles whose boxes it is in."""
+    from trimesh.triangles import closest_point
+
+    centres = mesh.triangles_center
+    low, high = triangles.min(axis=1) - gap, triangles.max(axis=1) + gap
+    near = np.all((low <= mesh.bounds[1]) & (high >= mesh.bounds[0]), axis=1)
+    triangles, low, high = triangles[near], low[near], high[near]
+    point, triangle = np.nonzero(np.all((centres[:, None] >= low[None]) & (centres[:, None] <= high[None]), axis=2))
+    if not len(point):
+        return np.zeros(0, dtype=np.int64)
+    distance = np.linalg.norm(closest_point(triangles[triangle], centres[point]) - centres[point], axis=1)
+    return np.unique(point[distance <= gap])
+
+
+def _bridge(mesh, faces: np.ndarray, gap: float) -> m3.Manifold:
+    """Prisms over ``mesh``'s ``faces`` from ``gap`` [m] inside the bit to twice it outside,
+    across the gap into the shell it touches. Their faces lie on no crack (HULL_FACE, like a
+    carved piece's): in the gap, and where a contact face meets the artist's surface, out of
+    it by at most twice ``gap``."""
+    from .piece_surface import _CRACK, _PROPERTY_COUNT, HULL_FACE
+
+    faces = faces[mesh.area_faces[faces] > 0.0]  # (a face of no area has no normal to extrude along)
+    normal = mesh.face_normals[faces][:, None, :]
+    corners = mesh.triangles[faces]
+    points = np.concatenate([corners - gap * normal, corners + 2.0 * gap * normal], axis=1)  # (P,6,3)
+    props = np.zeros((len(points) * 6, _PROPERTY_COUNT))
+    props[:, :3] = points.reshape(-1, 3)
+    props[:, _CRACK] = HULL_FACE
+    # Each prism: its inner cap, its outer cap, and two triangles a side (the corners are
+    # counter-clockwise about the outward normal, so each side faces away from the prism).
+    one = np.array([[0, 2, 1], [3, 4, 5], [0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [2, 0, 3], [2, 3, 5]])
+    triangles = (one[None] + 6 * np.arange(len(points))[:, None, None]).reshape(-1, 3)
+    prisms = m3.Manifold(m3.Mesh64(vert_properties=props, tri_verts=np.ascontiguousarray(triangles, dtype=np.uint64)))
+    # (one mesh of overlapping prisms is no valid solid: each is taken apart and they are added)
+    return m3.Manifold.batch_boolean(prisms.decompose(), m3.OpType.Add)
