@@ -164,8 +164,8 @@ def run(ctx: BenchContext) -> Section:
     markdown = "\n".join([
         "Each broken piece's render surface is the artist's surface cut along the cracks "
         "([docs/guide/fragment-geometry.md](../guide/fragment-geometry.md)). Measured on the live pieces at "
-        "the end of each run (a cache written), against the tets' boundary faces the cache held before "
-        f"(machine load {load_average()}; the machine was shared). A part reaching more than "
+        "the end of each run (a cache written), against each piece's tets (their boundary faces: the staircase a piece would show uncut; "
+        f"machine load {load_average()}; the machine was shared). A part reaching more than "
         f"{OVERREACH_FACTOR:.0f} spacings from its piece's nearest tet centroid is first divided: the material "
         f"nearest another piece's tets farther than {FOREIGN_DEPTH_FACTOR:g} spacings from its own goes to that "
         "piece. A piece the cut still fails (its render solid "
