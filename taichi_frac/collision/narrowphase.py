@@ -249,9 +249,9 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
     within the margin plus the pair's closing (squared: no square root for the ~90 % of
     candidates it rejects) and then the speculative reach of the two points. When either
     sphere has a contact patch, the contact's normal, depth and point are the patches'
-    (``surface.pair`` where one has a normal, ``surface.hull_pair``'s hull distance where
-    both have normals) and the speculative reach is that
-    of their contact spots."""
+    (``surface.pair`` where one has facets, ``surface.hull_pair``'s hull distance where
+    both have and the pair closes slower than ``surface.HULL_APPROACH``) and the
+    speculative reach is that of their contact spots."""
     sphere = particles.grid_sphere[k]
     rj = sphere[3]
     j = particles.grid_slot[k]

@@ -477,21 +477,21 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
 @ti.func
 def by_hulls(particles: ti.template(), i, j):
     """Whether the contact of spheres ``i`` and ``j`` is their patches' hulls' distance
-    (``hull_pair``): both have a normal (two bodies' surfaces). Along the patch normals
-    alone the gap of two curved patches that do not face each other squarely is
+    (``hull_pair``): both have facets (two bodies' surfaces: a face's, a curved patch's
+    normal, or the planes of a patch folded round a block's edge or corner). Along the patch
+    normals alone the gap of two curved patches that do not face each other squarely is
     under-measured: five stacked rings stood 6.7 mm apart each. Two without (two small
-    pieces, or patches folded round a block's edges) keep the spheres' contact: with their
-    hulls' distance a chip among chips dropped at 10 m/s onto a slab was pushed 3.4 mm
-    into it."""
+    pieces facing every way) keep the spheres' contact: with their hulls' distance a chip
+    among chips dropped at 10 m/s onto a slab was pushed 3.4 mm into it."""
     return has_facets(particles, i) and has_facets(particles, j)
 
 
 @ti.func
 def by_patches(particles: ti.template(), i, j):
-    """Whether the contact of spheres ``i`` and ``j`` comes from their patches along
-    their normals (``pair``): exactly one of the two has a normal (a chip, or a patch
-    folded round a small piece, on a body's face). Two with normals or two without meet
-    at their hulls' distance instead (``by_hulls``)."""
+    """Whether the contact of spheres ``i`` and ``j`` comes from their patches along the
+    facets of one of them (``pair``): exactly one of the two has facets (a chip on a body's
+    face or edge). Two with facets meet at their hulls' distance instead (``by_hulls``);
+    two without keep the spheres' contact."""
     has_patch = particles.point_count[i] > 0 or particles.point_count[j] > 0
     faceted = ti.cast(has_facets(particles, i), ti.i32) + ti.cast(has_facets(particles, j), ti.i32)
     return has_patch and faceted == 1
