@@ -16,7 +16,7 @@ import trimesh
 from taichi_frac.geometry.tetra import tetrahedralize
 from taichi_frac.geometry.contact_patches import contact_patches
 from taichi_frac.model import build_body_model
-from taichi_frac.bench.bodies import box_model, ring_model, single_tet_model, stack_rings
+from taichi_frac.bench.bodies import box_model, ring_model, settle_and_hold, single_tet_model, stack_cubes, stack_rings
 from support.dynamics import fresh_world, rotation
 
 #: Rest heights within this of exact [m] (the bound surface contact is held to).
@@ -179,12 +179,7 @@ def test_rings_stacked_flat_rest_on_their_tubes():
     higher than the one below."""
     world = fresh_world(surface_contact=True)
     rings = stack_rings(world, ring_model(), 3)
-    for _ in range(50):
-        world.advance(0.02, 10)
-    settled = world.body_state(rings)["position"]
-    for _ in range(25):
-        world.advance(0.02, 10)
-    state = world.body_state(rings)
+    settled, state = settle_and_hold(world, rings, 50, 25)
     for k in range(3):
         assert state["position"][k][2] == pytest.approx(0.025 + 0.05 * k, abs=(k + 1) * REST_TOLERANCE)
     assert np.max(np.abs(state["position"] - settled)) < 1e-4
@@ -251,10 +246,8 @@ def test_cube_rests_on_a_cube_at_its_edge_length(tets):
     model = build_body_model(mesh.vertices, mesh.tets, 2400.0)
     assert np.sum(np.linalg.norm(model.boundary_patches.normals, axis=1) == 0.0) > 0  # (folded patches)
     world = fresh_world(surface_contact=True)
-    world.add_ground(0.0, restitution=0.0)
     low = -float(model.vertices[:, 2].min())
-    bottom = world.add_body(model, (0, 0, low + 1e-3), restitution=0.0)
-    top = world.add_body(model, (0.01, 0.005, 3 * low + 3e-3), restitution=0.0)
+    bottom, top = stack_cubes(world, model, low)
     for _ in range(50):
         world.advance(0.02, 10)
     state = world.body_state([bottom, top])

@@ -59,3 +59,25 @@ def stack_rings(world, model, count: int, minor: float = 0.025) -> list[int]:
     gap = 0.0005
     return [world.add_body(model, (0, 0, minor + gap + k * (2 * minor + gap)), restitution=0.0)
             for k in range(count)]
+
+
+def stack_cubes(world, model, low: float) -> tuple[int, int]:
+    """Two copies of the cube ``model`` added to ``world`` on a ground at z = 0, restitution
+    0: the lower let down 1 mm above it, the upper 1 mm above the lower, offset 10 / 5 mm
+    along x / y. ``low`` [m]: how far the cube reaches below its centre of mass (its
+    collision layer's or its surface's). Returns (lower, upper) body ids."""
+    world.add_ground(0.0, restitution=0.0)
+    return (world.add_body(model, (0, 0, low + 1e-3), restitution=0.0),
+            world.add_body(model, (0.01, 0.005, 3 * low + 3e-3), restitution=0.0))
+
+
+def settle_and_hold(world, bodies, settle_frames: int, hold_frames: int):
+    """Advance ``world`` by ``settle_frames`` 20 ms frames (10 substeps each), then by
+    ``hold_frames`` more: (the ``bodies``' positions after settling (B,3) [m], their
+    ``body_state`` after holding)."""
+    for _ in range(settle_frames):
+        world.advance(0.02, 10)
+    settled = world.body_state(bodies)["position"]
+    for _ in range(hold_frames):
+        world.advance(0.02, 10)
+    return settled, world.body_state(bodies)

@@ -312,18 +312,16 @@ def _cube_on_cube(ctx: BenchContext, single: bool, surface: bool, tets: int) -> 
     from ..dynamics import DynamicsOptions
     from ..geometry.tetra import tetrahedralize
     from ..model import build_body_model
+    from .bodies import stack_cubes
 
     mesh = tetrahedralize(trimesh.creation.box((0.1, 0.1, 0.1)), target_tets=tets)
     model = build_body_model(mesh.vertices, mesh.tets, 2400.0, boundary_group_size=1 if single else 4)
     world = ctx.world()
     world.clear()
     world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
-    world.add_ground(0.0, restitution=0.0)
     layer = (model.particle_position[model.surface_particles], model.particle_radius[model.surface_particles]) \
         if single else (model.collision_position, model.boundary_radius)
-    low = -float(np.min(layer[0][:, 2] - layer[1]))
-    bottom = world.add_body(model, (0, 0, low + 1e-3), restitution=0.0)
-    top = world.add_body(model, (0.01, 0.005, 3 * low + 3e-3), restitution=0.0)
+    bottom, top = stack_cubes(world, model, -float(np.min(layer[0][:, 2] - layer[1])))
     for _ in range(50):
         world.advance(0.02, 10)
     z = world.body_state([bottom, top])["position"][:, 2]
@@ -340,18 +338,13 @@ def _ring_stack(ctx: BenchContext, single: bool, surface: bool) -> dict:
     height against exact (one tube diameter a ring), how far any ring moved in the last
     second, and whether all sleep."""
     from ..dynamics import DynamicsOptions
-    from .bodies import ring_model, stack_rings
+    from .bodies import ring_model, settle_and_hold, stack_rings
 
     world = ctx.world()
     world.clear()
     world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
     rings = stack_rings(world, ring_model(), STACK_RINGS)
-    for _ in range(50):
-        world.advance(0.02, 10)
-    settled = world.body_state(rings)["position"]
-    for _ in range(50):
-        world.advance(0.02, 10)
-    state = world.body_state(rings)
+    settled, state = settle_and_hold(world, rings, 50, 50)
     return dict(top=float(state["position"][-1][2]) - (0.025 + 0.05 * (STACK_RINGS - 1)),
                 drift=float(np.max(np.linalg.norm(state["position"] - settled, axis=1))),
                 asleep=int(state["sleeping"].sum()))
