@@ -154,7 +154,7 @@ def carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing):
     the part are then the cells', not a crack's: counted in the stats. The carving can cut
     the rest in two or more: the largest stays with its owner, the others are voted for again
     (a chip beyond it belongs to the tets around it)."""
-    from .piece_surface import DUST_VOLUME_FACTOR, HULL_FACE, _with_crack_index
+    from .piece_surface import HULL_FACE, _with_crack_index, without_dust
 
     parts, owner = list(parts), list(owner)
     for k, tets in enumerate(fragment_tets):
@@ -171,12 +171,11 @@ def carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing):
         carved = parts[best] ^ hull
         if carved.is_empty():
             continue
-        rest = sorted((part for part in (parts[best] - hull).decompose()
-                       if part.volume() >= DUST_VOLUME_FACTOR * spacing**3), key=lambda part: -part.volume())
+        rest = sorted(without_dust(parts[best] - hull, spacing), key=lambda part: -part.volume())
         parts[best] = rest[0] if rest else m3.Manifold()  # (the bulk stays its owner's)
         parts += rest[1:]
         owner += assign_parts(rest[1:], model, labels, spacing)
-        bits = [bit for bit in carved.decompose() if bit.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+        bits = without_dust(carved, spacing)
         parts += bits
         owner += [-(k + 2)] * len(bits)
     keep = [j for j, part in enumerate(parts) if not part.is_empty()]
@@ -315,7 +314,7 @@ def _divide_part(part, k, holding, depth, model, labels, spacing, corners, own_t
     nothing changes."""
     from scipy.spatial import cKDTree
 
-    from .piece_surface import _CRACK, DUST_VOLUME_FACTOR
+    from .piece_surface import _CRACK, without_dust
 
     centroids = model.particle_position
     vertices = _vertices(part, corners)
@@ -363,14 +362,14 @@ def _divide_part(part, k, holding, depth, model, labels, spacing, corners, own_t
     foreign = cells.union(near) if len(near) else None
     if foreign is None:
         return None
-    bits = [bit for bit in (part - foreign).decompose() if bit.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+    bits = without_dust(part - foreign, spacing)
     votes = assign_parts(bits, model, labels, spacing, corners)
     others = np.unique(labels[local[near]])
     shares = [cells.union(near[labels[local[near]] == other]) for other in others]
     if any(share is None for share in shares):  # (a degenerate diagram: the bits are voted for)
         shares, others = [foreign], None
     for index, share in enumerate(shares):
-        share = [bit for bit in (part ^ share).decompose() if bit.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+        share = without_dust(part ^ share, spacing)
         bits += share
         votes += (assign_parts(share, model, labels, spacing, corners) if others is None
                   else [int(others[index])] * len(share))
@@ -501,7 +500,7 @@ def failed_piece_shells(solid: m3.Manifold, model, labels, k: int, failed, parts
     neighbours' parts), left out. Empty where the diagram is degenerate."""
     from scipy.spatial import cKDTree
 
-    from .piece_surface import DUST_VOLUME_FACTOR
+    from .piece_surface import without_dust
 
     share = nearest_cells_share(solid, model, labels, k, failed, spacing)
     if share is None:
@@ -511,8 +510,8 @@ def failed_piece_shells(solid: m3.Manifold, model, labels, k: int, failed, parts
             and np.all(np.asarray(p.bounding_box())[:3] <= box[3:]) and np.all(np.asarray(p.bounding_box())[3:] >= box[:3])]
     share = m3.Manifold.batch_boolean([share, *kept], m3.OpType.Subtract)
     tree = cKDTree(model.particle_position[labels == k])
-    return [shell for shell in share.decompose() if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3
-            and tree.query(_vertices(shell, {}))[0].min() <= OVERREACH_FACTOR * spacing]
+    return [shell for shell in without_dust(share, spacing)
+            if tree.query(_vertices(shell, {}))[0].min() <= OVERREACH_FACTOR * spacing]
 
 
 def nearest_cells_share(solid: m3.Manifold, model, labels, k: int, among, spacing: float):

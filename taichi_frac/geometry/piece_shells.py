@@ -39,7 +39,7 @@ def join_stray_shells(shells: dict, spacing: float) -> tuple[dict, int]:
     the other piece's they touch most (MOVED_VOLUME_SHARE). The bridge: prisms over the bit's faces that touch
     that shell (CONTACT_GAP_FACTOR), reaching through the gap into both. Bits that touch no
     main shell stay. Returns (solids, how many bits moved to another piece)."""
-    from .piece_surface import DUST_VOLUME_FACTOR
+    from .piece_surface import without_dust
 
     volume = {id(shell): shell.volume() for mine in shells.values() for shell in mine}  # [m^3]
     shells = {k: sorted(mine, key=lambda shell: -volume[id(shell)]) for k, mine in shells.items()}
@@ -76,12 +76,9 @@ def join_stray_shells(shells: dict, spacing: float) -> tuple[dict, int]:
         moved += target != k
     result = {}
     for k in shells:
-        # (where a bridge meets the artist's surface its faces lie on the parts' own: the
-        # union leaves flat slivers of no volume there, dropped as dust)
         parts = [mains[k], *kept[k]]
         if joining[k]:
-            main = m3.Manifold.batch_boolean([mains[k], *joining[k]], m3.OpType.Add).decompose()
-            parts[:1] = [shell for shell in main if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+            parts[:1] = without_dust(m3.Manifold.batch_boolean([mains[k], *joining[k]], m3.OpType.Add), spacing)
         result[k] = parts[0] if len(parts) == 1 else m3.Manifold.compose(parts)
     return result, moved
 

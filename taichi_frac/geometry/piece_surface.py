@@ -246,6 +246,13 @@ def _tangent_frame_of(x: float, y: float, z: float) -> tuple[np.ndarray, np.ndar
     return e1, e2
 
 
+def without_dust(solid: m3.Manifold, spacing: float) -> list:
+    """The shells of ``solid`` but those under DUST_VOLUME_FACTOR ``spacing`` cubed: chips
+    where slabs' or cells' faces cross the surface, and the flat slivers of no volume a union
+    leaves where a weld's or a bridge's faces lie on the parts' own."""
+    return [shell for shell in solid.decompose() if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+
+
 def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, spacing: float, roughness: float,
                 roughness_scale: float, seed: int, index: int,
                 thickness_factor: float = SLAB_THICKNESS_FACTOR,
@@ -478,10 +485,7 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
         elif not mine:
             stats["empty_pieces"] += 1
         elif k in welds:
-            # (where a weld meets the artist's surface its faces lie on the parts' own: the
-            # union leaves flat slivers of no volume there, dropped as dust)
-            welded = m3.Manifold.batch_boolean([*mine, *welds[k]], m3.OpType.Add).decompose()
-            shells[k] = [shell for shell in welded if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+            shells[k] = without_dust(m3.Manifold.batch_boolean([*mine, *welds[k]], m3.OpType.Add), spacing)
             stats["welded_pieces"] += 1
         else:
             shells[k] = mine
