@@ -154,7 +154,8 @@ def carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing):
     the part are then the cells', not a crack's: counted in the stats. The carving can cut
     the rest in two or more: the largest stays with its owner, the others are voted for again
     (a chip beyond it belongs to the tets around it)."""
-    from .piece_surface import HULL_FACE, _with_crack_index, without_dust
+    from .piece_surface import _with_crack_index
+    from .render_solid import HULL_FACE, without_dust
 
     parts, owner = list(parts), list(owner)
     for k, tets in enumerate(fragment_tets):
@@ -314,7 +315,7 @@ def _divide_part(part, k, holding, depth, model, labels, spacing, corners, own_t
     nothing changes."""
     from scipy.spatial import cKDTree
 
-    from .piece_surface import _CRACK, without_dust
+    from .render_solid import _CRACK, without_dust
 
     centroids = model.particle_position
     vertices = _vertices(part, corners)
@@ -416,7 +417,7 @@ def _voronoi_cells(points: np.ndarray, spacing: float):
     (its faces HULL_FACE), or None where qhull's diagram is degenerate there."""
     from scipy.spatial import Voronoi
 
-    from .piece_surface import _PROPERTY_COUNT, _CRACK, HULL_FACE
+    from .render_solid import _PROPERTY_COUNT, _CRACK, HULL_FACE
 
     low, high = points.min(axis=0) - 20 * spacing, points.max(axis=0) + 20 * spacing
     fence = np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1]) for z in (low[2], high[2])])
@@ -500,7 +501,7 @@ def failed_piece_shells(solid: m3.Manifold, model, labels, k: int, failed, parts
     neighbours' parts), left out. Empty where the diagram is degenerate."""
     from scipy.spatial import cKDTree
 
-    from .piece_surface import without_dust
+    from .render_solid import without_dust
 
     share = nearest_cells_share(solid, model, labels, k, failed, spacing)
     if share is None:

@@ -39,7 +39,7 @@ def join_stray_shells(shells: dict, spacing: float) -> tuple[dict, int]:
     the other piece's they touch most (MOVED_VOLUME_SHARE). The bridge: prisms over the bit's faces that touch
     that shell (CONTACT_GAP_FACTOR), reaching through the gap into both. Bits that touch no
     main shell stay. Returns (solids, how many bits moved to another piece)."""
-    from .piece_surface import without_dust
+    from .render_solid import without_dust
 
     volume = {id(shell): shell.volume() for mine in shells.values() for shell in mine}  # [m^3]
     shells = {k: sorted(mine, key=lambda shell: -volume[id(shell)]) for k, mine in shells.items()}
@@ -122,7 +122,7 @@ def _bridge(mesh, faces: np.ndarray, gap: float) -> m3.Manifold:
     across the gap into the shell it touches. Their faces lie on no crack (HULL_FACE, like a
     carved piece's): in the gap, and where a contact face meets the artist's surface, out of
     it by at most twice ``gap``."""
-    from .piece_surface import _CRACK, _PROPERTY_COUNT, HULL_FACE
+    from .render_solid import _CRACK, _PROPERTY_COUNT, HULL_FACE
 
     faces = faces[mesh.area_faces[faces] > 0.0]  # (a face of no area has no normal to extrude along)
     normal = mesh.face_normals[faces][:, None, :]

@@ -67,7 +67,7 @@ class CacheRecorder:
     def prepare_body(self, rec, report) -> None:
         """Give a scene object's record what the cache draws of it: the shading of its
         source surface and its render solid (``report``: its PrepareReport)."""
-        from ..geometry.piece_surface import render_solid_from_surface, render_solid_from_tets
+        from ..geometry.render_solid import render_solid_from_surface, render_solid_from_tets
 
         model = rec.model
         if report.surface is not None:
@@ -113,7 +113,8 @@ class CacheRecorder:
             renders, counts = cut_render_solid(
                 rec.render, rec.model, split.fragment_tets, analysis.cracks,
                 [p.model.com_in_source for p in fracture.pieces], roughness=rec.fracture.crack_roughness,
-                roughness_scale=rec.fracture.crack_roughness_scale, seed=rec.fracture.seed)
+                roughness_scale=rec.fracture.crack_roughness_scale, seed=rec.fracture.seed,
+                fit_rounds=rec.fracture.crack_fit_rounds)
             self.render_cuts.append((time.perf_counter() - t_cut, counts))
         self.writer.end_fragment(rec.cache_id, frame)
         for piece, child, child_rec, render in zip(fracture.pieces, fracture.children, fracture.children_records,

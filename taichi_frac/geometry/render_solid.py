@@ -1,0 +1,181 @@
+"""A body's render solid: the artist's closed surface as an exact-arithmetic solid, and the
+records a broken piece's surface carries (its crack surfaces, its mesh for the cache).
+
+``piece_surface.py`` cuts it along the cracks; the constants here say how thin the cuts are
+and what is dropped, and the vertex property columns say what each corner carries.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import manifold3d as m3
+import numpy as np
+import trimesh
+
+from .surface_attributes import input_corner_normals
+
+#: Slab thickness as a fraction of the particle spacing: the two pieces of a crack are this
+#: far apart and each crack face lies half of it off its plane (1e-4 spacings: far below
+#: what a render shows, far above the boolean library's float64 round-off).
+SLAB_THICKNESS_FACTOR = 2e-4
+
+#: Thickness [particle spacings] of the slab that joins a piece's own parts again where a
+#: crack's slab cut through the piece: three slabs, so it overlaps the parts on both sides.
+WELD_THICKNESS_FACTOR = 3 * SLAB_THICKNESS_FACTOR
+#: Half the side [particle spacings] of the square a weld covers about each crossing.
+WELD_REACH_FACTOR = 1.0
+
+#: How far [particle spacings] a crack's slab reaches from the bond crossing nearest each of
+#: its points: beyond the surface where the plane meets it obliquely, and across the gaps
+#: between crossings where the mesher grades the tets coarse inside (the spacing is their
+#: mean V^(1/3), which the many small surface tets pull down: a teapot's inner tets are
+#: 3-4 spacings across, its crossings up to 11 spacings apart). A gap the slab leaves joins
+#: the two pieces' parts into one. Where a crossing inside one piece is nearer, its Voronoi
+#: cell still stops the slab halfway to it.
+SLAB_REACH_FACTOR = 8.0
+
+#: Parts of the cut solid smaller than this [particle spacings cubed] are dropped: chips
+#: where two slabs' edges cross the surface, far below a render's resolution.
+DUST_VOLUME_FACTOR = 1e-2
+
+#: Largest gap [particle spacings] between a ring crack's sphere and its polygon.
+SPHERE_SAGITTA_FACTOR = 0.02
+
+# Vertex property columns after x, y, z: corner normal (3), UV (2), crack index (-1: the
+# artist's surface).
+_NORMAL = slice(3, 6)
+_UV = slice(6, 8)
+_CRACK = 8
+_PROPERTY_COUNT = 9
+#: The crack index of a carved piece's hull faces (inner faces on no crack).
+HULL_FACE = -2
+
+
+@dataclass(frozen=True)
+class CrackSurface:
+    """The crack a piece's inner faces lie on, in the piece's body frame: a plane
+    (``radius`` None) through ``point`` (3,) [m] with unit ``normal`` (3,), or the sphere of
+    ``radius`` [m] about ``point`` (a ring crack)."""
+
+    point: np.ndarray
+    normal: np.ndarray
+    radius: float | None = None
+
+    def shifted(self, offset: np.ndarray) -> "CrackSurface":
+        return CrackSurface(self.point - offset, self.normal, self.radius)
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """(N,) [m] signed distance of ``points`` (N,3) from the crack surface."""
+        if self.radius is None:
+            return (points - self.point) @ self.normal
+        return np.linalg.norm(points - self.point, axis=1) - self.radius
+
+
+@dataclass(frozen=True, eq=False)
+class RenderSolid:
+    """A body's render surface, body frame [m]: ``solid`` a closed manifold whose vertex
+    properties carry the artist's corner normals and UVs and, on crack faces, the index of
+    their crack in ``cracks``; ``spacing`` [m] the body's particle spacing."""
+
+    solid: m3.Manifold
+    cracks: tuple
+    spacing: float
+
+    def moved(self, offset) -> "RenderSolid":
+        """The same solid in a frame whose origin is at ``offset`` (3,) [m] of this one."""
+        offset = np.asarray(offset, dtype=np.float64)
+        return RenderSolid(self.solid.translate(tuple(-offset)), tuple(c.shifted(offset) for c in self.cracks),
+                           self.spacing)
+
+
+@dataclass(frozen=True, eq=False)
+class PieceMesh:
+    """A render solid as a triangle mesh for the cache: vertices (V,3) [m], faces (F,3)
+    outward, face_is_inner (F,) bool, normals (F,3,3) unit and uvs (F,3,2) per corner (UVs:
+    the artist's on outer faces, [m] along the crack's tangent frame on inner ones),
+    face_crack (F,) index into ``cracks`` (-1 on outer faces, HULL_FACE on a carved piece's
+    faces that lie on no crack)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    face_is_inner: np.ndarray
+    normals: np.ndarray
+    uvs: np.ndarray
+    face_crack: np.ndarray
+    cracks: tuple
+
+
+def _to_manifold(vertices: np.ndarray, faces: np.ndarray, properties: np.ndarray) -> m3.Manifold:
+    """Manifold of a triangle mesh whose corners carry ``properties`` (F,3,P): one property
+    vertex per distinct (position, properties) row, shared positions merged."""
+    rows = np.concatenate([vertices[faces].reshape(-1, 3), properties.reshape(-1, properties.shape[2])], axis=1)
+    unique, corner = np.unique(rows, axis=0, return_inverse=True)
+    position_of = np.unique(unique[:, :3], axis=0, return_inverse=True)[1].reshape(-1)
+    first = np.full(position_of.max() + 1, -1, dtype=np.int64)
+    first[position_of[::-1]] = np.arange(len(unique))[::-1]  # each position's first property vertex
+    target = first[position_of]
+    distinct = np.nonzero(target != np.arange(len(unique)))[0]
+    pairs = np.stack([distinct, target[distinct]], axis=1)
+    mesh = m3.Mesh64(vert_properties=np.ascontiguousarray(unique, dtype=np.float64),
+                     tri_verts=np.ascontiguousarray(corner.reshape(-1, 3), dtype=np.uint64),
+                     merge_from_vert=np.ascontiguousarray(pairs[:, 0], dtype=np.uint64),
+                     merge_to_vert=np.ascontiguousarray(pairs[:, 1], dtype=np.uint64))
+    solid = m3.Manifold(mesh)
+    if solid.status() != m3.Error.NoError:
+        raise ValueError(f"the render surface is not a closed manifold ({solid.status()})")
+    return solid
+
+
+def render_solid_from_surface(surface: trimesh.Trimesh, origin, spacing: float) -> RenderSolid:
+    """The render solid of the artist's closed, outward-wound ``surface`` (source frame,
+    metres; its UVs where it has them, else zeros) in a body frame whose origin lies at
+    ``origin`` (3,) [m] of the source frame; ``spacing`` [m] the body's particle spacing."""
+    vertices = np.asarray(surface.vertices, dtype=np.float64) - np.asarray(origin, dtype=np.float64)
+    faces = np.asarray(surface.faces, dtype=np.int64)
+    props = np.zeros((len(faces), 3, _PROPERTY_COUNT - 3))
+    props[:, :, _NORMAL.start - 3:_NORMAL.stop - 3] = input_corner_normals(surface)
+    uv = getattr(surface.visual, "uv", None)
+    if uv is not None and len(uv) == len(vertices):
+        props[:, :, _UV.start - 3:_UV.stop - 3] = np.asarray(uv, dtype=np.float64)[faces]
+    props[:, :, _CRACK - 3] = -1.0
+    return RenderSolid(_to_manifold(vertices, faces, props), (), float(spacing))
+
+
+def render_solid_from_tets(model) -> RenderSolid:
+    """The render solid of a body with no artist's surface (a tet-mesh file): its tets'
+    boundary, flat-shaded, no UVs."""
+    faces = np.asarray(model.surface_faces, dtype=np.int64)
+    tri = model.vertices[faces]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    props = np.zeros((len(faces), 3, _PROPERTY_COUNT - 3))
+    props[:, :, 0:3] = normal[:, None, :]
+    props[:, :, _CRACK - 3] = -1.0
+    return RenderSolid(_to_manifold(model.vertices, faces, props), (), float(model.spacing))
+
+
+def tangent_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The crack's in-plane axes (the analysis' own choice, fracture/cracks.py)."""
+    return _tangent_frame_of(*(float(c) for c in normal))
+
+
+@functools.lru_cache(maxsize=4096)
+def _tangent_frame_of(x: float, y: float, z: float) -> tuple[np.ndarray, np.ndarray]:
+    # Kept per normal: every piece's mesh asks again for each crack it inherited, and a
+    # scene's few hundred cracks repeat thousands of times (numpy's small-array overhead).
+    from ..fracture.cracks import tangent_frame as crack_frame
+
+    e1, e2 = crack_frame(np.array([x, y, z]))
+    e1.flags.writeable = e2.flags.writeable = False
+    return e1, e2
+
+
+def without_dust(solid: m3.Manifold, spacing: float) -> list:
+    """The shells of ``solid`` but those under DUST_VOLUME_FACTOR ``spacing`` cubed: chips
+    where slabs' or cells' faces cross the surface, and the flat slivers of no volume a union
+    leaves where a weld's or a bridge's faces lie on the parts' own."""
+    return [shell for shell in solid.decompose() if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3]
+
+
