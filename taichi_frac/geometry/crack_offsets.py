@@ -82,18 +82,18 @@ def volume_offsets(solids, index_of: np.ndarray, cracks, targets: np.ndarray, fr
     ``targets`` (F,) [m^3]: least squares over the ``volume_errors``, each plane within
     MAX_OFFSET_FACTOR ``spacing`` of where the analysis put it. ``solids``: a cut's pieces'
     manifolds (None: no solid), made with the planes already ``moved`` (C,) [m] (None: none).
-    Returns (change (C,) [m], the further shift; all 0 when every error is within
-    VOLUME_TOLERANCE, the misfit the linear model predicts after it). Ring cracks and cracks
-    without a slab stay."""
+    Returns (change, predicted): change (C,) [m] the further shift (all 0 when every error is
+    within VOLUME_TOLERANCE), predicted the ``volume_misfit`` the linear model expects after
+    it. Ring cracks and cracks without a slab stay."""
     from scipy.optimize import lsq_linear
+
+    from ..fracture.crack_types import CrackPlane
 
     offsets = np.zeros(len(cracks))
     errors = volume_errors(solids, targets, fragment_tets)
     now = float(np.nansum(errors**2))
     if not np.nanmax(np.abs(errors), initial=0.0) > VOLUME_TOLERANCE:
         return offsets, now
-    from ..fracture.crack_types import CrackPlane
-
     # (a ring crack's sphere stays: moving radial planes and rings together re-sorts the
     # small parts where they meet, and the glass walls' pieces came out further off)
     movable = (index_of >= 0) & np.array([isinstance(c, CrackPlane) for c in cracks], dtype=bool)
