@@ -59,11 +59,9 @@ def plane_face_areas(solid, index_of: np.ndarray, cracks) -> np.ndarray:
     changes the solid's volume by d times this; the faces of a slit inside the piece, one of
     each side, cancel."""
     from ..fracture.crack_types import CrackPlane
-    from .render_solid import _CRACK
+    from .render_solid import _CRACK, solid_arrays
 
-    mesh = solid.to_mesh64()
-    props = np.asarray(mesh.vert_properties, dtype=np.float64)
-    tri = np.asarray(mesh.tri_verts, dtype=np.int64)
+    props, tri = solid_arrays(solid)
     crack = np.rint(props[tri, _CRACK]).astype(np.int64)  # (F,3)
     on_one = (crack == crack[:, :1]).all(axis=1)
     corners = props[tri, :3]

@@ -10,6 +10,8 @@ from __future__ import annotations
 import manifold3d as m3
 import numpy as np
 
+from .render_solid import solid_arrays
+
 #: A part's vote reads at most about this many of its faces (evenly spread over its list).
 MAX_VOTING_FACES = 256
 #: A vote whose winner has less than this share of the area is settled by the tets inside.
@@ -39,8 +41,8 @@ def _winding_inside(points: np.ndarray, solid: m3.Manifold) -> np.ndarray:
     """(N,) bool: ``points`` (N,3) inside the closed ``solid``."""
     from .piece_checks import inside
 
-    mesh = solid.to_mesh64()
-    return inside(points, np.asarray(mesh.vert_properties)[:, :3][np.asarray(mesh.tri_verts, dtype=np.int64)])
+    props, triangles = solid_arrays(solid)
+    return inside(points, props[:, :3][triangles])
 
 
 def _part_holding(points: np.ndarray, parts) -> int | None:
@@ -108,10 +110,9 @@ def overfull_pieces(parts, owner, model, labels, spacing) -> set[int]:
             continue
         failed.add(k)
         for part in mine:
-            mesh = part.to_mesh64()
-            vertices = np.asarray(mesh.vert_properties)[:, :3]
-            held = _tets_inside(model, vertices.min(axis=0), vertices.max(axis=0),
-                                vertices[np.asarray(mesh.tri_verts, dtype=np.int64)])
+            props, triangles = solid_arrays(part)
+            vertices = props[:, :3]
+            held = _tets_inside(model, vertices.min(axis=0), vertices.max(axis=0), vertices[triangles])
             for victim in np.unique(labels[held]):
                 if victim >= 0 and victim != k and excess > SWALLOWED_VOLUME_SHARE * float(
                         model.tet_volume[labels == victim].sum()):
@@ -325,9 +326,7 @@ def _divide_part(part, k, holding, depth, model, labels, spacing, corners, own_t
     # faces (the flat face crosses the tets' staircase there), taken elsewhere (no crack
     # between the two pieces' tets there: their cells' faces are the boundary).
     shallow = np.nonzero(own_tree.query(centroids[near])[0] <= depth * spacing)[0]
-    mesh = part.to_mesh64()
-    props = np.asarray(mesh.vert_properties)
-    tri_verts = np.asarray(mesh.tri_verts, dtype=np.int64)
+    props, tri_verts = solid_arrays(part)
     crack_faces = tri_verts[(props[tri_verts, _CRACK] >= 0).all(axis=1)]
     if len(shallow) and len(crack_faces):
         import trimesh

@@ -96,9 +96,10 @@ def without_crumbs(mine, spacing: float) -> list:
 def _trimesh(solid: m3.Manifold):
     import trimesh
 
-    mesh = solid.to_mesh64()
-    return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts, dtype=np.int64),
-                           process=False)
+    from .render_solid import solid_arrays
+
+    props, triangles = solid_arrays(solid)
+    return trimesh.Trimesh(props[:, :3], triangles, process=False)
 
 
 def _touching(mesh, triangles: np.ndarray, gap: float) -> np.ndarray:

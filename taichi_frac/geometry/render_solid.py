@@ -172,6 +172,13 @@ def _tangent_frame_of(x: float, y: float, z: float) -> tuple[np.ndarray, np.ndar
     return e1, e2
 
 
+def solid_arrays(solid: m3.Manifold) -> tuple[np.ndarray, np.ndarray]:
+    """``solid`` as arrays: (props (V,P) [m then the vertex properties], float64: x, y, z first;
+    triangles (F,3) int64 into props, outward)."""
+    mesh = solid.to_mesh64()
+    return np.asarray(mesh.vert_properties, dtype=np.float64), np.asarray(mesh.tri_verts, dtype=np.int64)
+
+
 def without_dust(solid: m3.Manifold, spacing: float) -> list:
     """The shells of ``solid`` but those under DUST_VOLUME_FACTOR ``spacing`` cubed: chips
     where slabs' or cells' faces cross the surface, and the flat slivers of no volume a union
