@@ -21,7 +21,7 @@ import numpy as np
 from .geometry import rows
 from .geometry.mass import MassProperties, tet_mass_properties
 from .geometry.collision_centres import CENTRE_REACH, contact_sphere_centres
-from .geometry.contact_patches import ContactPatches, contact_patches
+from .geometry.contact_patches import ContactPatches, contact_patches, contact_patches_many
 from .geometry.rays import near_faces
 from .geometry.surface_groups import group_surface_particles
 from .geometry.topology import (
@@ -125,12 +125,20 @@ class BodyModel:
     def boundary_patches(self) -> "ContactPatches":
         """The true surface under each boundary sphere (``contact_patches``), computed on
         first use and kept with the model."""
-        return contact_patches(self, self.boundary_member_offsets, self.boundary_members)
+        return contact_patches(*self._patch_groups(False))
 
     @cached_property
     def surface_particle_patches(self) -> "ContactPatches":
         """The same for the single-scale layer: one patch per surface particle."""
-        return contact_patches(self, np.arange(self.surface_particle_count + 1), self.surface_particles)
+        return contact_patches(*self._patch_groups(True))
+
+    def _patch_groups(self, single: bool):
+        """(self, member offsets, members) of ``surface_particle_patches`` (``single``) or
+        ``boundary_patches``: what ``contact_patches`` takes."""
+        if single:
+            return self, np.arange(self.surface_particle_count + 1), self.surface_particles
+        return self, self.boundary_member_offsets, self.boundary_members
+
 
     @property
     def spacing(self) -> float:
@@ -154,6 +162,19 @@ class BodyModel:
     @property
     def volume(self) -> float:
         return float(self.tet_volume.sum())
+
+
+
+def patches_of(models, single: bool) -> list:
+    """Each model's ``surface_particle_patches`` (``single``) or ``boundary_patches``: those
+    not computed yet in one ``contact_patches_many`` pass (the same arrays as one call
+    each), kept with their models as the properties keep them."""
+    name = "surface_particle_patches" if single else "boundary_patches"
+    missing = list({id(m): m for m in models if name not in m.__dict__}.values())
+    if missing:
+        for model, patches in zip(missing, contact_patches_many([m._patch_groups(single) for m in missing])):
+            model.__dict__[name] = patches  # (where cached_property keeps its value)
+    return [getattr(m, name) for m in models]
 
 
 def build_body_model(

@@ -14,8 +14,8 @@ import pytest
 import trimesh
 
 from taichi_frac.geometry.tetra import tetrahedralize
-from taichi_frac.geometry.contact_patches import contact_patches
-from taichi_frac.model import build_body_model
+from taichi_frac.geometry.contact_patches import contact_patches, contact_patches_many
+from taichi_frac.model import build_body_model, patches_of
 from taichi_frac.bench.bodies import box_model, ring_model, settle_and_hold, single_tet_model, stack_cubes, stack_rings
 from support.dynamics import fresh_world, rotation
 
@@ -280,3 +280,22 @@ def test_folded_patches_have_the_planes_they_span_as_facets():
     tet = single_tet_model()
     chip = contact_patches(tet, tet.boundary_member_offsets, tet.boundary_members)
     assert np.all(chip.facets == 0.0)
+
+
+def test_patches_of_several_bodies_at_once_are_each_bodys_own():
+    """``contact_patches_many`` (all of a fracture's fragments in one pass) gives each body
+    exactly the arrays of its own ``contact_patches`` call (bit for bit: every sum runs
+    over one patch's faces in the same order), for flat, folded, curved and one-tet
+    patches side by side, and ``patches_of`` keeps them as the models' own patches."""
+    mesh = tetrahedralize(trimesh.creation.box((0.1, 0.1, 0.1)), target_tets=60)
+    models = [box_model(0.1, 0.1, 0.1), build_body_model(mesh.vertices, mesh.tets, 2400.0), single_tet_model(),
+              ring_model()]
+    together = contact_patches_many([(m, m.boundary_member_offsets, m.boundary_members) for m in models])
+    for model, got in zip(models, together):
+        alone = contact_patches(model, model.boundary_member_offsets, model.boundary_members)
+        for name in ("offsets", "points", "normals", "facets"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(alone, name))
+    kept = patches_of(models, single=False)
+    assert all(k is m.boundary_patches for k, m in zip(kept, models))
+    for got, alone in zip(kept, together):
+        np.testing.assert_array_equal(got.points, alone.points)

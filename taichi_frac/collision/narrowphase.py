@@ -53,9 +53,6 @@ class Contacts:
     the impulse cache and the impact records visit them (sorted by querying particle).
     Written by solver.solve_contacts: sweep_order (i32), ``order`` with the contacts
     between bodies first, then those with static colliders.
-    direction (vec3 unit, body b's frame): the contact normal of a hull contact
-    (``surface.hull_pair``), kept in the contact cache to start the same pair's search
-    from next substep; zero for the others.
     Written by reduction.reduce_static_contacts: reduce_mark (i32, scratch: whether the
     contact is kept, then its slot after the compaction).
     Scalars: count (may exceed capacity: the excess is ``overflow``), overflow (summed over
@@ -93,11 +90,10 @@ class Contacts:
         self.order = ti.field(ti.i32, shape=capacity)
         self.sweep_order = ti.field(ti.i32, shape=capacity)
         self.reduce_mark = ti.field(ti.i32, shape=capacity)
-        self.direction = vec3.field(shape=capacity)
         # (what ``_append`` writes: the fields that moving a contact to another slot moves)
         self.written_by_narrowphase = (self.query, self.key, self.body_a, self.body_b, self.static_index, self.normal,
                                        self.point, self.separation, self.radius, self.friction, self.restitution,
-                                       self.normal_impulse, self.tangent_impulse, self.direction)
+                                       self.normal_impulse, self.tangent_impulse)
         self.order_epoch = ti.field(ti.i32, shape=())
         self.count = ti.field(ti.i32, shape=())
         self.overflow = ti.field(ti.i32, shape=())
@@ -140,33 +136,56 @@ def _speculative(bodies: ti.template(), statics: ti.template(), a, xa, b, xb, n,
 def _cached(particles: ti.template(), query, key):
     """What the contact of particle ``query`` with partner ``key`` kept at the end of the
     last substep (zeros when it made none): (normal impulse [N s], tangent impulse (vec3
-    [N s]), hull direction (vec3, the partner body's frame))."""
+    [N s]))."""
     previous = particles.parity[None]
     jn = 0.0
     jt = vec3(0.0)
-    direction = vec3(0.0)
     if particles.cache_stamp[previous, query] == particles.cache_epoch[None]:
         for k in range(particles.cache_count[previous, query]):
             if particles.cache_key[previous, query, k] == key:
                 jn = particles.cache_normal[previous, query, k]
                 jt = particles.cache_tangent[previous, query, k]
-                direction = particles.cache_direction[previous, query, k]
-    return jn, jt, direction
+    return jn, jt
+
+
+@ti.func
+def _hull_warm(particles: ti.template(), query, key):
+    """The normal (vec3 unit, partner body's frame) the hull search of particle ``query``
+    with particle ``key`` found last substep, contact or not (zero when there was none):
+    where this substep's search starts (``surface.hull_pair``'s ``warm``)."""
+    previous = particles.parity[None]
+    direction = vec3(0.0)
+    if particles.hull_stamp[previous, query] == particles.cache_epoch[None]:
+        for k in range(particles.hull_count[previous, query]):
+            if particles.hull_key[previous, query, k] == key:
+                direction = particles.hull_direction[previous, query, k]
+    return direction
+
+
+@ti.func
+def _keep_hull(particles: ti.template(), query, key, direction):
+    """Keep the hull search's normal of particle ``query`` with particle ``key``
+    (``direction``, partner body's frame) for the next substep's ``_hull_warm``. Only the
+    thread of ``query`` writes its rows (``particle_contacts``): no atomics."""
+    following = 1 - particles.parity[None]
+    k = particles.hull_count[following, query]
+    if k < particles.hull_key.shape[2]:
+        particles.hull_key[following, query, k] = key
+        particles.hull_direction[following, query, k] = direction
+        particles.hull_count[following, query] = k + 1
 
 
 @ti.func
 def _append(contacts: ti.template(), particles: ti.template(), query, key, a, b, static_index, normal, point,
-            separation, radius, friction, restitution, direction):
-    """``direction``: the hull search's normal in body b's frame (``Contacts.direction``)."""
+            separation, radius, friction, restitution):
     c = ti.atomic_add(contacts.count[None], 1)
     if c < contacts.capacity:
         contacts.query[c] = query
         contacts.key[c] = key
         # Warm start: the impulses this pair carried at the end of the last substep.
-        jn, jt, _ = _cached(particles, query, key)
+        jn, jt = _cached(particles, query, key)
         contacts.normal_impulse[c] = jn
         contacts.tangent_impulse[c] = jt
-        contacts.direction[c] = direction
         contacts.body_a[c] = a
         contacts.body_b[c] = b
         contacts.static_index[c] = static_index
@@ -268,7 +287,6 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
         point = xj + n * (rj + 0.5 * gap)
         x_a, x_o = xi, xj
         scale = ti.min(ri, rj)
-        direction = vec3(0.0)
         if ti.static(patches):
             patched = surface.by_patches(particles, i, j)
             hulls = surface.by_hulls(particles, i, j) and closing <= ti.static(surface.HULL_APPROACH) * mean_r
@@ -278,10 +296,10 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
                 spot_a = x_a
                 spot_o = x_o
                 if hulls:
-                    _, _, warm = _cached(particles, i, j)
+                    warm = _hull_warm(particles, i, j)
                     n_patch, gap_patch, spot_a, spot_o = surface.hull_pair(
                         bodies, particles, a, i, o, j, n, margin * mean_r + closing, rot @ warm)
-                    direction = rot.transpose() @ n_patch
+                    _keep_hull(particles, i, j, rot.transpose() @ n_patch)
                 else:
                     n_patch, gap_patch, spot_a, spot_o = surface.pair(bodies, particles, a, i, o, j, n)
                 if gap_patch >= -ti.static(surface.TRUSTED_DEPTH) * ti.max(ri, rj):
@@ -296,7 +314,7 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
         if gap < margin * mean_r + _speculative(bodies, statics, a, x_a, o, x_o, n, dt):
             mu = ti.sqrt(bodies.friction[a] * bodies.friction[o])
             e = ti.max(bodies.restitution[a], bodies.restitution[o])
-            _append(contacts, particles, i, j, a, o, -1, n, point, gap, scale, mu, e, direction)
+            _append(contacts, particles, i, j, a, o, -1, n, point, gap, scale, mu, e)
             if bodies.sleeping[o] == 1 and bodies.sleep_timer[a] < sleep_time:
                 bodies.wake_request[o] = 1
 
@@ -368,7 +386,7 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
                 _collider_contacts(bodies, particles, statics, contacts, margin, dt, bounce_speed, i, a, x, patch, n,
                                    gap, point, level, kind, k, key, mu, e)
             elif gap < margin * r + _speculative(bodies, statics, a, x, -1, x, n, dt):
-                _append(contacts, particles, i, key, a, kind, k, n, point, gap, r, mu, e, vec3(0.0))
+                _append(contacts, particles, i, key, a, kind, k, n, point, gap, r, mu, e)
 
 
 @ti.func
@@ -399,7 +417,7 @@ def _collider_contacts(bodies: ti.template(), particles: ti.template(), statics:
             at = spot - 0.5 * g * n
         if g < margin * r + bodies.motion[a] and g < margin * r + _speculative(bodies, statics, a, spot, -1, spot, n,
                                                                               dt):
-            _append(contacts, particles, i, key - m, a, kind, k, n, at, g, r, mu, e, vec3(0.0))
+            _append(contacts, particles, i, key - m, a, kind, k, n, at, g, r, mu, e)
 
 
 @ti.func
@@ -422,6 +440,10 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: 
             if not is_idle(bodies, a) and (bodies.near_body[a] == 1 or bodies.near_static[a] == 1):
                 xi = bodies.position[a] + bodies.rotation[a] @ particles.offset[i]
                 ri = particles.radius[i]
+                if ti.static(patches):  # (this thread's rows of the hull searches kept for next substep)
+                    following = 1 - particles.parity[None]
+                    particles.hull_stamp[following, i] = particles.cache_epoch[None] + 1
+                    particles.hull_count[following, i] = 0
                 count = bodies.neighbor_count[a]
                 listed = count >= 0
                 # (one call site for both cases: each is inlined whole, and compiling the

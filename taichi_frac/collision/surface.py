@@ -75,9 +75,16 @@ MANIFOLD_SPREAD = 0.05
 @ti.func
 def lowest(particles: ti.template(), p, axis):
     """min over sphere ``p``'s patch points of point . ``axis`` (body frame) [m]; the
-    sphere's own (centre . axis - radius) when it has no patch."""
-    low = lowest3(particles, p, ti.Matrix.rows([axis, axis, axis]))
-    return low[0]
+    sphere's own (centre . axis - radius |axis|) when it has no patch (``lowest3``'s
+    arithmetic along one axis)."""
+    low = particles.offset[p].dot(axis) - particles.radius[p] * ti.sqrt(axis[0] ** 2 + axis[1] ** 2 + axis[2] ** 2)
+    count = particles.point_count[p]
+    if count > 0:
+        low = 1e30
+        start = particles.point_start[p]
+        for k in range(start, start + count):
+            low = ti.min(low, particles.surface_point[k].dot(axis))
+    return low
 
 
 @ti.func
@@ -139,10 +146,13 @@ def manifold(particles: ti.template(), p, axis, low):
         band = low + SUPPORT_BAND * radius
         spread2 = (MANIFOLD_SPREAD * radius) ** 2
         first = particles.surface_point[start]
+        first_level = first.dot(axis)
         for k in range(start, start + count):
             x = particles.surface_point[k]
-            if x.dot(axis) < first.dot(axis):
+            level = x.dot(axis)
+            if level < first_level:
                 first = x
+                first_level = level
         # Second: farthest from the first.
         second = first
         best = spread2
@@ -299,10 +309,13 @@ def _extreme(particles: ti.template(), p, axis):
     if count > 0:
         start = particles.point_start[p]
         point = particles.surface_point[start]
+        low = point.dot(axis)  # (the best level kept: one dot product a point)
         for k in range(start + 1, start + count):
             x = particles.surface_point[k]
-            if x.dot(axis) < point.dot(axis):
+            level = x.dot(axis)
+            if level < low:
                 point = x
+                low = level
     return point
 
 

@@ -98,6 +98,8 @@ def write_bodies(bodies: ti.template(), particles: ti.template(),
             particles.body[p] = slot
             particles.cache_stamp[0, p] = -1
             particles.cache_stamp[1, p] = -1
+            particles.hull_stamp[0, p] = -1
+            particles.hull_stamp[1, p] = -1
             particles.point_count[p] = 0  # (sphere contacts unless write_patches says otherwise)
             sphere = _sphere_f32(spheres, begin + k)
             particles.offset[p] = ti.math.vec3(sphere[0], sphere[1], sphere[2])

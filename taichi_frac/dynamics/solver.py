@@ -159,7 +159,6 @@ def store_impulses(particles: ti.template(), contacts: ti.template()):
                 particles.cache_key[following, i, k] = contacts.key[c]
                 particles.cache_normal[following, i, k] = contacts.normal_impulse[c]
                 particles.cache_tangent[following, i, k] = contacts.tangent_impulse[c]
-                particles.cache_direction[following, i, k] = contacts.direction[c]
                 particles.cache_count[following, i] = k + 1
         particles.parity[None] = following
         particles.cache_epoch[None] = epoch

@@ -16,6 +16,9 @@ vec3 = ti.math.vec3
 vec4 = ti.math.vec4
 mat3 = ti.math.mat3
 CACHE_SLOTS = 4  # contacts remembered per particle for warm starting
+# Hull searches remembered per particle (``Particles.hull_direction``): a ring's sphere
+# resting on another ring searches with two to five of its spheres.
+HULL_SLOTS = 8
 # Cluster spheres per body for the narrowphase's pre-test (a sphere near one of them reads
 # the body's grid; narrowphase._pair_contacts): one per 16 collision spheres, at most this
 # many (16 passes about half as many spheres as the box alone, 8 noticeably more, 32 few
@@ -170,11 +173,16 @@ class Particles:
         names the previous one: cache_count (2, P) contacts kept for particle P as the
         querying side; cache_key (2, P, CACHE_SLOTS) partner (particle slot >= 0, -1 - k
         ground plane k, -1000 - k static box k); cache_normal [N s], cache_tangent (vec3,
-        [N s]) their accumulated impulses; cache_direction (vec3, partner body frame) a hull
-        contact's normal (``Contacts.direction``); cache_stamp (2, P) the store that wrote the
+        [N s]) their accumulated impulses; cache_stamp (2, P) the store that wrote the
         particle's entries (only the last store, ``cache_epoch``, is valid; add_body sets
         -1 on a reused slot). Writer: solver.store_impulses; read by the narrowphase when
         the same pair is made again.
+        Hull searches (``surface.hull_pair``), in the same two halves: hull_count (2, P)
+        searches kept for particle P as the querying side; hull_key (2, P, HULL_SLOTS) the
+        partner particle; hull_direction (vec3 unit, partner body frame) the normal found,
+        contact or not, where the same pair's search starts next substep; hull_stamp (2, P)
+        as cache_stamp (the substep's epoch is ``cache_epoch`` + 1 until the store).
+        Writer: the narrowphase (each particle's own thread).
         Contact patches (``geometry.contact_patches.ContactPatches``): point_start, point_count (i32) the rows
             of ``surface_point`` holding sphere P's patch (count 0: the sphere is its own
             surface, the contacts are sphere contacts); patch_normal (vec3 body frame,
@@ -203,7 +211,10 @@ class Particles:
         self.cache_key = ti.field(ti.i32, shape=(2, capacity, CACHE_SLOTS))
         self.cache_normal = ti.field(ti.f32, shape=(2, capacity, CACHE_SLOTS))
         self.cache_tangent = vec3.field(shape=(2, capacity, CACHE_SLOTS))
-        self.cache_direction = vec3.field(shape=(2, capacity, CACHE_SLOTS))
+        self.hull_count = ti.field(ti.i32, shape=(2, capacity))
+        self.hull_key = ti.field(ti.i32, shape=(2, capacity, HULL_SLOTS))
+        self.hull_direction = vec3.field(shape=(2, capacity, HULL_SLOTS))
+        self.hull_stamp = ti.field(ti.i32, shape=(2, capacity))
         self.cache_stamp = ti.field(ti.i32, shape=(2, capacity))
         self.parity = ti.field(ti.i32, shape=())
         self.cache_epoch = ti.field(ti.i32, shape=())

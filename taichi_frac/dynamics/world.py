@@ -20,7 +20,7 @@ from .. import runtime
 from ..collision import broadphase, narrowphase
 from ..collision.grid import body_grid
 from ..kinematics.quaternion import quaternion_matrix
-from ..model import BodyModel
+from ..model import BodyModel, patches_of
 from . import body_fields, checkpoints, integrate, stages
 from . import impacts as impact_kernels
 from .checkpoints import Checkpoint
@@ -163,7 +163,7 @@ class World:
                  for b in range(count)]
         if any(pose.shape != (13,) for pose in poses):
             raise ValueError("position, velocities need 3 components and orientation_wxyz 4")
-        layers, patches = [], []
+        layers = []
         for model in models:
             if single:
                 offsets, radii = model.particle_position[model.surface_particles], \
@@ -173,12 +173,13 @@ class World:
             if len(radii) == 0:
                 raise ValueError("the body has no collision particles (empty boundary layer)")
             layers.append((offsets, radii))
-            if self.options.surface_contact:
-                patches.append(model.surface_particle_patches if single else model.boundary_patches)
-                if len(patches[-1].offsets) != len(radii) + 1:
-                    raise ValueError(f"the model's boundary groups ({len(patches[-1].offsets) - 1}) do not match "
-                                     f"its {len(radii)} collision spheres: rebuild it, or add it with "
-                                     "DynamicsOptions(surface_contact=False)")
+        # (one numpy pass for all the models' patches: a fracture adds its fragments at once)
+        patches = patches_of(models, single) if self.options.surface_contact else []
+        for patch, (_, radii) in zip(patches, layers):
+            if len(patch.offsets) != len(radii) + 1:
+                raise ValueError(f"the model's boundary groups ({len(patch.offsets) - 1}) do not match "
+                                 f"its {len(radii)} collision spheres: rebuild it, or add it with "
+                                 "DynamicsOptions(surface_contact=False)")
         taken, point_starts = self.slots.take([len(radii) for _, radii in layers],
                                               [len(patch.points) for patch in patches])
         ints = np.zeros((count, BODY_WRITE_INTS.width), dtype=np.int32)
