@@ -62,7 +62,7 @@ def plane_face_areas(solid, index_of: np.ndarray, cracks) -> np.ndarray:
     from .render_solid import _CRACK, solid_arrays
 
     props, tri = solid_arrays(solid)
-    crack = np.rint(props[tri, _CRACK]).astype(np.int64)  # (F,3)
+    crack = np.rint(np.nan_to_num(props[tri, _CRACK], nan=-1.0)).astype(np.int64)  # (F,3)
     on_one = (crack == crack[:, :1]).all(axis=1)
     corners = props[tri, :3]
     area_vector = 0.5 * np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])  # (F,3)
