@@ -7,10 +7,16 @@ Ctrl-C both raises KeyboardInterrupt and sets a flag that the simulation reads b
 steps (:func:`check`), so it is honoured even when swallowed; a second Ctrl-C exits the
 process at once with status 130 (the cache keeps its last checkpoint, which is always a
 complete file: checkpoints are written atomically).
+
+A library that catches and prints an exception raised in its own import (USD's module loader
+prints a KeyboardInterrupt during ``import pxr`` as a warning with a traceback) imports under
+:func:`deferred`: a Ctrl-C there only sets the flag, and the KeyboardInterrupt comes when the
+import is done.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import threading
@@ -18,6 +24,7 @@ import threading
 _requested = False
 _previous = None
 _installed = False
+_deferring = 0
 
 
 def _handler(signum, frame):
@@ -28,7 +35,22 @@ def _handler(signum, frame):
     _requested = True
     os.write(2, b"\ninterrupted: stopping at the next step and keeping the frames done "
                 b"(Ctrl-C again to exit at once)\n")
-    raise KeyboardInterrupt
+    if not _deferring:
+        raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def deferred():
+    """A block a first Ctrl-C does not interrupt: it is raised (KeyboardInterrupt) when the
+    block ends. A second Ctrl-C still exits at once."""
+    global _deferring
+    _deferring += 1
+    try:
+        yield
+    finally:
+        _deferring -= 1
+    if _deferring == 0 and _installed and _requested:
+        raise KeyboardInterrupt
 
 
 def install() -> None:

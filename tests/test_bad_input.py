@@ -366,3 +366,23 @@ def test_the_first_checkpoint_comes_right_after_the_first_frame(tmp_path, scene_
     assert seen == {1: 1, 2: 1, 3: 1}
     data, _ = _layer_data(out)
     assert data[schema.KEY_COMPLETE] is True and data[schema.KEY_LAST_FRAME] == 3
+
+
+def test_ctrl_c_in_a_deferred_block_comes_when_the_block_ends():
+    """A first Ctrl-C inside ``interrupts.deferred`` (an import whose library would print it
+    as a traceback) only sets the flag; the KeyboardInterrupt comes at the block's end."""
+    interrupts.install()
+    try:
+        reached_end = False
+        with pytest.raises(KeyboardInterrupt):
+            with interrupts.deferred():
+                os.kill(os.getpid(), signal.SIGINT)
+                for _ in range(1000):
+                    pass
+                assert interrupts.requested()
+                reached_end = True
+        assert reached_end
+    finally:
+        interrupts.restore()
+    with interrupts.deferred():  # (not installed: nothing to raise)
+        pass

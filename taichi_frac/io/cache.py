@@ -18,12 +18,15 @@ import time as _time
 from pathlib import Path
 
 import numpy as np
-from pxr import Gf, Sdf, Tf, Usd, UsdGeom, Vt
 
 from .. import __version__
+from ..interrupts import deferred
 from ..kinematics.quaternion import quaternion_multiply
 from ..options import LOOKS, MaterialLook, SurfaceLook
 from . import schema
+
+with deferred():  # (USD's loader prints a Ctrl-C during its import as a traceback)
+    from pxr import Gf, Sdf, Tf, Usd, UsdGeom, Vt
 
 # Body-frame data is Z-up; a Y-up stage turns the world by -90 degrees about X:
 # (x, y, z) -> (x, z, -y). As a quaternion (w, x, y, z):
