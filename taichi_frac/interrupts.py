@@ -49,8 +49,8 @@ def deferred():
         yield
     finally:
         _deferring -= 1
-    if _deferring == 0 and _installed and _requested:
-        raise KeyboardInterrupt
+    if _deferring == 0:
+        check()
 
 
 def install() -> None:

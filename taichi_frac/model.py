@@ -139,7 +139,6 @@ class BodyModel:
             return self, np.arange(self.surface_particle_count + 1), self.surface_particles
         return self, self.boundary_member_offsets, self.boundary_members
 
-
     @property
     def spacing(self) -> float:
         """[m] ``particle_spacing``, or this model's own mean V^(1/3) when it is None."""
@@ -162,7 +161,6 @@ class BodyModel:
     @property
     def volume(self) -> float:
         return float(self.tet_volume.sum())
-
 
 
 def patches_of(models, single: bool) -> list:

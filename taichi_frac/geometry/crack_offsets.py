@@ -110,13 +110,12 @@ def volume_offsets(solids, index_of: np.ndarray, cracks, targets: np.ndarray, fr
     if not rows:
         return offsets, now
     columns = np.nonzero(movable)[0]
-    a = np.array(rows)[:, columns]
-    a = np.vstack([a, np.sqrt(OFFSET_WEIGHT) * np.eye(len(columns))])
-    b = np.concatenate([-np.array(misfits), np.zeros(len(columns))])
+    rows, misfits = np.array(rows)[:, columns], np.array(misfits)
     already = np.zeros(len(columns)) if moved is None else np.asarray(moved)[columns] / spacing
-    b[len(misfits):] = -np.sqrt(OFFSET_WEIGHT) * already  # (the weight is on the total shift)
+    # (the weight is on the total shift)
+    a = np.vstack([rows, np.sqrt(OFFSET_WEIGHT) * np.eye(len(columns))])
+    b = np.concatenate([-misfits, -np.sqrt(OFFSET_WEIGHT) * already])
     fit = lsq_linear(a, b, bounds=(-MAX_OFFSET_FACTOR - already, MAX_OFFSET_FACTOR - already))
     offsets[columns] = fit.x * spacing
     # (the pieces without faces on a movable plane keep their errors)
-    fitted = np.array(rows)[:, columns] @ fit.x + np.array(misfits)
-    return offsets, now - float(np.sum(np.array(misfits) ** 2)) + float(np.sum(fitted**2))
+    return offsets, now - float(np.sum(misfits**2)) + float(np.sum((rows @ fit.x + misfits) ** 2))
