@@ -375,27 +375,29 @@ CONTACT_FRACTURE_RUNS = 2
 
 def _rings_ms(ctx: BenchContext, scene, single: bool, surface: bool, fracture: bool, frames) -> tuple:
     """Mean ms/frame of one 13-ring run (its first frame left out), the contacts of its
-    last substep and its fragments."""
+    last substep, its fragments, and its bodies asleep at the end and in all."""
     from .tables import run_scene
 
     label = [m[0] for m in CONTACT_MODES if m[1] == single and m[2] == surface][0]
     sim, summary, _ = run_scene(ctx, _with_contact(scene, single, surface), f"13 rings, {label}", fracture=fracture,
                                 frames=frames)
-    return float(summary.ms_per_frame["mean_after_first"]), sim.world.stats.contacts, summary.fragments
+    sleeping = sim.world.body_state()["sleeping"]
+    return (float(summary.ms_per_frame["mean_after_first"]), sim.world.stats.contacts, summary.fragments,
+            int(sleeping.sum()), len(sleeping))
 
 
 def _rings_fastest(ctx: BenchContext, scenes, fracture: bool, frames, runs: int) -> dict:
     """Each contact mode's 13 rings on each of ``scenes``, ``runs`` times interleaved (every
     mode and scene once per round): mode label -> one (fastest ms/frame, contacts in the
-    last substep, fragments) per scene."""
+    last substep, fragments, bodies asleep at the end, bodies) per scene."""
     times = {(m[0], k): [] for m in CONTACT_MODES for k in range(len(scenes))}
     last = {}
     for _ in range(runs):
         for k, scene in enumerate(scenes):
             for m in CONTACT_MODES:
-                ms, contacts, fragments = _rings_ms(ctx, scene, m[1], m[2], fracture, frames)
+                ms, *counts = _rings_ms(ctx, scene, m[1], m[2], fracture, frames)
                 times[m[0], k].append(ms)
-                last[m[0], k] = (contacts, fragments)
+                last[m[0], k] = tuple(counts)
     return {m[0]: [(min(times[m[0], k]), *last[m[0], k]) for k in range(len(scenes))] for m in CONTACT_MODES}
 
 
@@ -452,4 +454,6 @@ def contact_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) -> 
                 + [", ".join(f"{r[0]:.1f} / {r[2]}" for r in on[k]) for k in labels])
     rows.append([f"13 rings, fracture on, mean over {sets}: contacts in the last substep / fragments"]
                 + [f"{np.mean([r[1] for r in on[k]]):,.0f} / {np.mean([r[2] for r in on[k]]):.1f}" for k in labels])
+    rows.append(["13 rings, fracture on, per seed set: bodies asleep at the end / bodies"]
+                + [", ".join(f"{r[3]} / {r[4]}" for r in on[k]) for k in labels])
     return md_table(["measure", *labels], rows)
