@@ -50,6 +50,45 @@ def single_tet_model(edge: float = 0.05):
     return build_body_model(vertices, np.array([[0, 1, 2, 3]]), DENSITY, boundary_group_size=4)
 
 
+@functools.lru_cache(maxsize=None)
+def ring_chips(count: int = 36, seed: int = 0, tets: int = 6000, reach: float = 0.02) -> tuple:
+    """``count`` chips cut from a porcelain ring of ``tets`` tets (``ring_model``): each the
+    tets whose centroids lie within 0.6-1.4 ``reach`` [m] of a random point of its surface
+    (3-50 tets, 1-10 collision spheres: the jagged pieces a fracture makes). Chips of no
+    tet are left out."""
+    ring = ring_model(pieces=tets)
+    centroids = ring.vertices[ring.tets].mean(axis=1)
+    surface = np.unique(np.asarray(ring.surface_faces))
+    rng = np.random.default_rng(seed)
+    chips = []
+    for _ in range(count):
+        centre = ring.vertices[rng.choice(surface)]
+        picked = np.nonzero(np.linalg.norm(centroids - centre, axis=1) < reach * (0.6 + 0.8 * rng.random()))[0]
+        if len(picked):
+            used, index = np.unique(ring.tets[picked], return_inverse=True)
+            chips.append(build_body_model(ring.vertices[used], index.reshape(-1, 4), DENSITY, boundary_group_size=4))
+    return tuple(chips)
+
+
+def drop_heap(world, chips, seed: int = 0, spacing: float = 0.035) -> list[int]:
+    """``chips`` (BodyModels) added to ``world`` over a ground at z = 0 (restitution 0.1) in
+    a heap: columns on a 3 x 3 grid ``spacing`` [m] apart, 4 cm between layers, each chip
+    turned at random (``seed``) and let go 1 cm above the ground or the layer below.
+    Returns their body ids."""
+    from ..kinematics.quaternion import quaternion_matrix
+
+    world.add_ground(0.0, restitution=0.1)
+    rng = np.random.default_rng(seed)
+    bodies = []
+    for k, chip in enumerate(chips):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        low = (chip.vertices @ quaternion_matrix(q).T)[:, 2].min()
+        position = ((k % 3) * spacing, ((k // 3) % 3) * spacing, 0.01 - low + 0.04 * (k // 9))
+        bodies.append(world.add_body(chip, position, tuple(q), restitution=0.1))
+    return bodies
+
+
 def stack_rings(world, model, count: int, minor: float = 0.025) -> list[int]:
     """``count`` copies of the flat torus ``model`` (tube radius ``minor`` [m]) stacked on a
     ground at z = 0 added to ``world``, each let down 0.5 mm above the one below it,

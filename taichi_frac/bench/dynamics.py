@@ -354,6 +354,35 @@ def _ring_stack(ctx: BenchContext, single: bool, surface: bool) -> dict:
                 asleep=int(state["sleeping"].sum()))
 
 
+#: Heaps of ring chips in the contact table (``bodies.ring_chips`` / ``drop_heap`` seeds),
+#: 36 chips each, and the times [s] their sleeping chips are counted at.
+HEAPS = 4
+HEAP_TIMES = (1.0, 2.0, 3.0)
+
+
+def _chip_heaps(ctx: BenchContext, single: bool, surface: bool) -> list:
+    """Chips asleep at each of ``HEAP_TIMES``, summed over the ``HEAPS`` heaps (20 ms
+    frames, two substeps, as the 13 rings run), and the chips in all."""
+    from ..dynamics import DynamicsOptions
+    from .bodies import drop_heap, ring_chips
+
+    asleep = [0] * len(HEAP_TIMES)
+    chips = 0
+    for seed in range(HEAPS):
+        world = ctx.world()
+        world.clear()
+        world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
+        bodies = drop_heap(world, ring_chips(36, seed=seed), seed=seed)
+        chips += len(bodies)
+        frame = 0
+        for k, seconds in enumerate(HEAP_TIMES):
+            while frame < round(seconds / 0.02):
+                world.advance(0.02, 2)
+                frame += 1
+            asleep[k] += int(world.body_state(bodies)["sleeping"].sum())
+    return asleep + [chips]
+
+
 #: Runs of each 13-ring mode in the contact table, interleaved; the fastest counts. A mode's
 #: first run in a process compiles its kernels (the collide kernel's contact-patch code,
 #: the fracture stage at the first crack) inside one of its frames, which the mean over 50
@@ -438,6 +467,10 @@ def contact_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) -> 
         + [f"{1e3 * drops[k]['depth']:.2f} / {1e3 * flat[k]['depth']:.2f} / {1e3 * edge[k]['depth']:.2f}"
            for k in labels],
     ]
+    heaps = {m[0]: _chip_heaps(ctx, m[1], m[2]) for m in CONTACT_MODES}
+    rows.append([f"{HEAPS} heaps of 36 ring chips (3-50 tets) dropped in four layers: chips asleep at "
+                 + " / ".join(f"{t:g}" for t in HEAP_TIMES) + " s, of all"]
+                + [" / ".join(str(v) for v in heaps[k][:-1]) + f" of {heaps[k][-1]}" for k in labels])
     off = _rings_fastest(ctx, [scene], False, frames, CONTACT_RING_RUNS)
     ms = {k: off[k][0][0] for k in labels}
     rows.append([f"13 rings, fracture off, ms/frame, fastest of {CONTACT_RING_RUNS} interleaved runs (ratio to "

@@ -29,6 +29,17 @@ GROUND = -1  # ``body_b`` of a contact with a ground plane
 STATIC_BOX = -2  # ``body_b`` of a contact with a static box
 
 
+#: Cache keys of one static collider's contacts with a particle: the collider's key less
+#: the row, in the particle's patch, of the point the contact is made at. Keyed by the
+#: point, a contact finds its own impulse of the last substep however ``surface.manifold``
+#: ordered its points this time; keyed by that order, two nearly level points that traded
+#: places traded impulses too, and a chip resting on a face rocked on them for good.
+POINT_KEYS = 4096
+
+#: The first static box's key (planes count down from -1, boxes from here).
+BOX_KEYS = -(1 << 24)
+
+
 @ti.data_oriented
 class Contacts:
     """Per-substep contact buffer, shape (max_contacts,).
@@ -339,7 +350,7 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
         level = 0.0
         kind = GROUND
         k = s
-        key = -1 - k * ti.static(surface.MANIFOLD_POINTS)
+        key = -1 - k * ti.static(POINT_KEYS)
         mu = 0.0
         e = 0.0
         if s < planes:
@@ -351,7 +362,7 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
         else:
             k = s - planes
             kind = STATIC_BOX
-            key = -1000 - k * ti.static(surface.MANIFOLD_POINTS)
+            key = ti.static(BOX_KEYS) - k * ti.static(POINT_KEYS)
             rot = statics.box_rotation[k]
             half = statics.box_half_extents[k]
             local = rot.transpose() @ (x - statics.box_center[k])
@@ -381,7 +392,13 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
             level = point.dot(n)
             mu = ti.sqrt(bodies.friction[a] * statics.box_friction[k])
             e = ti.max(bodies.restitution[a], statics.box_restitution[k])
-        if gap < margin * r + bodies.motion[a]:
+        # A patch may stand out of its sphere (``Particles.overhang``): a chip's corner 3 mm
+        # past it touched the floor, its contact made or not as the motion bound varied,
+        # and the chip rocked on it for good.
+        over = 0.0
+        if ti.static(patches):
+            over = particles.overhang[i]
+        if gap - over < margin * r + bodies.motion[a]:
             if ti.static(patches):
                 _collider_contacts(bodies, particles, statics, contacts, margin, dt, bounce_speed, i, a, x, patch, n,
                                    gap, point, level, kind, k, key, mu, e)
@@ -398,15 +415,17 @@ def _collider_contacts(bodies: ti.template(), particles: ti.template(), statics:
     the sphere's (``gap`` [m], at the collider's ``point`` nearest it) or, with a patch,
     one per ``surface.manifold`` point (the collider's support along n is ``level`` [m]),
     or one for an impact (approaching faster than ``bounce_speed`` [m/s], the restitution
-    threshold) or a body of many spheres (``surface.against``). ``key``: the cache key of
-    the first; the manifold's points count down from it."""
+    threshold) or a body of many spheres (``surface.against``). ``key``: the collider's
+    cache key; a patch point's contact is keyed ``key`` less the point's row in the patch
+    (``POINT_KEYS``)."""
     count = 1
     points = ti.Matrix.zero(ti.f32, ti.static(surface.MANIFOLD_POINTS), 3)
     levels = ti.Vector.zero(ti.f32, ti.static(surface.MANIFOLD_POINTS))
+    ids = ti.Vector.zero(ti.i32, ti.static(surface.MANIFOLD_POINTS))
     if patch:
         v, _ = _point_velocity(bodies, a, x)
         single = -v.dot(n) > bounce_speed or bodies.particle_count[a] > ti.static(surface.MANIFOLD_MAX_SPHERES)
-        gap, count, points, levels = surface.against(bodies, particles, a, i, n, level, single)
+        gap, count, points, levels, ids = surface.against(bodies, particles, a, i, n, level, single)
     r = particles.radius[i]
     for m in range(count):  # (a dynamic loop: unrolled, each _append was inlined four times)
         g = gap + levels[m]
@@ -417,7 +436,7 @@ def _collider_contacts(bodies: ti.template(), particles: ti.template(), statics:
             at = spot - 0.5 * g * n
         if g < margin * r + bodies.motion[a] and g < margin * r + _speculative(bodies, statics, a, spot, -1, spot, n,
                                                                               dt):
-            _append(contacts, particles, i, key - m, a, kind, k, n, at, g, r, mu, e)
+            _append(contacts, particles, i, key - ids[m] % ti.static(POINT_KEYS), a, kind, k, n, at, g, r, mu, e)
 
 
 @ti.func

@@ -8,7 +8,7 @@ So a body's patch contacts with one static collider are reduced to representativ
 face-face manifold (Bullet's ``btPersistentManifold::sortCachedPoints``, PhysX's patch
 reduction): the deepest contact, and the contact farthest out along each of
 ``DIRECTIONS`` directions across the contact normal among the contacts that touch (gap
-within ``surface.SUPPORT_BAND`` of their sphere's radius of the deepest gap), and
+within ``TOUCHING_BAND`` of their sphere's radius of the deepest gap), and
 among those near (within the contact margin, as the narrowphase makes a resting body's
 contacts). Against a plane a body's gap is an
 affine function of the point (for the small rotation of one substep), so the
@@ -30,12 +30,17 @@ import math
 import taichi as ti
 
 from ..kinematics.frames import tangent_basis
-from . import surface
 
 
 #: Directions across the contact normal along which the outermost contact is kept: eight
 #: (every 45 degrees) outline a ring's circle of contacts within 8 % of its radius.
 DIRECTIONS = 8
+
+#: Contacts whose gap lies within this fraction of their sphere's radius of the deepest gap
+#: touch (``_layer``). A dropped contact lies inside the outline kept, which holds it only
+#: to within the spread of the layer's gaps: a curved chip whose outline stood 0.6-0.9 mm
+#: up (a tenth of a radius) lost the three contacts it stood on and rocked for seconds.
+TOUCHING_BAND = 0.02
 
 #: ``contacts.reduce_mark`` values.
 UNSEEN, KEEP, DROP = 0, 1, 2
@@ -55,11 +60,11 @@ def _same_collider(contacts: ti.template(), c, d):
 @ti.func
 def _layer(contacts: ti.template(), c, low, margin):
     """Which layer of the contact area contact ``c`` lies in, by its gap above the deepest
-    gap ``low`` [m] in its sphere's radii: 0 within ``surface.SUPPORT_BAND`` (touching),
+    gap ``low`` [m] in its sphere's radii: 0 within ``TOUCHING_BAND`` (touching),
     1 within ``margin`` (near), 2 beyond (made because it approaches: never reduced)."""
     rise = contacts.separation[c] - low
     r = contacts.radius[c]
-    return ti.select(rise <= ti.static(surface.SUPPORT_BAND) * r, 0, ti.select(rise <= margin * r, 1, 2))
+    return ti.select(rise <= ti.static(TOUCHING_BAND) * r, 0, ti.select(rise <= margin * r, 1, 2))
 
 
 @ti.func

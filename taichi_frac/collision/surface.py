@@ -67,6 +67,10 @@ MANIFOLD_POINTS = 4
 #: iteration. A chip of a few spheres keeps its manifold (``MANIFOLD_POINTS``).
 MANIFOLD_MAX_SPHERES = 16
 
+#: The id (``manifold``'s ids) of the one contact a patch makes at the middle of its band
+#: (``against``'s ``single``): past any patch's points.
+SPOT_ID = 4095
+
 #: Manifold points closer than this fraction of the sphere's radius to the ones already
 #: kept (or to their line) add nothing: the manifold stops there.
 MANIFOLD_SPREAD = 0.05
@@ -134,9 +138,12 @@ def manifold(particles: ti.template(), p, axis, low):
     the band point farthest from it, the one farthest from their line, and the one
     farthest on the other side of that line. Returns (count, points (mat 4x3, body frame
     [m], rows past ``count`` unused), levels (vec4 [m]: each point's height above ``low``
-    along ``axis``)). A sphere without a patch: its lowest point, count 1."""
+    along ``axis``), ids (ivec4: each point's row in the patch, which names its contact
+    for warm starting whatever order the points are picked in)). A sphere without a
+    patch: its lowest point, count 1, id 0."""
     points = ti.Matrix.zero(ti.f32, ti.static(MANIFOLD_POINTS), 3)
     levels = ti.Vector.zero(ti.f32, ti.static(MANIFOLD_POINTS))
+    ids = ti.Vector.zero(ti.i32, ti.static(MANIFOLD_POINTS))
     kept = 1
     start = particles.point_start[p]
     count = particles.point_count[p]
@@ -153,6 +160,7 @@ def manifold(particles: ti.template(), p, axis, low):
             if level < first_level:
                 first = x
                 first_level = level
+                ids[0] = k - start
         # Second: farthest from the first.
         second = first
         best = spread2
@@ -161,6 +169,7 @@ def manifold(particles: ti.template(), p, axis, low):
             if x.dot(axis) <= band and (x - first).norm_sqr() > best:
                 best = (x - first).norm_sqr()
                 second = x
+                ids[1] = k - start
         edge = second - first
         third = first
         fourth = first
@@ -174,6 +183,7 @@ def manifold(particles: ti.template(), p, axis, low):
                 if x.dot(axis) <= band and area > best3:
                     best3 = area
                     third = x
+                    ids[2] = k - start
             if best3 > spread2 * edge.norm_sqr():
                 kept = 3
                 # Fourth: farthest from that line on the other side of it.
@@ -185,6 +195,7 @@ def manifold(particles: ti.template(), p, axis, low):
                     if x.dot(axis) <= band and away > best4:
                         best4 = away
                         fourth = x
+                        ids[3] = k - start
                 if best4 > spread2 * edge.norm() * side.norm():
                     kept = 4
         rows = ti.Matrix.rows([first, second, third, fourth])
@@ -195,7 +206,7 @@ def manifold(particles: ti.template(), p, axis, low):
     else:
         for d in ti.static(range(3)):
             points[0, d] = first[d]
-    return kept, points, levels
+    return kept, points, levels, ids
 
 
 @ti.func
@@ -514,7 +525,8 @@ def by_patches(particles: ti.template(), i, j):
 def against(bodies: ti.template(), particles: ti.template(), a, i, n, level, single):
     """Sphere ``i`` of body ``a`` against a static collider whose support along the world
     normal ``n`` (out of the collider, into a) is ``level`` [m]: (gap [m] of the deepest
-    point, and ``manifold``'s count, points (world [m]) and levels along n). ``single``:
+    point, and ``manifold``'s count, points (world [m]), levels along n and ids; the
+    single point's id is ``SPOT_ID``). ``single``:
     one point instead, the middle of its ``SPOT_BAND`` (``contact_spot``), for an impact
     (the patch approaches faster than the restitution threshold) and for a body of more
     than ``MANIFOLD_MAX_SPHERES`` spheres (whose contacts ``reduction`` then thins out).
@@ -526,14 +538,15 @@ def against(bodies: ti.template(), particles: ti.template(), a, i, n, level, sin
     count = 1
     points = ti.Matrix.zero(ti.f32, ti.static(MANIFOLD_POINTS), 3)
     levels = ti.Vector.zero(ti.f32, ti.static(MANIFOLD_POINTS))
+    ids = ti.Vector([SPOT_ID] * MANIFOLD_POINTS, dt=ti.i32)
     if single:
         spot = contact_spot(particles, i, axis, low, SPOT_BAND)
         for c in ti.static(range(3)):
             points[0, c] = spot[c]
     else:
-        count, points, levels = manifold(particles, i, axis, low)
+        count, points, levels, ids = manifold(particles, i, axis, low)
     points = points @ rot_a.transpose()
     for m in ti.static(range(MANIFOLD_POINTS)):
         for c in ti.static(range(3)):
             points[m, c] += bodies.position[a][c]
-    return bodies.position[a].dot(n) + low - level, count, points, levels
+    return bodies.position[a].dot(n) + low - level, count, points, levels, ids

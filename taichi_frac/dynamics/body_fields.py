@@ -81,6 +81,7 @@ def write_bodies(bodies: ti.template(), particles: ti.template(),
             upper = ti.max(upper, offset + r)
         bodies.bounding_radius[slot] = bounding
         bodies.max_particle_radius[slot] = largest
+        bodies.max_overhang[slot] = 0.0
         bodies.mean_particle_radius[slot] = total / (end - begin)
         bodies.local_lower[slot] = lower
         bodies.local_upper[slot] = upper
@@ -101,6 +102,7 @@ def write_bodies(bodies: ti.template(), particles: ti.template(),
             particles.hull_stamp[0, p] = -1
             particles.hull_stamp[1, p] = -1
             particles.point_count[p] = 0  # (sphere contacts unless write_patches says otherwise)
+            particles.overhang[p] = 0.0
             sphere = _sphere_f32(spheres, begin + k)
             particles.offset[p] = ti.math.vec3(sphere[0], sphere[1], sphere[2])
             particles.radius[p] = sphere[3]
@@ -112,13 +114,14 @@ def write_bodies(bodies: ti.template(), particles: ti.template(),
 
 
 @ti.kernel
-def write_patches(particles: ti.template(), ints: ti.types.ndarray(dtype=ti.i32, ndim=2),
+def write_patches(bodies: ti.template(), particles: ti.template(), ints: ti.types.ndarray(dtype=ti.i32, ndim=2),
                   normals: ti.types.ndarray(dtype=ti.f32, ndim=2), facets: ti.types.ndarray(dtype=ti.f32, ndim=2),
                   points: ti.types.ndarray(dtype=ti.f32, ndim=2)):
     """The contact patches of S spheres: ``ints`` (S,4) (particle slot, first row of
     ``surface_point`` for its patch, its point count, the first row of those points in
     ``points``), ``normals`` (S,3) and ``facets`` (S, 3 MAX_FACETS) body frame, ``points``
-    (P,3) [m] body frame."""
+    (P,3) [m] body frame. Each sphere's ``overhang`` and its body's ``max_overhang``,
+    bounding radius and box grow to hold the patch."""
     ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for s in range(ints.shape[0]):
         p = ints[s, 0]
@@ -128,9 +131,22 @@ def write_patches(particles: ti.template(), ints: ti.types.ndarray(dtype=ti.i32,
         particles.patch_normal[p] = ti.math.vec3(normals[s, 0], normals[s, 1], normals[s, 2])
         for f in ti.static(range(particles.patch_facet.shape[1])):
             particles.patch_facet[p, f] = ti.math.vec3(facets[s, 3 * f], facets[s, 3 * f + 1], facets[s, 3 * f + 2])
+        centre = particles.offset[p]
+        radius = particles.radius[p]
+        reach = radius
         for k in range(ints[s, 2]):
             row = ints[s, 3] + k
-            particles.surface_point[start + k] = ti.math.vec3(points[row, 0], points[row, 1], points[row, 2])
+            x = ti.math.vec3(points[row, 0], points[row, 1], points[row, 2])
+            particles.surface_point[start + k] = x
+            reach = ti.max(reach, (x - centre).norm())
+        over = reach - radius
+        particles.overhang[p] = over
+        b = particles.body[p]
+        ti.atomic_max(bodies.max_overhang[b], over)
+        ti.atomic_max(bodies.bounding_radius[b], centre.norm() + reach)
+        for d in ti.static(range(3)):
+            ti.atomic_min(bodies.local_lower[b][d], centre[d] - reach)
+            ti.atomic_max(bodies.local_upper[b][d], centre[d] + reach)
 
 
 @ti.kernel
