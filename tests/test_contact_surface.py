@@ -16,7 +16,7 @@ import trimesh
 from taichi_frac.geometry.tetra import tetrahedralize
 from taichi_frac.geometry.contact_patches import contact_patches, contact_patches_many
 from taichi_frac.model import build_body_model, patches_of
-from taichi_frac.bench.bodies import (box_model, drop_heap, ring_chips, ring_model, settle_and_hold, single_tet_model,
+from taichi_frac.bench.bodies import (box_model, heap_asleep, ring_model, settle_and_hold, single_tet_model,
                                       stack_cubes, stack_rings)
 from support.dynamics import fresh_world, rotation
 
@@ -150,13 +150,7 @@ def test_heaps_of_ring_chips_come_to_rest_and_sleep():
     above the points it stood on and four cache slots a particle left its other contacts
     cold every substep). Sphere contacts put all 144 to sleep by 1.5 s: in a heap the patch
     contacts still leave a few chips creeping at 1-5 mm/s."""
-    asleep = 0
-    for seed in range(4):
-        world = fresh_world(surface_contact=True)
-        bodies = drop_heap(world, ring_chips(36, seed=seed), seed=seed)
-        for _ in range(150):
-            world.advance(0.02, 2)
-        asleep += int(world.body_state(bodies)["sleeping"].sum())
+    asleep = sum(heap_asleep(fresh_world(surface_contact=True), seed)[0][0] for seed in range(4))
     assert asleep >= 0.8 * 144
 
 

@@ -89,6 +89,21 @@ def drop_heap(world, chips, seed: int = 0, spacing: float = 0.035) -> list[int]:
     return bodies
 
 
+def heap_asleep(world, seed: int, times=(3.0,)) -> tuple[list[int], int]:
+    """Drop heap ``seed`` of 36 ring chips (``ring_chips``, ``drop_heap``) into ``world``
+    (cleared, its options set) and run it in 20 ms frames of two substeps, as the 13 rings
+    run: (the chips asleep at each of ``times`` [s], ascending; the chips)."""
+    bodies = drop_heap(world, ring_chips(36, seed=seed), seed=seed)
+    asleep = []
+    frame = 0
+    for seconds in times:
+        while frame < round(seconds / 0.02):
+            world.advance(0.02, 2)
+            frame += 1
+        asleep.append(int(world.body_state(bodies)["sleeping"].sum()))
+    return asleep, len(bodies)
+
+
 def stack_rings(world, model, count: int, minor: float = 0.025) -> list[int]:
     """``count`` copies of the flat torus ``model`` (tube radius ``minor`` [m]) stacked on a
     ground at z = 0 added to ``world``, each let down 0.5 mm above the one below it,

@@ -361,10 +361,10 @@ HEAP_TIMES = (1.0, 2.0, 3.0)
 
 
 def _chip_heaps(ctx: BenchContext, single: bool, surface: bool) -> list:
-    """Chips asleep at each of ``HEAP_TIMES``, summed over the ``HEAPS`` heaps (20 ms
-    frames, two substeps, as the 13 rings run), and the chips in all."""
+    """Chips asleep at each of ``HEAP_TIMES``, summed over the ``HEAPS`` heaps
+    (``bodies.heap_asleep``), and the chips in all."""
     from ..dynamics import DynamicsOptions
-    from .bodies import drop_heap, ring_chips
+    from .bodies import heap_asleep
 
     asleep = [0] * len(HEAP_TIMES)
     chips = 0
@@ -372,14 +372,9 @@ def _chip_heaps(ctx: BenchContext, single: bool, surface: bool) -> list:
         world = ctx.world()
         world.clear()
         world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
-        bodies = drop_heap(world, ring_chips(36, seed=seed), seed=seed)
-        chips += len(bodies)
-        frame = 0
-        for k, seconds in enumerate(HEAP_TIMES):
-            while frame < round(seconds / 0.02):
-                world.advance(0.02, 2)
-                frame += 1
-            asleep[k] += int(world.body_state(bodies)["sleeping"].sum())
+        counts, total = heap_asleep(world, seed, HEAP_TIMES)
+        asleep = [n + c for n, c in zip(asleep, counts)]
+        chips += total
     return asleep + [chips]
 
 

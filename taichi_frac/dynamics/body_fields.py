@@ -81,7 +81,6 @@ def write_bodies(bodies: ti.template(), particles: ti.template(),
             upper = ti.max(upper, offset + r)
         bodies.bounding_radius[slot] = bounding
         bodies.max_particle_radius[slot] = largest
-        bodies.max_overhang[slot] = 0.0
         bodies.mean_particle_radius[slot] = total / (end - begin)
         bodies.local_lower[slot] = lower
         bodies.local_upper[slot] = upper
@@ -120,8 +119,8 @@ def write_patches(bodies: ti.template(), particles: ti.template(), ints: ti.type
     """The contact patches of S spheres: ``ints`` (S,4) (particle slot, first row of
     ``surface_point`` for its patch, its point count, the first row of those points in
     ``points``), ``normals`` (S,3) and ``facets`` (S, 3 MAX_FACETS) body frame, ``points``
-    (P,3) [m] body frame. Each sphere's ``overhang`` and its body's ``max_overhang``,
-    bounding radius and box grow to hold the patch."""
+    (P,3) [m] body frame. Each sphere's ``overhang``, and its body's bounding radius and
+    box grown to hold the patch."""
     ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)
     for s in range(ints.shape[0]):
         p = ints[s, 0]
@@ -142,7 +141,6 @@ def write_patches(bodies: ti.template(), particles: ti.template(), ints: ti.type
         over = reach - radius
         particles.overhang[p] = over
         b = particles.body[p]
-        ti.atomic_max(bodies.max_overhang[b], over)
         ti.atomic_max(bodies.bounding_radius[b], centre.norm() + reach)
         for d in ti.static(range(3)):
             ti.atomic_min(bodies.local_lower[b][d], centre[d] - reach)

@@ -71,11 +71,10 @@ class Bodies:
             the radius of the sphere it impacts like (Hertz peak force of impact rows, see
             impacts.py).
         active: i32 1 = slot in use. fixed: i32 1 = never moves. Writer: add_body/remove_body.
-        bounding_radius: [m] max |offset| + radius (+ the patch's overhang, below) over the
-            body's particles.
+        bounding_radius: [m] max |offset| + radius (+ the patch's ``Particles.overhang``)
+            over the body's particles.
         mean_particle_radius, max_particle_radius: [m] of its collision particles
             (substep refinement, contact reach).
-        max_overhang: [m] the largest of its particles' ``overhang`` (0 without patches).
         local_lower, local_upper: vec3 [m] body-frame box holding every collision sphere
             and contact patch.
         cluster (capacity, MAX_CLUSTERS) vec4: body-frame spheres (centre [m], radius [m])
@@ -133,7 +132,6 @@ class Bodies:
         self.bounding_radius = ti.field(ti.f32, shape=capacity)
         self.mean_particle_radius = ti.field(ti.f32, shape=capacity)
         self.max_particle_radius = ti.field(ti.f32, shape=capacity)
-        self.max_overhang = ti.field(ti.f32, shape=capacity)
         self.local_lower = vec3.field(shape=capacity)
         self.local_upper = vec3.field(shape=capacity)
         self.cluster = vec4.field(shape=(capacity, MAX_CLUSTERS))
@@ -180,10 +178,10 @@ class Particles:
         Contact cache (warm starting), two halves (previous / next substep), ``parity``
         names the previous one: cache_count (2, P) contacts kept for particle P as the
         querying side; cache_key (2, P, CACHE_SLOTS) partner (particle slot >= 0; a static
-        collider's contacts ``narrowphase.POINT_KEYS``' keys, one per patch point); cache_normal [N s], cache_tangent (vec3,
-        [N s]) their accumulated impulses; cache_stamp (2, P) the store that wrote the
-        particle's entries (only the last store, ``cache_epoch``, is valid; add_body sets
-        -1 on a reused slot). Writer: solver.store_impulses; read by the narrowphase when
+        collider's contacts ``narrowphase.POINT_KEYS``' keys, one per patch point);
+        cache_normal [N s], cache_tangent (vec3, [N s]) their accumulated impulses;
+        cache_stamp (2, P) the store that wrote the particle's entries (only the last
+        store, ``cache_epoch``, is valid; add_body sets -1 on a reused slot). Writer: solver.store_impulses; read by the narrowphase when
         the same pair is made again.
         Hull searches (``surface.hull_pair``), in the same two halves: hull_count (2, P)
         searches kept for particle P as the querying side; hull_key (2, P, HULL_SLOTS) the
