@@ -1,6 +1,7 @@
 """`taichi-frac info`: JSON keys, Table 1 numbers, primitive specs, files and errors."""
 
 import json
+import re
 
 import pytest
 import trimesh
@@ -43,9 +44,14 @@ def test_file_with_units_and_table_output(tmp_path, capsys):
     trimesh.creation.box((100.0, 50.0, 20.0)).export(str(path))
     data = _json(capsys, ["info", str(path), "--units", "mm", "--particles", "600", "--json"])
     assert data["tet_volume"] == pytest.approx(0.1 * 0.05 * 0.02, rel=1e-9)
+    # The particle spacing is the tets' mean V^(1/3): at most the cube root of the mean volume
+    # (Jensen, equal only when every tet has the same volume), and near it for a quality mesh.
+    mean_root = (data["tet_volume"] / data["tets"]) ** (1.0 / 3.0)
+    assert 0.75 * mean_root < data["particle_spacing"] <= mean_root
     assert main(["info", str(path), "--units", "mm", "--particles", "600"]) == 0
     out = capsys.readouterr().out
     assert "physics particles (tets)" in out and "boundary particles" in out and "min dihedral angle" in out
+    assert re.search(rf"particle spacing +{data['particle_spacing']:.3g} m \(mean tet V\^\(1/3\)", out)
 
 
 def test_errors_exit_2_with_the_message(tmp_path, capsys):

@@ -249,7 +249,7 @@ def test_a_copy_that_loses_a_thin_part_is_refused(monkeypatch):
         return real(sphere.vertices, sphere.faces, count) if count < 1000 else real(vertices, faces, count)
 
     monkeypatch.setattr(simplify_module, "_decimate", tail_lost_when_coarse)
-    spacing = simplify_module.particle_spacing(mesh.volume, 1000)
+    spacing = simplify_module.tet_edge(mesh.volume, 1000)
     unbounded, _ = simplify_module.simplify_to_faces(mesh, 700, max_deviation=None)
     assert unbounded.bounds[1][0] == pytest.approx(0.05, abs=0.002)  # the tail is gone: the test can fail
     copy, _ = simplify_module.simplify_to_faces(mesh, 700, max_deviation=0.5 * spacing)
@@ -369,7 +369,7 @@ def test_cow_keeps_its_tail():
     model, report = prepare_body(str(path), scale=scale, repair=True, particles=ParticleOptions(target_particles=5000),
                                  use_cache=False, time_limit=300)
     source_bounds = read_surface(path).bounds * scale
-    spacing = simplify_module.particle_spacing(report.surface_volume, 5000)
+    spacing = simplify_module.tet_edge(report.surface_volume, 5000)
     tets = report.tet_surface if report.tet_surface is not None else report.surface
     assert tets is not None
     lo, hi = np.asarray(report.tet_extents), np.asarray(source_bounds[1] - source_bounds[0])

@@ -139,9 +139,9 @@ def _prepare_row(name, source, target: int, out: Path):
         path.parent.mkdir(parents=True, exist_ok=True)
         source.export(str(path))
     extents = np.array(report.tet_extents) / np.array(report.input_extents)
-    from ..geometry.simplify import particle_spacing
+    from ..geometry.simplify import tet_edge
 
-    spacing = particle_spacing(report.surface_volume, target)
+    spacing = tet_edge(report.surface_volume, target)
     row = dict(deviation=report.surface_deviation / spacing, name=name, faces=faces_in, tet_faces=report.tet_surface_triangles, particles=report.physics_particles,
                target=target, volume_error=report.volume_error, kept=report.kept_volume_fraction,
                extents_min=float(extents.min()), extents_max=float(extents.max()), seconds=seconds,
@@ -296,7 +296,7 @@ def _markdown(rows, drops, timing, target, load_before) -> str:
             ("" if r["surface_closed"] else "surface not closed; ")
             + (f"drop: {r['drop_error'][:160]}" if "drop_error" in r else "")])
     table = md_table(["mesh", "faces in", "tet surface", f"particles (target {target:,})", "volume error",
-                      "kept (winding no.)", "extents kept", "deviation [spacings]", "prepare [s]", "drop ms/frame",
+                      "kept (winding no.)", "extents kept", "deviation [tet edges]", "prepare [s]", "drop ms/frame",
                       "fragments", "mass error", "cache read back", "rendered: box, volume", "note"], table_rows,
                      align="lrrrrrrrrrrrrrl")
     check = md_table(["faces", "crossing pairs found", "crossing check wall [s]", "its main-thread CPU [s]",
@@ -314,7 +314,7 @@ def _markdown(rows, drops, timing, target, load_before) -> str:
         "the fraction of the input's generalized winding-number solid inside the repaired one (40,000 "
         "samples, '-' where nothing was repaired); *extents kept*: the tets' bounding box over the input's, "
         "smallest and largest axis; *deviation*: the farthest point of the input's surface from the "
-        "simulated solid's, in particle spacings (edge of a regular tet of the target's particle volume); "
+        "simulated solid's, in tet edges (the edge of a regular tet of the target's particle volume, about 2.04 particle spacings); "
         "*mass error*: |final + dropped debris - initial| / initial; *cache read back*: the drop's USD cache "
         "opened again: fragment meshes with faces (findings of USD's validators); *rendered*: in that cache, the "
         "visible meshes' box at the first frame over the input's box (axes sorted; smallest and largest ratio), and "

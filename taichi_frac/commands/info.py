@@ -56,6 +56,8 @@ def register(subparsers) -> None:
 
 
 def _table(report) -> str:
+    from ..geometry.simplify import TET_EDGE_PER_SPACING
+
     t = report.timings
     com = ", ".join(f"{c:.6g}" for c in report.center_of_mass)
     inertia = report.inertia
@@ -69,6 +71,8 @@ def _table(report) -> str:
          + (f" (tets fill a copy of {report.tet_surface_triangles:,})"
             if report.tet_surface_triangles not in (-1, report.surface_triangles) else "")),
         ("volume", f"{report.tet_volume:.6g} m^3 (surface {report.surface_volume:.6g} m^3, error {report.volume_error:+.2e})"),
+        ("particle spacing", f"{report.particle_spacing:.3g} m (mean tet V^(1/3); a regular tet of that volume has "
+                             f"edges {TET_EDGE_PER_SPACING:.2f} times as long)"),
         ("min dihedral angle", f"{report.min_dihedral_deg:.2f} deg ({report.sliver_count} tets below 5 deg)"),
         ("mass", f"{report.mass:.6g} kg"),
         ("centre of mass (source frame)", f"({com}) m"),

@@ -90,6 +90,10 @@ class PrepareReport:
     #: tets' boundary: how far the simulated solid strays from the artist's (None for
     #: tet-mesh files).
     surface_deviation: float | None = None
+    #: [m] the mean V^(1/3) of the tets (``BodyModel.spacing``): the unit of the SPH smoothing
+    #: length, the crack roughness and the piece-geometry measures. A regular tet of that
+    #: volume has edges about 2.04 times as long.
+    particle_spacing: float = float("nan")
 
     def as_dict(self) -> dict:
         return {k: v for k, v in self.__dict__.items() if k not in ("surface", "tet_surface")}
@@ -408,5 +412,6 @@ def prepare_body(
         tet_extents=extents.tolist(),
         surface_closed=surface is None or bool(surface.is_watertight and surface.is_winding_consistent),
         surface_deviation=deviation,
+        particle_spacing=model.spacing,
     )
     return model, report

@@ -1,4 +1,4 @@
-"""The surface the tets fill: a copy of the artist's surface simplified to the particle spacing.
+"""The surface the tets fill: a copy of the artist's surface simplified to the particles' size.
 
 TetGen keeps every input triangle, so a surface finer than the spacing of the wanted particles
 forces tiny tets along it and the particle count follows the surface, not the target (a 70k
@@ -19,8 +19,8 @@ artist's (``PrepareReport.surface``); only the simulation sees the copy.
 A thin part (a cow's tail, a handle) can decimate into the body next to it; removing the
 crossings then cuts the part away, and its volume is too small for any volume check to see
 (the cow's tail: 7 % of its length, 0.01 % of its volume). So every copy is also held to a
-distance: no point of the input may lie farther than ``MAX_DEVIATION`` particle spacings from
-the copy (:func:`surface_deviation`); a copy that strays is replaced by a finer one.
+distance: no point of the input may lie farther than ``MAX_DEVIATION`` tet edges
+(:func:`tet_edge`) from the copy (:func:`surface_deviation`); a copy that strays is replaced by a finer one.
 """
 
 from __future__ import annotations
@@ -42,10 +42,9 @@ FINER_FACTOR = 1.0
 VOLUME_TOLERANCE = 0.005
 #: Fewest triangles a simplified copy keeps (a coarser copy loses the shape, not just detail).
 MIN_FACES = 500
-#: Largest distance from a point of the input to the copy, in particle spacings
-#: (:func:`particle_spacing`). Decimating to the target's spacing moves the surface by up to
-#: 0.6 spacings (where shells were united); a lost thin part lies its length away (the cow's
-#: tail: 2.4 spacings).
+#: Largest distance from a point of the input to the copy, in tet edges (:func:`tet_edge`).
+#: Decimating to the target's spacing moves the surface by up to 0.6 edges (where shells were
+#: united); a lost thin part lies its length away (the cow's tail: 2.4 edges).
 MAX_DEVIATION = 1.0
 #: Input points the deviation is measured at: every vertex up to this count, else a random
 #: subset of this size (a lost part has many vertices; one is enough to see it).
@@ -54,10 +53,15 @@ DEVIATION_SAMPLES = 50_000
 RETRIES = 10
 
 
-def particle_spacing(volume: float, target_particles: int) -> float:
-    """Edge [m] of a regular tet of ``volume`` / ``target_particles`` [m^3]: the spacing of
-    the physics particles."""
-    return (6.0 * math.sqrt(2.0) * volume / target_particles) ** (1.0 / 3.0)
+#: A regular tet's edge over the cube root of its volume, (6 sqrt 2)^(1/3).
+TET_EDGE_PER_SPACING = (6.0 * math.sqrt(2.0)) ** (1.0 / 3.0)
+
+
+def tet_edge(volume: float, target_particles: int) -> float:
+    """Edge [m] of a regular tet of ``volume`` / ``target_particles`` [m^3]: the length the
+    copy's triangles are sized by and its distance check is measured in (about 2.04 particle
+    spacings, the particle volume's cube root)."""
+    return TET_EDGE_PER_SPACING * (volume / target_particles) ** (1.0 / 3.0)
 
 
 def deviation_points(mesh: trimesh.Trimesh, samples: int = DEVIATION_SAMPLES, seed: int = 0) -> np.ndarray:
@@ -86,7 +90,7 @@ def target_face_count(volume: float, area: float, target_particles: int) -> int:
     """Triangles of a surface of ``area`` [m^2] at the spacing of ``target_particles`` tets
     filling ``volume`` [m^3]: area / (an equilateral triangle of EDGE_FACTOR x the regular tet's
     edge)."""
-    edge = EDGE_FACTOR * particle_spacing(volume, target_particles)
+    edge = EDGE_FACTOR * tet_edge(volume, target_particles)
     return max(MIN_FACES, int(round(area / (math.sqrt(3.0) / 4.0 * edge**2))))
 
 
@@ -263,13 +267,13 @@ def simplified_tet_surfaces(mesh: trimesh.Trimesh, target_particles: int, clock=
     by more than 15 % (thin parts, many sharp features), the next has fewer faces, by the
     overshoot to the 2/3 (tets ~ faces^(3/2) where the surface sets the count); three at most.
     A large input is first decimated once to 8x the wanted faces, so later copies start small.
-    Every copy lies within :data:`MAX_DEVIATION` particle spacings of every point of ``mesh``.
+    Every copy lies within :data:`MAX_DEVIATION` tet edges of every point of ``mesh``.
     """
     wanted = target_face_count(mesh.volume, mesh.area, target_particles)
     if len(mesh.faces) <= FINER_FACTOR * wanted:
         return
     volume = float(mesh.volume)
-    bound = dict(max_deviation=MAX_DEVIATION * particle_spacing(volume, target_particles),
+    bound = dict(max_deviation=MAX_DEVIATION * tet_edge(volume, target_particles),
                  reference_points=deviation_points(mesh))
     source = mesh
     if len(mesh.faces) > 16 * wanted:
