@@ -138,4 +138,17 @@ def _bridge(mesh, faces: np.ndarray, gap: float) -> m3.Manifold:
     triangles = (one[None] + 6 * np.arange(len(points))[:, None, None]).reshape(-1, 3)
     prisms = m3.Manifold(m3.Mesh64(vert_properties=props, tri_verts=np.ascontiguousarray(triangles, dtype=np.uint64)))
     # (one mesh of overlapping prisms is no valid solid: each is taken apart and they are added)
-    return m3.Manifold.batch_boolean(prisms.decompose(), m3.OpType.Add)
+    bridge = m3.Manifold.batch_boolean(prisms.decompose(), m3.OpType.Add)
+    # The union of nearly coplanar prisms can leave a vertex without properties (NaN), which
+    # would read as the artist's surface without its UVs: it is a hull face's like the rest.
+    mesh = bridge.to_mesh64()
+    props = np.array(mesh.vert_properties, dtype=np.float64, order="C")
+    missing = np.isnan(props[:, 3:]).any(axis=1)
+    if not missing.any():
+        return bridge
+    props[missing, 3:] = 0.0
+    props[missing, _CRACK] = HULL_FACE
+    # (copies: the binding takes no read-only views of the library's own arrays)
+    return m3.Manifold(m3.Mesh64(vert_properties=props, tri_verts=np.array(mesh.tri_verts, dtype=np.uint64),
+                                 merge_from_vert=np.array(mesh.merge_from_vert, dtype=np.uint64),
+                                 merge_to_vert=np.array(mesh.merge_to_vert, dtype=np.uint64)))
