@@ -273,10 +273,11 @@ class FractureOptions:
             spacing (``taichi-frac info`` prints the spacing).
         crack_roughness_scale: wavelength [m] of that noise's coarsest octave; None = four
             particle spacings.
-        crack_fit_rounds: how many times the rendered crack planes are moved parallel to
-            themselves (within half a particle spacing, where the tets' staircase along the
-            crack lies) so that each piece's render surface holds its tets' volume; 0 leaves
-            them where the analysis put them. Each round cuts the split's render solid again
+        crack_fit_rounds: how many times the rendered cracks are moved (planes shifted by at
+            most half a particle spacing and, where shifts cannot do it, tilted by at most
+            half a spacing more at their far end; ring cracks' spheres resized by at most half
+            a spacing: within the tets' staircase along the crack) so that each piece's
+            render surface holds its tets' volume; 0 leaves them where the analysis put them. Each round cuts the split's render solid again
             once or twice, and only when a piece of 100 tets or more is off by over 1 %.
     """
 

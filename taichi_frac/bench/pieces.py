@@ -47,7 +47,7 @@ def _scene_cases(quick: bool):
 
 
 #: The label suffix of the cases whose crack planes the volume fit leaves where they are.
-UNMOVED = "planes unmoved"
+UNMOVED = "cracks unmoved"
 
 
 def tet_height(model) -> float:
@@ -146,7 +146,7 @@ def _mesh_case(ctx: BenchContext, fit_rounds: int | None = None):
 def run(ctx: BenchContext) -> Section:
     from ..geometry.piece_parts import (FOREIGN_DEPTH_FACTOR, GAINED_VOLUME_FACTOR, GAINED_VOLUME_SHARE,
                                         LOST_VOLUME_SHARE, OVERREACH_FACTOR)
-    from ..geometry.crack_offsets import FITTED_PIECE_TETS, MAX_OFFSET_FACTOR, VOLUME_TOLERANCE
+    from ..geometry.crack_offsets import FITTED_PIECE_TETS, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR, VOLUME_TOLERANCE
     from ..options import FractureOptions
     from .tables import run_scene
 
@@ -202,10 +202,11 @@ def run(ctx: BenchContext) -> Section:
         "V^(1/3)). A flat crack face crosses the tets' staircase, so it lies up to "
         "about a tet's height (last column) from its piece's tets and its volume differs from theirs by that "
         "layer: the distance and volume columns measure that difference, not an error of the cut alone. "
-        "Each crack plane is then moved parallel to itself, at most "
-        f"{MAX_OFFSET_FACTOR:g} spacings, so the pieces of {FITTED_PIECE_TETS} tets or more come nearest their "
+        f"Each crack plane is then shifted along its normal by at most {MAX_OFFSET_FACTOR:g} spacings and, where "
+        f"shifts cannot do it, tilted by at most {MAX_TILT_FACTOR:g} more at its far end, and each ring crack's sphere "
+        f"resized by at most {MAX_OFFSET_FACTOR:g}, so the pieces of {FITTED_PIECE_TETS} tets or more come nearest their "
         f"tets' volumes (while one is off by more than {100 * VOLUME_TOLERANCE:g} %, up to the default "
-        f"{FractureOptions().crack_fit_rounds} rounds); the rows '{UNMOVED}' are the same runs with the planes "
+        f"{FractureOptions().crack_fit_rounds} rounds); the rows '{UNMOVED}' are the same runs with the cracks "
         "where the analysis put them.",
         "",
         md_table(["case", "pieces", "on their tets' boundary (cut failed)",

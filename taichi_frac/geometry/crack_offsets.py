@@ -1,24 +1,41 @@
 """Where the flat crack faces go so each piece keeps its tets' volume.
 
-A crack plane cuts the bonds whose particles (tet centroids) lie on its two sides; the tets
+A crack cuts the bonds whose particles (tet centroids) lie on its two sides; the tets
 themselves straddle it, so two pieces' tets meet along a staircase about a tet deep (some
 two particle spacings), and a flat crack face through it gives one side more than its tets
 and the other less: a piece of a hundred tets is off by several per cent. The physics fixes
 the face's position only to within that staircase. This module measures a first cut's
-pieces and moves each crack plane parallel to itself, by at most MAX_OFFSET_FACTOR particle
-spacings, so that the pieces' volumes come as near their tets' as the planes allow in the
-least-squares sense: moving plane k by d changes a piece's volume by d times the signed area
-of its faces on that plane, so the offsets solve a small bounded linear problem. The bonds,
-the pieces and their mass stay as the physics made them.
+pieces and moves each crack within it so that the pieces' volumes come as near their tets'
+as the cracks allow in the least-squares sense:
+
+- a crack plane is shifted along its normal by d and tilted: its shift at a point u of the
+  plane (in its tangent frame about a pivot, the mean of the bond crossings it cuts) is
+  d + (a1 u1 + a2 u2) / R, R the farthest crossing's distance from the pivot. A row of
+  pieces along one radial crack of a pane needs the tilt: one shift cannot suit them all;
+- a ring crack's sphere grows or shrinks by d.
+
+A face on a crack of outward area vector A changes its piece's volume by the shift under it
+times A . n (n the crack's normal there), so the pieces' volumes are linear in (d, a1, a2)
+and the moves solve a small bounded linear problem. The bonds, the pieces and their mass
+stay as the physics made them.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-#: Largest shift [particle spacings] of a crack face from its crack plane: about a quarter of a
-#: tet's height, well inside the staircase the same cut bonds allow.
+#: Largest shift [particle spacings] of a crack plane at its pivot, or of a ring crack's radius:
+#: about a quarter of a tet's height, well inside the staircase the same cut bonds allow.
 MAX_OFFSET_FACTOR = 0.5
+#: Largest shift [particle spacings] the tilt adds at a plane's farthest crossing (each of a1,
+#: a2 within this over sqrt(2)): a plane moves at most a spacing anywhere, about half a tet.
+MAX_TILT_FACTOR = 0.5
+
+#: The columns of an offset row: the shift at the pivot (a sphere: its radius), then the
+#: tilt's shifts [m] at the reach R along the plane's two tangent axes.
+MOVES = 3
 
 #: Only pieces of this many tets or more enter the fit: a piece of a few tets where cracks meet
 #: differs from its planes by a large share whatever they do, and must not pull the planes of
@@ -52,70 +69,145 @@ def volume_misfit(solids, targets: np.ndarray, fragment_tets) -> float:
     return float(np.nansum(volume_errors(solids, targets, fragment_tets) ** 2))
 
 
-def plane_face_areas(solid, index_of: np.ndarray, cracks) -> np.ndarray:
-    """(C,) [m^2] for each plane crack with a slab (``index_of`` its crack-property index, -1
-    none), the signed area of ``solid``'s faces on it: the sum over its faces of area x
-    (outward normal . crack normal); 0 for the others. Moving the plane by d along its normal
-    changes the solid's volume by d times this; the faces of a slit inside the piece, one of
-    each side, cancel."""
+@dataclass(frozen=True)
+class TiltFrame:
+    """Where a plane crack tilts about: ``pivot`` (3,) [m] on the analysis plane, its tangent
+    axes ``e1``, ``e2`` (3,) and ``reach`` [m], the farthest crossing's distance from it."""
+
+    pivot: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+    reach: float
+
+
+def tilt_frames(cracks, crossings, spacing: float) -> list:
+    """For each crack, its TiltFrame (a plane crack with crossings) or None: ``crossings`` a
+    list of (N,3) [m] points where the bonds it cuts between pieces cross it (or None)."""
+    from ..fracture.crack_types import CrackPlane
+    from .render_solid import tangent_frame
+
+    frames = []
+    for crack, sites in zip(cracks, crossings):
+        if not isinstance(crack, CrackPlane) or sites is None or not len(sites):
+            frames.append(None)
+            continue
+        normal = np.asarray(crack.normal, dtype=np.float64)
+        centre = np.mean(sites, axis=0)
+        pivot = centre - float((centre - crack.point) @ normal) * normal
+        rel = sites - pivot
+        rel -= np.outer(rel @ normal, normal)
+        e1, e2 = tangent_frame(normal)
+        frames.append(TiltFrame(pivot, e1, e2, max(float(np.sqrt(np.max(np.einsum("ij,ij->i", rel, rel)))),
+                                                   spacing)))
+    return frames
+
+
+def moved_crack(crack, frame: TiltFrame | None, move: np.ndarray):
+    """The CrackSurface of ``crack`` (CrackPlane / RingCrack) moved by ``move`` (MOVES,) [m]:
+    a plane shifted by move[0] at ``frame``'s pivot and tilted so that it is shifted by
+    move[1] (move[2]) more at the reach along e1 (e2); a sphere's radius grown by move[0]."""
+    from ..fracture.crack_types import CrackPlane
+    from .render_solid import CrackSurface
+
+    move = np.asarray(move, dtype=np.float64)
+    if not isinstance(crack, CrackPlane):
+        return CrackSurface(np.asarray(crack.point, float), np.zeros(3), float(crack.radius) + float(move[0]))
+    normal = np.asarray(crack.normal, dtype=np.float64)
+    if frame is None or not np.any(move):
+        return CrackSurface(np.asarray(crack.point, float) + float(move[0]) * normal, normal)
+    # The plane h(u) = d + (a1 u1 + a2 u2) / R over the pivot's tangent frame.
+    tilted = normal - (move[1] * frame.e1 + move[2] * frame.e2) / frame.reach
+    return CrackSurface(frame.pivot + float(move[0]) * normal, tilted / np.linalg.norm(tilted))
+
+
+def crack_face_moves(solid, origin, index_of: np.ndarray, cracks, frames) -> np.ndarray:
+    """(C, MOVES) [m^2] how ``solid``'s volume changes per metre of each crack's moves (see
+    ``moved_crack``): for each crack with a slab (``index_of`` its crack-property index, -1
+    none), the sum over its faces of (outward area vector . the crack's normal) times the
+    shift each move makes under the face's centroid; 0 for the others. ``origin`` (3,) [m]:
+    the solid's frame origin in the body's (where ``frames`` are). The faces of a slit inside
+    the piece, one of each side, cancel."""
     from ..fracture.crack_types import CrackPlane
     from .render_solid import _CRACK, solid_arrays
 
     props, tri = solid_arrays(solid)
     crack = np.rint(np.nan_to_num(props[tri, _CRACK], nan=-1.0)).astype(np.int64)  # (F,3)
     on_one = (crack == crack[:, :1]).all(axis=1)
-    corners = props[tri, :3]
+    corners = props[tri, :3] + np.asarray(origin, dtype=np.float64)
     area_vector = 0.5 * np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])  # (F,3)
-    areas = np.zeros(len(index_of))
+    centroid = corners.mean(axis=1)
+    moves = np.zeros((len(index_of), MOVES))
     for k, index in enumerate(index_of):
-        if index >= 0 and isinstance(cracks[k], CrackPlane):
-            rows = on_one & (crack[:, 0] == index)
-            areas[k] = float(np.sum(area_vector[rows] @ np.asarray(cracks[k].normal, dtype=np.float64)))
-    return areas
+        rows = on_one & (crack[:, 0] == index) if index >= 0 else None
+        if rows is None or not rows.any():
+            continue
+        if isinstance(cracks[k], CrackPlane):
+            flux = area_vector[rows] @ np.asarray(cracks[k].normal, dtype=np.float64)
+            moves[k, 0] = float(np.sum(flux))
+            frame = frames[k] if frames is not None else None
+            if frame is not None:
+                rel = centroid[rows] - frame.pivot
+                moves[k, 1] = float(np.sum(flux * (rel @ frame.e1))) / frame.reach
+                moves[k, 2] = float(np.sum(flux * (rel @ frame.e2))) / frame.reach
+        else:
+            radial = centroid[rows] - np.asarray(cracks[k].point, dtype=np.float64)
+            radial /= np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-300)
+            moves[k, 0] = float(np.einsum("ij,ij->", area_vector[rows], radial))
+    return moves
 
 
 def volume_offsets(solids, index_of: np.ndarray, cracks, targets: np.ndarray, fragment_tets,
-                   spacing: float, moved: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-    """The shift of each crack plane along its normal that brings the pieces' volumes nearest
-    ``targets`` (F,) [m^3]: least squares over the ``volume_errors``, each plane within
-    MAX_OFFSET_FACTOR ``spacing`` of where the analysis put it. ``solids``: a cut's pieces'
-    manifolds (None: no solid), made with the planes already ``moved`` (C,) [m] (None: none).
-    Returns (change, predicted): change (C,) [m] the further shift (all 0 when every error is
-    within VOLUME_TOLERANCE), predicted the ``volume_misfit`` the linear model expects after
-    it. Ring cracks and cracks without a slab stay."""
+                   spacing: float, moved: np.ndarray | None = None, frames=None,
+                   origins=None, shifts_only: bool = False) -> tuple[np.ndarray, float]:
+    """The moves of each crack (see ``moved_crack``) that bring the pieces' volumes nearest
+    ``targets`` (F,) [m^3]: least squares over the ``volume_errors``, each plane's shift within
+    MAX_OFFSET_FACTOR ``spacing`` at its pivot and its tilt within MAX_TILT_FACTOR at its
+    reach, a sphere's radius within MAX_OFFSET_FACTOR. ``solids``: a cut's pieces' manifolds
+    (None: no solid) in their frames, whose origins in the body's are ``origins`` (F,3) [m]
+    (None: the body's own), made with the cracks already ``moved`` (C, MOVES) [m] (None: none);
+    ``frames``: each crack's TiltFrame or None (no tilt; None: none tilts); ``shifts_only``:
+    only the planes' shifts are free (no tilt, the spheres stay). Returns (change,
+    predicted): change (C, MOVES) [m] the further moves (all 0 when every error is within
+    VOLUME_TOLERANCE), predicted the ``volume_misfit`` the linear model expects after it.
+    Cracks without a slab stay."""
     from scipy.optimize import lsq_linear
 
-    from ..fracture.crack_types import CrackPlane
-
-    offsets = np.zeros(len(cracks))
+    change = np.zeros((len(cracks), MOVES))
     errors = volume_errors(solids, targets, fragment_tets)
     now = float(np.nansum(errors**2))
     if not np.nanmax(np.abs(errors), initial=0.0) > VOLUME_TOLERANCE:
-        return offsets, now
-    # (a ring crack's sphere stays: moving radial planes and rings together re-sorts the
-    # small parts where they meet, and the glass walls' pieces came out further off)
-    movable = (index_of >= 0) & np.array([isinstance(c, CrackPlane) for c in cracks], dtype=bool)
-    if not movable.any():
-        return offsets, now
+        return change, now
+    # The free columns: every slab's shift (a sphere: its radius), the tilts of planes with a frame.
+    from ..fracture.crack_types import CrackPlane
+
+    free = np.zeros((len(cracks), MOVES), dtype=bool)
+    free[:, 0] = index_of >= 0
+    if shifts_only:
+        free[:, 0] &= np.array([isinstance(c, CrackPlane) for c in cracks], dtype=bool)
+    elif frames is not None:
+        free[:, 1:] = np.array([f is not None for f in frames], dtype=bool)[:, None] & (index_of >= 0)[:, None]
+    if not free.any():
+        return change, now
     rows, misfits = [], []
-    for solid, target, error in zip(solids, targets, errors):
+    origins = np.zeros((len(solids), 3)) if origins is None else np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    for solid, origin, target, error in zip(solids, origins, targets, errors):
         if np.isnan(error):
             continue
-        areas = plane_face_areas(solid, index_of, cracks)
-        if not np.any(areas):
+        moves = crack_face_moves(solid, origin, index_of, cracks, frames)
+        if not np.any(moves[free]):
             continue
-        # The relative error after the move, error + areas . d / target, d in spacings.
-        rows.append(areas * spacing / target)
+        # The relative error after the moves, error + moves . x / target, x in spacings.
+        rows.append(moves[free] * spacing / target)
         misfits.append(error)
     if not rows:
-        return offsets, now
-    columns = np.nonzero(movable)[0]
-    rows, misfits = np.array(rows)[:, columns], np.array(misfits)
-    already = np.zeros(len(columns)) if moved is None else np.asarray(moved)[columns] / spacing
-    # (the weight is on the total shift)
-    a = np.vstack([rows, np.sqrt(OFFSET_WEIGHT) * np.eye(len(columns))])
+        return change, now
+    rows, misfits = np.array(rows), np.array(misfits)
+    already = np.zeros(int(free.sum())) if moved is None else np.asarray(moved).reshape(len(cracks), MOVES)[free] / spacing
+    bound = np.where(np.nonzero(free)[1] == 0, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR / np.sqrt(2.0))
+    # (the weight is on the total moves)
+    a = np.vstack([rows, np.sqrt(OFFSET_WEIGHT) * np.eye(len(already))])
     b = np.concatenate([-misfits, -np.sqrt(OFFSET_WEIGHT) * already])
-    fit = lsq_linear(a, b, bounds=(-MAX_OFFSET_FACTOR - already, MAX_OFFSET_FACTOR - already))
-    offsets[columns] = fit.x * spacing
-    # (the pieces without faces on a movable plane keep their errors)
-    return offsets, now - float(np.sum(misfits**2)) + float(np.sum((rows @ fit.x + misfits) ** 2))
+    fit = lsq_linear(a, b, bounds=(-bound - already, bound - already))
+    change[free] = fit.x * spacing
+    # (the pieces without faces on a free crack keep their errors)
+    return change, now - float(np.sum(misfits**2)) + float(np.sum((rows @ fit.x + misfits) ** 2))

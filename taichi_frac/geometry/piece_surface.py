@@ -51,7 +51,7 @@ from __future__ import annotations
 import manifold3d as m3
 import numpy as np
 
-from .crack_offsets import piece_target_volumes, volume_misfit, volume_offsets
+from .crack_offsets import MOVES, VOLUME_TOLERANCE, moved_crack, piece_target_volumes, tilt_frames, volume_misfit, volume_offsets
 from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
                           overfull_pieces, overreaching_pieces)
 from .piece_shells import join_stray_shells, without_crumbs
@@ -248,22 +248,24 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
             ``com_in_source``).
         roughness: [m] crack-face noise amplitude (0: flat); roughness_scale [m] its
             wavelength (None: 4 particle spacings); seed: the noise's seed.
-        fit_rounds: how many times the planes are moved to fit the pieces' volumes (below);
-            0: cut on the crack planes as the analysis placed them.
+        fit_rounds: how many times the cracks are moved to fit the pieces' volumes (below);
+            0: cut on the cracks as the analysis placed them.
 
-    The cut is made on the crack planes, then, while a piece of ``FITTED_PIECE_TETS`` tets or
-    more is off its tets' volume by more than ``VOLUME_TOLERANCE`` (up to ``fit_rounds``
-    times), again with each plane moved parallel to itself by the offsets that bring those
-    pieces' volumes nearest their tets' (``crack_offsets``), kept when it is nearer (else with
-    half those offsets, see FIT_STEPS).
+    The cut is made on the cracks as the analysis placed them, then, while a piece of
+    ``FITTED_PIECE_TETS`` tets or more is off its tets' volume by more than
+    ``VOLUME_TOLERANCE`` (up to ``fit_rounds`` times), again with the cracks moved (planes
+    shifted and tilted, ring cracks' spheres resized) by what brings those pieces' volumes
+    nearest their tets' (``crack_offsets``), kept when it is nearer (else with half those
+    moves, see FIT_STEPS).
 
     Returns (pieces, stats): pieces a list of F RenderSolid or None (the caller then gives the
     piece its tets' boundary, exact in volume); stats a dict of counts (slabs, parts,
     unassigned parts, pieces without a part, ``fallback_pieces``: pieces the cut failed, see
     ``failed_pieces``, of which ``cell_pieces`` got the solid nearest their tets instead
     (``piece_parts.failed_piece_shells``) and the rest None; ``shells_moved``: stray shells
-    joined to another piece, see ``piece_shells.join_stray_shells``; ``moved_cracks``: planes
-    the kept cut moved, ``largest_offset`` [particle spacings], ``fit_cuts``: cuts made for
+    joined to another piece, see ``piece_shells.join_stray_shells``; ``moved_cracks``: cracks
+    the kept cut moved, ``largest_offset`` [particle spacings]: the largest shift of a moved
+    crack (a plane's at its pivot plus its tilt's at its reach), ``fit_cuts``: cuts made for
     the fit besides the first).
     """
     spacing = render.spacing
@@ -272,16 +274,25 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     for k, tets in enumerate(fragment_tets):
         labels[np.asarray(tets, dtype=np.int64)] = k
     per_crack = _separating_cracks(model, np.asarray(model.bonds, dtype=np.int64), labels, cracks)
-    args = (render, model, fragment_tets, labels, cracks, per_crack, piece_origins, roughness, roughness_scale, seed)
-    pieces, stats, index_of = _cut(*args, np.zeros(len(cracks)))
+    frames = tilt_frames(cracks, [None if sites is None else sites[cut & (inside < 0)]
+                                  for sites, cut, inside in per_crack], spacing)
+    args = (render, model, fragment_tets, labels, cracks, per_crack, frames, piece_origins, roughness,
+            roughness_scale, seed)
+    pieces, stats, index_of = _cut(*args, np.zeros((len(cracks), MOVES)))
     stats.update(moved_cracks=0, largest_offset=0.0, fit_cuts=0)
     if not fit_rounds:
         return pieces, stats
     targets = piece_target_volumes(render.solid.volume(), model, fragment_tets)
     solids = [p.solid if p is not None else None for p in pieces]
-    best, moved, cuts = volume_misfit(solids, targets, fragment_tets), np.zeros(len(cracks)), 0
+    best, moved, cuts = volume_misfit(solids, targets, fragment_tets), np.zeros((len(cracks), MOVES)), 0
     for _ in range(fit_rounds):
-        change, predicted = volume_offsets(solids, index_of, cracks, targets, fragment_tets, spacing, moved)
+        # The planes' shifts alone when they promise as much as every move (tilts and the ring
+        # cracks' radii too), or every piece within the tolerance: fewer moves keep the linear
+        # model nearer what the cut gives.
+        fits = [volume_offsets(solids, index_of, cracks, targets, fragment_tets, spacing, moved, frames,
+                               piece_origins, shifts_only=shifts_only) for shifts_only in (True, False)]
+        shifts, every = fits
+        change, predicted = shifts if shifts[1] <= max(every[1], VOLUME_TOLERANCE**2) else every
         if not np.any(change != 0.0) or predicted > (1.0 - FIT_GAIN) * best:
             break
         for step in FIT_STEPS:
@@ -292,8 +303,9 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
             misfit = volume_misfit(again_solids, targets, fragment_tets)
             if misfit < best:
                 pieces, solids, best, moved = again, again_solids, misfit, offsets
-                stats = dict(again_stats, moved_cracks=int(np.sum(offsets != 0.0)),
-                             largest_offset=float(np.max(np.abs(offsets)) / spacing))
+                reach = np.abs(offsets[:, 0]) + np.linalg.norm(offsets[:, 1:], axis=1)
+                stats = dict(again_stats, moved_cracks=int(np.sum(reach > 0.0)),
+                             largest_offset=float(np.max(reach)) / spacing)
                 break
         else:
             break
@@ -301,10 +313,10 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     return pieces, stats
 
 
-def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, piece_origins, roughness, roughness_scale, seed,
-         offsets):
-    """One cut of ``cut_render_solid`` with plane crack i moved ``offsets[i]`` [m] along its
-    normal. Returns (pieces, stats, index_of): index_of (len(cracks),) each crack's index in
+def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, frames, piece_origins, roughness,
+         roughness_scale, seed, offsets):
+    """One cut of ``cut_render_solid`` with crack i moved by ``offsets[i]`` (MOVES,) [m] (see
+    ``crack_offsets.moved_crack``; ``frames`` each crack's TiltFrame or None). Returns (pieces, stats, index_of): index_of (len(cracks),) each crack's index in
     the pieces' ``cracks`` (-1: it made no slab)."""
     from ..fracture.crack_types import CrackPlane
 
@@ -316,12 +328,10 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, p
         if not len(separating) or not separating.any():
             continue
         index = len(new_cracks)
+        surface = moved_crack(crack, frames[i], offsets[i])
         if isinstance(crack, CrackPlane):
-            normal = np.asarray(crack.normal, float)
-            surface = CrackSurface(np.asarray(crack.point, float) + offsets[i] * normal, normal)
             slab = _plane_slab(surface, sites, separating, spacing, roughness, roughness_scale, seed, index)
         else:
-            surface = CrackSurface(np.asarray(crack.point, float), np.zeros(3), float(crack.radius))
             slab = _sphere_shell(surface, spacing)
         if slab is None or slab.is_empty():
             continue
