@@ -337,6 +337,12 @@ def test_finite_crack_and_ring_crack_make_closed_pieces_and_cut_again(box):
         deviation = crack_deviation(mesh.vertices, mesh.faces, mesh.face_is_inner, mesh.face_crack, mesh.cracks)
         assert deviation < 0.05 * model.spacing  # the sphere's polygon: within its sagitta bound
     assert sum(volumes) == pytest.approx(parent_volume, rel=1e-3)
+    # Every generation's pieces are fitted to the unbroken box's render-to-tets volume ratio,
+    # not to their parent's (which carries its own cut's misfit).
+    root_scale = render.solid.volume() / model.volume
+    assert render.volume_scale is None and root_scale != pytest.approx(parent_volume / piece.model.volume, abs=1e-9)
+    for solid in (*renders, *child_renders):
+        assert solid.volume_scale == pytest.approx(root_scale, rel=1e-12)
 
 
 def test_a_piece_the_cut_fails_gets_the_surface_nearest_its_tets(box):

@@ -50,10 +50,11 @@ VOLUME_TOLERANCE = 0.01
 OFFSET_WEIGHT = 1e-4
 
 
-def piece_target_volumes(render_volume: float, model, fragment_tets) -> np.ndarray:
-    """(F,) [m^3] each piece's share of the render solid: its tets' volume, scaled by the render
-    solid's volume over all the tets' (the artist's surface and the tets' boundary differ)."""
-    scale = render_volume / model.volume
+def piece_target_volumes(scale: float, model, fragment_tets) -> np.ndarray:
+    """(F,) [m^3] each piece's share of the render solid: its tets' volume times ``scale``, the
+    unbroken body's render volume over its tets' (the artist's surface and the tets' boundary
+    differ). Not the breaking piece's own ratio: that carries its own cut's misfit, which
+    would pass to all its pieces alike instead of being mended where it lies."""
     return np.array([scale * model.tet_volume[np.asarray(t, dtype=np.int64)].sum() for t in fragment_tets])
 
 

@@ -276,13 +276,14 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     per_crack = _separating_cracks(model, np.asarray(model.bonds, dtype=np.int64), labels, cracks)
     frames = tilt_frames(cracks, [None if sites is None else sites[cut & (inside < 0)]
                                   for sites, cut, inside in per_crack], spacing)
+    scale = render.volume_scale if render.volume_scale is not None else render.solid.volume() / model.volume
     args = (render, model, fragment_tets, labels, cracks, per_crack, frames, piece_origins, roughness,
-            roughness_scale, seed)
+            roughness_scale, seed, scale)
     pieces, stats, index_of = _cut(*args, np.zeros((len(cracks), MOVES)))
     stats.update(moved_cracks=0, largest_offset=0.0, fit_cuts=0)
     if not fit_rounds:
         return pieces, stats
-    targets = piece_target_volumes(render.solid.volume(), model, fragment_tets)
+    targets = piece_target_volumes(scale, model, fragment_tets)
     solids = [p.solid if p is not None else None for p in pieces]
     best, moved, cuts = volume_misfit(solids, targets, fragment_tets), np.zeros((len(cracks), MOVES)), 0
     for _ in range(fit_rounds):
@@ -314,9 +315,10 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
 
 
 def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, frames, piece_origins, roughness,
-         roughness_scale, seed, offsets):
+         roughness_scale, seed, volume_scale, offsets):
     """One cut of ``cut_render_solid`` with crack i moved by ``offsets[i]`` (MOVES,) [m] (see
-    ``crack_offsets.moved_crack``; ``frames`` each crack's TiltFrame or None). Returns (pieces, stats, index_of): index_of (len(cracks),) each crack's index in
+    ``crack_offsets.moved_crack``; ``frames`` each crack's TiltFrame or None; the pieces'
+    ``RenderSolid.volume_scale`` is ``volume_scale``). Returns (pieces, stats, index_of): index_of (len(cracks),) each crack's index in
     the pieces' ``cracks`` (-1: it made no slab)."""
     from ..fracture.crack_types import CrackPlane
 
@@ -384,7 +386,7 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
         else:
             shells[k] = mine
     solids, stats["shells_moved"] = join_stray_shells({k: mine for k, mine in shells.items() if mine}, spacing)
-    pieces = [RenderSolid(solids[k], tuple(new_cracks), spacing).moved(origin) if k in solids else None
+    pieces = [RenderSolid(solids[k], tuple(new_cracks), spacing, volume_scale).moved(origin) if k in solids else None
               for k, origin in enumerate(origins)]
     stats["unassigned_parts"] = int(sum(1 for o in owner if o == -1))
     return pieces, stats, index_of

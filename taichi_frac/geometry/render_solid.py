@@ -77,17 +77,21 @@ class CrackSurface:
 class RenderSolid:
     """A body's render surface, body frame [m]: ``solid`` a closed manifold whose vertex
     properties carry the artist's corner normals and UVs and, on crack faces, the index of
-    their crack in ``cracks``; ``spacing`` [m] the body's particle spacing."""
+    their crack in ``cracks``; ``spacing`` [m] the body's particle spacing. ``volume_scale``
+    (a broken piece's): the unbroken body's render volume over its tets' volume, what a
+    piece's render solid should hold per volume of its tets; None for an unbroken body's
+    (its own volume over its tets')."""
 
     solid: m3.Manifold
     cracks: tuple
     spacing: float
+    volume_scale: float | None = None
 
     def moved(self, offset) -> "RenderSolid":
         """The same solid in a frame whose origin is at ``offset`` (3,) [m] of this one."""
         offset = np.asarray(offset, dtype=np.float64)
         return RenderSolid(self.solid.translate(tuple(-offset)), tuple(c.shifted(offset) for c in self.cracks),
-                           self.spacing)
+                           self.spacing, self.volume_scale)
 
 
 @dataclass(frozen=True, eq=False)
