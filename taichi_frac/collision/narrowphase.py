@@ -216,10 +216,16 @@ def clear_contacts(contacts: ti.template()):
     contacts.count[None] = 0
 
 
+#: A body wakes a sleeping one it touches only when its fastest point moves faster than this
+#: many times the sleep speed (``DynamicsOptions.sleep_linear_speed``): a chip creeping or
+#: settling in a heap at a few mm/s leans on its sleeping neighbours as on the ground.
+WAKE_SPEED_FACTOR = 3.0
+
+
 @ti.func
 def _pair_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
-                   contacts: ti.template(), patches: ti.template(), margin, sleep_time, dt, i, a, xi, ri, o,
-                   closing):
+                   contacts: ti.template(), patches: ti.template(), margin, sleep_time, wake_speed, dt, i, a, xi,
+                   ri, o, closing):
     """Sphere-sphere contacts of particle ``i`` (awake body ``a``, world centre ``xi`` [m],
     radius ``ri`` [m]) with the spheres of body ``o``, whose gap may close by ``closing``
     [m] this substep (``bounds.pair_motion``, or the broadphase's value for the pair).
@@ -231,8 +237,10 @@ def _pair_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.
     Then the cells of o's grid within ``grow`` of the point, and in them each sphere j
     whose gap is below the margin plus the pair's closing; the speculative test of that
     pair of points (``_speculative``) decides. An awake body that has not been still for
-    ``sleep_time`` [s] wakes a sleeping body it touches; one just woken itself (its timer
-    kept at ``sleep_time`` or more) does not, so a touch does not wake a whole pile."""
+    ``sleep_time`` [s] and moves faster than ``wake_speed`` [m/s] at its fastest point wakes
+    a sleeping body it touches; one just woken itself (its timer kept at ``sleep_time`` or
+    more) does not, so a touch does not wake a whole pile, and neither does a body creeping
+    or settling against it (one of a heap's chips kept waking its neighbours)."""
     grow = (ri + bodies.max_particle_radius[o]) * (1.0 + 0.5 * margin) + closing
     gap = xi - bodies.position[o]
     bound = bodies.bounding_radius[o] + grow
@@ -267,13 +275,13 @@ def _pair_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.
                             if (nearest - rel).norm_sqr() < wide * wide:
                                 cell = (cx * dims[1] + cy) * dims[2] + cz
                                 for k in range(particles.cell_first[base + cell], particles.cell_first[base + cell + 1]):
-                                    _test_pair(bodies, particles, statics, contacts, patches, margin, sleep_time, dt,
-                                               i, a, xi, ri, o, rot, local, closing, k)
+                                    _test_pair(bodies, particles, statics, contacts, patches, margin, sleep_time,
+                                               wake_speed, dt, i, a, xi, ri, o, rot, local, closing, k)
 
 
 @ti.func
 def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.template(), contacts: ti.template(),
-               patches: ti.template(), margin, sleep_time, dt, i, a, xi, ri, o, rot, local, closing, k):
+               patches: ti.template(), margin, sleep_time, wake_speed, dt, i, a, xi, ri, o, rot, local, closing, k):
     """Contact of particle ``i`` (body ``a``) with grid entry ``k`` of body ``o`` (its
     centre ``local`` [m] in o's frame, rotation ``rot`` o -> world), when their gap is
     within the margin plus the pair's closing (squared: no square root for the ~90 % of
@@ -326,7 +334,9 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
             mu = ti.sqrt(bodies.friction[a] * bodies.friction[o])
             e = ti.max(bodies.restitution[a], bodies.restitution[o])
             _append(contacts, particles, i, j, a, o, -1, n, point, gap, scale, mu, e)
-            if bodies.sleeping[o] == 1 and bodies.sleep_timer[a] < sleep_time:
+            if bodies.sleeping[o] == 1 and bodies.sleep_timer[a] < sleep_time and \
+                    bodies.linear_velocity[a].norm() + bodies.angular_velocity[a].norm() * bodies.bounding_radius[a] \
+                    > wake_speed:
                 bodies.wake_request[o] = 1
 
 
@@ -441,7 +451,8 @@ def _collider_contacts(bodies: ti.template(), particles: ti.template(), statics:
 
 @ti.func
 def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.template(),
-                      contacts: ti.template(), patches: ti.template(), margin, sleep_time, dt, bounce_speed):
+                      contacts: ti.template(), patches: ti.template(), margin, sleep_time, wake_speed, dt,
+                      bounce_speed):
     """One pass over the particles of awake bodies near something: each particle's world
     centre, its sphere-sphere contacts with each neighbour o of its body a that it makes
     (o > a when both are awake, so a pair is made once; every idle neighbour, which makes
@@ -450,7 +461,8 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: 
     the pair's closing computed here. A parallel task on every arch, unlike the small
     passes: a particle's contacts are appended by one thread in program order
     (neighbours, cells, entries), and ``order_contacts`` sorts them by particle.
-    ``bounce_speed`` [m/s]: the restitution threshold (``_collider_contacts``). ``patches``
+    ``wake_speed`` [m/s]: how fast a body must move to wake a sleeping one it touches
+    (``_pair_contacts``). ``bounce_speed`` [m/s]: the restitution threshold (``_collider_contacts``). ``patches``
     (static bool): whether any body has contact patches; without, the patch code is not
     compiled (a third of the kernel's build time) and every contact is the spheres'."""
     for i in range(particles.slot_end[None]):
@@ -476,8 +488,8 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: 
                     if o != a and bodies.active[o] == 1 and (o > a or is_idle(bodies, o)):
                         if not listed:
                             closing = pair_motion(bodies, statics, a, o, dt)
-                        _pair_contacts(bodies, particles, statics, contacts, patches, margin, sleep_time, dt, i, a,
-                                       xi, ri, o, closing)
+                        _pair_contacts(bodies, particles, statics, contacts, patches, margin, sleep_time, wake_speed,
+                                       dt, i, a, xi, ri, o, closing)
                 if bodies.near_static[a] == 1:
                     _static_contacts(bodies, particles, statics, contacts, patches, margin, dt, bounce_speed, i, a,
                                      xi)

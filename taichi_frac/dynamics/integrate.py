@@ -96,11 +96,22 @@ def _integrate_position(bodies: ti.template(), gravity, b, dt, max_rotation, sle
         # Sleep test on the fastest point (|v| + |w| R), so a small piece turning slowly
         # (2 cm fragment at 0.1 rad/s: 2 mm/s) sleeps like a large one.
         # (whether it sleeps is decided with the bodies it touches: sleep_together)
+        # A substep a little over the sleep speeds (a jolt in a settling heap) costs the timer a
+        # few substeps, not all it has: resetting it kept whole heaps awake for one chip's jolts.
         spin = w.norm()
-        if v.norm() + spin * bodies.bounding_radius[b] < sleep_linear_speed and spin < sleep_angular_speed:
+        speed = v.norm() + spin * bodies.bounding_radius[b]
+        if speed < sleep_linear_speed and spin < sleep_angular_speed:
             bodies.sleep_timer[b] += dt
+        elif speed < JOLT_FACTOR * sleep_linear_speed and spin < JOLT_FACTOR * sleep_angular_speed:
+            bodies.sleep_timer[b] = ti.max(bodies.sleep_timer[b] - JOLT_PENALTY * dt, 0.0)
         else:
             bodies.sleep_timer[b] = 0.0
+
+
+#: A substep under this many times the sleep speeds takes JOLT_PENALTY substeps off the sleep
+#: timer instead of resetting it: a body must be slow over four fifths of its substeps to sleep.
+JOLT_FACTOR = 3.0
+JOLT_PENALTY = 4.0
 
 
 @ti.func

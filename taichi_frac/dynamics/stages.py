@@ -40,8 +40,9 @@ def collide(f: ti.template(), margin: ti.f32, dt: ti.f32, sleep_time: ti.f32, pa
     patches (``narrowphase.particle_contacts``)."""
     broadphase.body_cull(f.bodies, f.statics, f.grid, margin, dt)
     narrowphase.clear_contacts(f.contacts)
-    narrowphase.particle_contacts(f.bodies, f.particles, f.statics, f.contacts, patches, margin, sleep_time, dt,
-                                  f.params.restitution_threshold[None])
+    wake_speed = narrowphase.WAKE_SPEED_FACTOR * f.params.sleep_linear_speed[None]
+    narrowphase.particle_contacts(f.bodies, f.particles, f.statics, f.contacts, patches, margin, sleep_time,
+                                  wake_speed, dt, f.params.restitution_threshold[None])
     narrowphase.order_contacts(f.particles, f.contacts)
     if ti.static(patches):
         reduction.reduce_static_contacts(f.bodies, f.particles, f.contacts, margin,
