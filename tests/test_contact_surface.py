@@ -145,13 +145,15 @@ def test_chips_on_the_ground_come_to_rest_and_sleep():
 def test_heaps_of_ring_chips_come_to_rest_and_sleep():
     """Four heaps of 36 chips cut from a ring (3-50 tets, the jagged pieces a fracture
     makes), each dropped in four layers, two substeps a frame as the 13 rings run: at 3 s
-    at least 80 % of the 144 chips sleep (measured 120; 96 when a manifold point's warm
-    start followed its rank, the contact reduction kept a chip's outline a tenth of a radius
-    above the points it stood on and four cache slots a particle left its other contacts
-    cold every substep). Sphere contacts put all 144 to sleep by 1.5 s: in a heap the patch
-    contacts still leave a few chips creeping at 1-5 mm/s."""
+    at least 90 % of the 144 chips sleep (measured 144; 120 to 133 when a jolt a little over
+    the sleep speed reset a chip's sleep timer and a creeping chip woke the sleeping ones it
+    touched, 96 when a manifold point's warm start followed its rank, the contact reduction
+    kept a chip's outline a tenth of a radius above the points it stood on and four cache
+    slots a particle left its other contacts cold every substep). In a heap the patch
+    contacts leave a few chips creeping at 1-5 mm/s, which now lean on their sleeping
+    neighbours instead of waking them."""
     asleep = sum(heap_asleep(fresh_world(surface_contact=True), seed)[0][0] for seed in range(4))
-    assert asleep >= 0.8 * 144
+    assert asleep >= 0.9 * 144
 
 
 def test_a_resting_ring_stands_on_a_few_contacts_that_carry_its_weight():
