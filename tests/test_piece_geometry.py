@@ -234,7 +234,8 @@ def test_tilted_planes_fit_a_saddle_that_shifts_cannot():
                          peak_stress=1.0)
     cracks = [x_plane, y_plane]
     grid = np.linspace(0.1, 0.9, 5)
-    crossings = [np.array([[0.5, a, b] for a in grid for b in grid]), np.array([[a, 0.5, b] for a in grid for b in grid])]
+    crossings = [np.array([[0.5, a, b] for a in grid for b in grid]),
+                 np.array([[a, 0.5, b] for a in grid for b in grid])]
     spacing = 0.1
     frames = tilt_frames(cracks, crossings, spacing)
     np.testing.assert_allclose(frames[0].pivot, [0.5, 0.5, 0.5], atol=1e-12)

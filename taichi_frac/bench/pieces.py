@@ -189,8 +189,8 @@ def run(ctx: BenchContext) -> Section:
         "([docs/guide/fragment-geometry.md](../guide/fragment-geometry.md)). Measured on the live pieces at "
         "the end of each run (a cache written), against each piece's tets (their boundary faces: the staircase a piece would show uncut; "
         f"commit {info['commit']}, {info['date']}, {info['cpu']} with {info['cores']} cores, machine load "
-        f"{load_average()}: the times compare with each other, not with other pages' machines). A part reaching more than "
-        f"{OVERREACH_FACTOR:.0f} spacings from its piece's nearest tet centroid is first divided: the material "
+        f"{load_average()}: the times compare with each other, not with other pages' machines). A part "
+        f"reaching more than {OVERREACH_FACTOR:.0f} spacings from its piece's nearest tet centroid is first divided: the material "
         f"nearest another piece's tets farther than {FOREIGN_DEPTH_FACTOR:g} spacings from its own goes to that "
         "piece. A piece the cut still fails (its render solid "
         f"under {100 * LOST_VOLUME_SHARE:.0f} % of its tets' volume, over it by more than "
@@ -206,8 +206,8 @@ def run(ctx: BenchContext) -> Section:
         "layer: the distance and volume columns measure that difference, not an error of the cut alone. "
         f"Each crack plane is then shifted along its normal by at most {MAX_OFFSET_FACTOR:g} spacings and, where "
         f"shifts cannot do it, tilted by at most {MAX_TILT_FACTOR:g} more at its far end, and each ring crack's sphere "
-        f"resized by at most {MAX_OFFSET_FACTOR:g}, so the pieces of {FITTED_PIECE_TETS} tets or more come nearest their "
-        f"tets' volumes (while one is off by more than {100 * VOLUME_TOLERANCE:g} %, up to the default "
+        f"resized by at most {MAX_OFFSET_FACTOR:g}, so the pieces of {FITTED_PIECE_TETS} tets or more come "
+        f"nearest their tets' volumes (while one is off by more than {100 * VOLUME_TOLERANCE:g} %, up to the default "
         f"{FractureOptions().crack_fit_rounds} rounds); the rows '{UNMOVED}' are the same runs with the cracks "
         "where the analysis put them.",
         "",

@@ -203,7 +203,8 @@ def volume_offsets(solids, index_of: np.ndarray, cracks, targets: np.ndarray, fr
     if not rows:
         return change, now
     rows, misfits = np.array(rows), np.array(misfits)
-    already = np.zeros(int(free.sum())) if moved is None else np.asarray(moved).reshape(len(cracks), MOVES)[free] / spacing
+    already = (np.zeros(int(free.sum())) if moved is None
+               else np.asarray(moved).reshape(len(cracks), MOVES)[free] / spacing)
     bound = np.where(np.nonzero(free)[1] == 0, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR / np.sqrt(2.0))
     # (the weight is on the total moves)
     a = np.vstack([rows, np.sqrt(OFFSET_WEIGHT) * np.eye(len(already))])

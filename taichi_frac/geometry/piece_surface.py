@@ -51,7 +51,8 @@ from __future__ import annotations
 import manifold3d as m3
 import numpy as np
 
-from .crack_offsets import MOVES, VOLUME_TOLERANCE, moved_crack, piece_target_volumes, tilt_frames, volume_misfit, volume_offsets
+from .crack_offsets import (MOVES, VOLUME_TOLERANCE, moved_crack, piece_target_volumes, tilt_frames, volume_misfit,
+                            volume_offsets)
 from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
                           overfull_pieces, overreaching_pieces)
 from .piece_shells import join_stray_shells, without_crumbs
@@ -290,9 +291,8 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
         # The planes' shifts alone when they promise as much as every move (tilts and the ring
         # cracks' radii too), or every piece within the tolerance: fewer moves keep the linear
         # model nearer what the cut gives.
-        fits = [volume_offsets(solids, index_of, cracks, targets, fragment_tets, spacing, moved, frames,
-                               piece_origins, shifts_only=shifts_only) for shifts_only in (True, False)]
-        shifts, every = fits
+        shifts, every = (volume_offsets(solids, index_of, cracks, targets, fragment_tets, spacing, moved, frames,
+                                        piece_origins, shifts_only=shifts_only) for shifts_only in (True, False))
         change, predicted = shifts if shifts[1] <= max(every[1], VOLUME_TOLERANCE**2) else every
         if not np.any(change != 0.0) or predicted > (1.0 - FIT_GAIN) * best:
             break
@@ -318,8 +318,9 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
          roughness_scale, seed, volume_scale, offsets):
     """One cut of ``cut_render_solid`` with crack i moved by ``offsets[i]`` (MOVES,) [m] (see
     ``crack_offsets.moved_crack``; ``frames`` each crack's TiltFrame or None; the pieces'
-    ``RenderSolid.volume_scale`` is ``volume_scale``). Returns (pieces, stats, index_of): index_of (len(cracks),) each crack's index in
-    the pieces' ``cracks`` (-1: it made no slab)."""
+    ``RenderSolid.volume_scale`` is ``volume_scale``). Returns (pieces, stats, index_of):
+    index_of (len(cracks),) each crack's index in the pieces' ``cracks`` (-1: it made no
+    slab)."""
     from ..fracture.crack_types import CrackPlane
 
     spacing = render.spacing
