@@ -329,3 +329,38 @@ def test_touching_bodies_sleep_together():
     world.bodies.sleep_timer.from_numpy(t)
     world.advance(0.02, 1)
     assert world.body_state([alone])["sleeping"].all()
+
+
+@pytest.mark.parametrize("speed, wakes", [(0.02, False), (0.1, True)])
+def test_only_a_moving_body_wakes_a_sleeping_one(speed, wakes):
+    """A sleeping 10 cm block is struck on its side by a 5 cm block sliding on the ground
+    without friction. At 2 cm/s (under three times the 1 cm/s sleep speed) the slider leans
+    on it as on a wall: the block stays asleep where it was. At 10 cm/s it is woken."""
+    world = fresh_world(sleep_time=0.2)
+    world.add_ground(0.0, restitution=0.0)
+    big, small = box_model(0.1, 0.1, 0.1, pieces=200), box_model(0.05, 0.05, 0.05, pieces=60)
+    block = world.add_body(big, (0, 0, -lowest_point(big)), friction=0.5, restitution=0.0)
+    slider = world.add_body(small, (-0.12, 0, -lowest_point(small)), friction=0.0, restitution=0.0)
+    for _ in range(75):  # 1.5 s: both settle (on their spheres' bumps, turning a little) and sleep
+        world.advance(0.02, 2)
+    start = world.body_state([block, slider])
+    assert np.all(start["sleeping"] == 1)
+
+    def sphere_gap():
+        a, b = world.particle_state(slider), world.particle_state(block)
+        centres = np.linalg.norm(a["position"][:, None] - b["position"][None], axis=2)
+        return float(np.min(centres - a["radius"][:, None] - b["radius"][None]))
+
+    gap = sphere_gap()
+    assert 0.01 < gap < 0.06
+    world.set_body_velocity(slider, (speed, 0.0, 0.0), (0.0, 0.0, 0.0))
+    woke = False
+    for _ in range(int(np.ceil(1.5 * gap / speed / 0.02)) + 15):  # to the block (not head on) and 0.3 s on
+        world.advance(0.02, 2)
+        woke |= bool(world.body_state([block])["sleeping"][0] == 0)
+    assert woke == wakes
+    if not wakes:
+        end = world.body_state([block, slider])
+        np.testing.assert_allclose(end["position"][0], start["position"][0], atol=1e-9)
+        # It stopped against the block and did not push into it.
+        assert abs(end["linear_velocity"][1][0]) < 1e-3 and sphere_gap() > -0.002
