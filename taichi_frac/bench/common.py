@@ -158,6 +158,12 @@ def warm_up(ctx: BenchContext) -> None:
     ctx.progress(f"warm-up (kernel compilation): {time.perf_counter() - t0:.1f} s, {events} fracture events")
 
 
+def provenance() -> str:
+    """'commit C, date, CPU with N cores': what a page written by its own command ran at."""
+    info = machine_info()
+    return f"commit {info['commit']}, {info['date']}, {info['cpu']} with {info['cores']} cores"
+
+
 @functools.lru_cache(maxsize=1)
 def machine_info() -> dict:
     """What the report ran on: CPU, cores, memory, versions, commit, date, load."""

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import REPO, SCENES, BenchContext, Section, load_average, machine_info, md_table
+from .common import REPO, SCENES, BenchContext, Section, load_average, md_table, provenance
 
 SHARED_MESH = REPO.parent / "shared" / "meshes" / "spot.obj"
 #: Pieces with at least this many tets are the "large" ones the volume bound is read on: a
@@ -183,12 +183,11 @@ def run(ctx: BenchContext) -> Section:
                      f"{100 * m['median_volume']:.1f} %", m["volume_over"], m["distance"], m["far"],
                      f"{m['tet_height']:.2f}"]
                     for label, m in rows]
-    info = machine_info()
     markdown = "\n".join([
         "Each broken piece's render surface is the artist's surface cut along the cracks "
         "([docs/guide/fragment-geometry.md](../guide/fragment-geometry.md)). Measured on the live pieces at "
         "the end of each run (a cache written), against each piece's tets (their boundary faces: the staircase a piece would show uncut; "
-        f"commit {info['commit']}, {info['date']}, {info['cpu']} with {info['cores']} cores, machine load "
+        f"{provenance()}, machine load "
         f"{load_average()}: the times compare with each other, not with other pages' machines). A part "
         f"reaching more than {OVERREACH_FACTOR:.0f} spacings from its piece's nearest tet centroid is first divided: the material "
         f"nearest another piece's tets farther than {FOREIGN_DEPTH_FACTOR:g} spacings from its own goes to that "

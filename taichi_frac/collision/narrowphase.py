@@ -18,7 +18,7 @@ never carry an impulse.
 
 import taichi as ti
 
-from ..kinematics.bounds import is_idle, pair_motion
+from ..kinematics.bounds import fastest_point_speed, is_idle, pair_motion
 from . import surface
 from .grid import CELLS_PER_SPHERE
 
@@ -334,9 +334,8 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
             mu = ti.sqrt(bodies.friction[a] * bodies.friction[o])
             e = ti.max(bodies.restitution[a], bodies.restitution[o])
             _append(contacts, particles, i, j, a, o, -1, n, point, gap, scale, mu, e)
-            if bodies.sleeping[o] == 1 and bodies.sleep_timer[a] < sleep_time and \
-                    bodies.linear_velocity[a].norm() + bodies.angular_velocity[a].norm() * bodies.bounding_radius[a] \
-                    > wake_speed:
+            if bodies.sleeping[o] == 1 and bodies.sleep_timer[a] < sleep_time \
+                    and fastest_point_speed(bodies, a) > wake_speed:
                 bodies.wake_request[o] = 1
 
 
@@ -462,7 +461,8 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: 
     passes: a particle's contacts are appended by one thread in program order
     (neighbours, cells, entries), and ``order_contacts`` sorts them by particle.
     ``wake_speed`` [m/s]: how fast a body must move to wake a sleeping one it touches
-    (``_pair_contacts``). ``bounce_speed`` [m/s]: the restitution threshold (``_collider_contacts``). ``patches``
+    (``_pair_contacts``). ``bounce_speed`` [m/s]: the restitution threshold
+    (``_collider_contacts``). ``patches``
     (static bool): whether any body has contact patches; without, the patch code is not
     compiled (a third of the kernel's build time) and every contact is the spheres'."""
     for i in range(particles.slot_end[None]):

@@ -15,7 +15,7 @@ import taichi as ti
 
 from .. import runtime
 from ..collision import surface
-from ..kinematics.bounds import is_idle, motion_speed, near_statics
+from ..kinematics.bounds import fastest_point_speed, is_idle, motion_speed, near_statics
 from ..kinematics.quaternion import quat_integrate, quat_to_matrix
 
 vec3 = ti.math.vec3
@@ -99,7 +99,7 @@ def _integrate_position(bodies: ti.template(), gravity, b, dt, max_rotation, sle
         # A substep a little over the sleep speeds (a jolt in a settling heap) costs the timer a
         # few substeps, not all it has: resetting it kept whole heaps awake for one chip's jolts.
         spin = w.norm()
-        speed = v.norm() + spin * bodies.bounding_radius[b]
+        speed = fastest_point_speed(bodies, b)
         if speed < sleep_linear_speed and spin < sleep_angular_speed:
             bodies.sleep_timer[b] += dt
         elif speed < JOLT_FACTOR * sleep_linear_speed and spin < JOLT_FACTOR * sleep_angular_speed:

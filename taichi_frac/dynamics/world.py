@@ -230,10 +230,11 @@ class World:
             rows_so_far += len(patch.points)
             self.slots.point_range[slot] = (first, len(patch.points))
         body_fields.write_patches(self.bodies, self.particles,
-                       np.ascontiguousarray(np.concatenate(ints), dtype=np.int32),
-                       np.concatenate([p.normals for p in patches]).astype(np.float32),
-                       np.concatenate([p.facets.reshape(len(p.facets), -1) for p in patches]).astype(np.float32),
-                       np.concatenate([p.points for p in patches]).astype(np.float32))
+                                  np.ascontiguousarray(np.concatenate(ints), dtype=np.int32),
+                                  np.concatenate([p.normals for p in patches]).astype(np.float32),
+                                  np.concatenate([p.facets.reshape(len(p.facets), -1)
+                                                  for p in patches]).astype(np.float32),
+                                  np.concatenate([p.points for p in patches]).astype(np.float32))
 
     def remove_body(self, body: int) -> None:
         """Free a body's slot and particle range (a parent replaced by its fragments)."""

@@ -139,8 +139,8 @@ def crack_face_moves(solid, origin, index_of: np.ndarray, cracks, frames) -> np.
     centroid = corners.mean(axis=1)
     moves = np.zeros((len(index_of), MOVES))
     for k, index in enumerate(index_of):
-        rows = on_one & (crack[:, 0] == index) if index >= 0 else None
-        if rows is None or not rows.any():
+        rows = on_one & (crack[:, 0] == index)
+        if index < 0 or not rows.any():
             continue
         if isinstance(cracks[k], CrackPlane):
             flux = area_vector[rows] @ np.asarray(cracks[k].normal, dtype=np.float64)
@@ -166,45 +166,53 @@ def volume_offsets(solids, index_of: np.ndarray, cracks, targets: np.ndarray, fr
     reach, a sphere's radius within MAX_OFFSET_FACTOR. ``solids``: a cut's pieces' manifolds
     (None: no solid) in their frames, whose origins in the body's are ``origins`` (F,3) [m]
     (None: the body's own), made with the cracks already ``moved`` (C, MOVES) [m] (None: none);
-    ``frames``: each crack's TiltFrame or None (no tilt; None: none tilts); ``shifts_only``:
-    only the planes' shifts are free (no tilt, the spheres stay). Returns (change,
-    predicted): change (C, MOVES) [m] the further moves (all 0 when every error is within
-    VOLUME_TOLERANCE), predicted the ``volume_misfit`` the linear model expects after it.
-    Cracks without a slab stay."""
-    from scipy.optimize import lsq_linear
+    ``frames``: each crack's TiltFrame or None (no tilt; None: none tilts).
 
-    change = np.zeros((len(cracks), MOVES))
+    The planes' shifts alone are fitted first, and kept when they promise as much as every
+    move (tilts and the spheres' radii too) or every piece within VOLUME_TOLERANCE: fewer
+    moves keep the linear model nearer what the cut gives (``shifts_only``: only those).
+    Returns (change, predicted): change (C, MOVES) [m] the further moves (all 0 when every
+    error is within VOLUME_TOLERANCE), predicted the ``volume_misfit`` the linear model
+    expects after it. Cracks without a slab stay."""
+    from ..fracture.crack_types import CrackPlane
+
     errors = volume_errors(solids, targets, fragment_tets)
     now = float(np.nansum(errors**2))
     if not np.nanmax(np.abs(errors), initial=0.0) > VOLUME_TOLERANCE:
-        return change, now
-    # The free columns: every slab's shift (a sphere: its radius), the tilts of planes with a frame.
-    from ..fracture.crack_types import CrackPlane
-
-    free = np.zeros((len(cracks), MOVES), dtype=bool)
-    free[:, 0] = index_of >= 0
-    if shifts_only:
-        free[:, 0] &= np.array([isinstance(c, CrackPlane) for c in cracks], dtype=bool)
-    elif frames is not None:
-        free[:, 1:] = np.array([f is not None for f in frames], dtype=bool)[:, None] & (index_of >= 0)[:, None]
-    if not free.any():
-        return change, now
-    rows, misfits = [], []
+        return np.zeros((len(cracks), MOVES)), now
+    # Each fitted piece's relative error after the moves x [spacings]: error + moves . x / target.
     origins = np.zeros((len(solids), 3)) if origins is None else np.asarray(origins, dtype=np.float64).reshape(-1, 3)
-    for solid, origin, target, error in zip(solids, origins, targets, errors):
-        if np.isnan(error):
-            continue
-        moves = crack_face_moves(solid, origin, index_of, cracks, frames)
-        if not np.any(moves[free]):
-            continue
-        # The relative error after the moves, error + moves . x / target, x in spacings.
-        rows.append(moves[free] * spacing / target)
-        misfits.append(error)
+    pieces = [(crack_face_moves(solid, origin, index_of, cracks, frames) * spacing / target, error)
+              for solid, origin, target, error in zip(solids, origins, targets, errors) if not np.isnan(error)]
+    moved = np.zeros((len(cracks), MOVES)) if moved is None else np.asarray(moved).reshape(len(cracks), MOVES)
+    # The free columns: the planes' shifts; then every slab's shift (a sphere: its radius) and
+    # the tilts of planes with a frame.
+    free = np.zeros((len(cracks), MOVES), dtype=bool)
+    free[:, 0] = (index_of >= 0) & np.array([isinstance(c, CrackPlane) for c in cracks], dtype=bool)
+    shifts = _fit(free, pieces, moved / spacing, now, spacing)
+    if shifts_only:
+        return shifts
+    free[:, 0] = index_of >= 0
+    if frames is not None:
+        free[:, 1:] = np.array([f is not None for f in frames], dtype=bool)[:, None] & (index_of >= 0)[:, None]
+    every = _fit(free, pieces, moved / spacing, now, spacing)
+    return shifts if shifts[1] <= max(every[1], VOLUME_TOLERANCE**2) else every
+
+
+def _fit(free: np.ndarray, pieces, already: np.ndarray, now: float, spacing: float) -> tuple[np.ndarray, float]:
+    """``volume_offsets``' least squares over the moves ``free`` (C, MOVES) bool: ``pieces``
+    each fitted piece's (moves (C, MOVES) per spacing over its target, error), ``already``
+    (C, MOVES) the moves made [spacings], ``now`` the misfit before. Returns (change (C,
+    MOVES) [m], predicted misfit)."""
+    from scipy.optimize import lsq_linear
+
+    change = np.zeros(free.shape)
+    rows = [(moves[free], error) for moves, error in pieces if np.any(moves[free])]
     if not rows:
         return change, now
-    rows, misfits = np.array(rows), np.array(misfits)
-    already = (np.zeros(int(free.sum())) if moved is None
-               else np.asarray(moved).reshape(len(cracks), MOVES)[free] / spacing)
+    misfits = np.array([error for _, error in rows])
+    rows = np.array([row for row, _ in rows])
+    already = already[free]
     bound = np.where(np.nonzero(free)[1] == 0, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR / np.sqrt(2.0))
     # (the weight is on the total moves)
     a = np.vstack([rows, np.sqrt(OFFSET_WEIGHT) * np.eye(len(already))])

@@ -51,8 +51,7 @@ from __future__ import annotations
 import manifold3d as m3
 import numpy as np
 
-from .crack_offsets import (MOVES, VOLUME_TOLERANCE, moved_crack, piece_target_volumes, tilt_frames, volume_misfit,
-                            volume_offsets)
+from .crack_offsets import MOVES, moved_crack, piece_target_volumes, tilt_frames, volume_misfit, volume_offsets
 from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
                           overfull_pieces, overreaching_pieces)
 from .piece_shells import join_stray_shells, without_crumbs
@@ -288,12 +287,8 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     solids = [p.solid if p is not None else None for p in pieces]
     best, moved, cuts = volume_misfit(solids, targets, fragment_tets), np.zeros((len(cracks), MOVES)), 0
     for _ in range(fit_rounds):
-        # The planes' shifts alone when they promise as much as every move (tilts and the ring
-        # cracks' radii too), or every piece within the tolerance: fewer moves keep the linear
-        # model nearer what the cut gives.
-        shifts, every = (volume_offsets(solids, index_of, cracks, targets, fragment_tets, spacing, moved, frames,
-                                        piece_origins, shifts_only=shifts_only) for shifts_only in (True, False))
-        change, predicted = shifts if shifts[1] <= max(every[1], VOLUME_TOLERANCE**2) else every
+        change, predicted = volume_offsets(solids, index_of, cracks, targets, fragment_tets, spacing, moved, frames,
+                                           piece_origins)
         if not np.any(change != 0.0) or predicted > (1.0 - FIT_GAIN) * best:
             break
         for step in FIT_STEPS:

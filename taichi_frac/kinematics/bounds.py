@@ -14,6 +14,13 @@ def is_idle(bodies: ti.template(), b):
 
 
 @ti.func
+def fastest_point_speed(bodies: ti.template(), b):
+    """|v| + |w| x bounding radius [m/s]: no point of body ``b`` moves faster now (the sleep
+    test, and whether a touch wakes a sleeping body)."""
+    return bodies.linear_velocity[b].norm() + bodies.angular_velocity[b].norm() * bodies.bounding_radius[b]
+
+
+@ti.func
 def motion_speed(bodies: ti.template(), statics: ti.template(), b, dt):
     """Bound on the speed of any point of body ``b`` over a step of ``dt`` [s]:
     |v| + |g| dt + |w| x bounding radius [m/s]."""
