@@ -201,6 +201,73 @@ def test_rings_stacked_flat_rest_on_their_tubes():
     assert state["sleeping"].all()
 
 
+def _hull_gap(points_a, points_b, guess, directions):
+    """Signed distance [m] of the convex hulls of ``points_a`` and ``points_b`` (K,3), the
+    largest support gap min a.n - max b.n over unit n, by brute force: the best of
+    ``directions`` and ``guess``, then searched about it at shrinking scales."""
+    def gaps(normals):
+        return (points_a @ normals.T).min(axis=0) - (points_b @ normals.T).max(axis=0)
+
+    candidates = np.vstack([directions, guess])
+    found = gaps(candidates)
+    best, normal = found.max(), candidates[found.argmax()]
+    for scale in (0.1, 0.03, 0.01, 0.003, 0.001):
+        nearby = normal + scale * directions[:400]
+        nearby /= np.linalg.norm(nearby, axis=1, keepdims=True)
+        found = gaps(nearby)
+        if found.max() > best:
+            best, normal = found.max(), nearby[found.argmax()]
+    return best
+
+
+def test_contacts_between_resting_rings_are_their_patches_hull_distance():
+    """Four tori dropped tilted and offset onto one another, two substeps a frame: every
+    contact between two patches with facets reports the distance of the patches' convex
+    hulls, against a brute-force search over 4000 directions refined about the best
+    (an independent reference). Median error under 0.1 mm, nine in ten under 0.6 mm
+    (measured 0.02 and 0.42; with one search step a substep from the last normal, 0.71
+    and 2.7: resting pieces were pushed apart where they did not touch)."""
+    world = fresh_world(surface_contact=True)
+    world.add_ground(0.0, restitution=0.0)
+    ring = ring_model()
+
+    def tilt(degrees, axis):
+        axis = np.asarray(axis, float) / np.linalg.norm(axis)
+        half = math.radians(degrees) / 2
+        return (math.cos(half), *(math.sin(half) * axis))
+
+    for position, orientation in (((0, 0, 0.03), (1, 0, 0, 0)), ((0.06, 0, 0.10), tilt(25, (0, 1, 0))),
+                                  ((-0.03, 0.05, 0.17), tilt(35, (1, 0.3, 0))),
+                                  ((0.02, -0.05, 0.24), tilt(15, (0.5, 1, 0)))):
+        world.add_body(ring, position, orientation, restitution=0.0)
+    directions = np.random.default_rng(0).normal(size=(4000, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    errors = []
+    for frame in range(60):
+        world.advance(0.02, 2)
+        if frame < 20 or frame % 5:
+            continue
+        p, b, c = world.particles, world.bodies, world.contacts
+        n = min(c.count[None], c.capacity)
+        query, key, other = c.query.to_numpy()[:n], c.key.to_numpy()[:n], c.body_b.to_numpy()[:n]
+        separation, normal = c.separation.to_numpy()[:n], c.normal.to_numpy()[:n]
+        start, count = p.point_start.to_numpy(), p.point_count.to_numpy()
+        faceted = np.linalg.norm(p.patch_facet.to_numpy()[:, 0], axis=1) > 0.5
+        points, body = p.surface_point.to_numpy(), p.body.to_numpy()
+        position, turn = b.position.to_numpy(), b.rotation.to_numpy()
+
+        def patch(s):
+            return position[body[s]] + points[start[s]:start[s] + count[s]] @ turn[body[s]].T
+
+        for k in range(n):
+            i, j = query[k], key[k]
+            if other[k] >= 0 and faceted[i] and faceted[j]:
+                errors.append(_hull_gap(patch(i), patch(j), normal[k], directions) - separation[k])
+    errors = np.array(errors)
+    assert len(errors) > 500
+    assert np.median(errors) < 1e-4 and np.percentile(errors, 90) < 0.6e-3
+
+
 def test_ring_rests_on_a_slab_at_its_minor_radius():
     """A torus lying flat on a tet-meshed slab (a box-shaped body of many patches) rests
     at the slab's top plus its minor radius, within 0.5 mm."""
