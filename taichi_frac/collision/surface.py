@@ -266,11 +266,11 @@ HULL_ITERATIONS = 6
 
 #: Directions the search tries when it starts from the pair's normal of the last substep
 #: (``hull_pair``'s ``warm``). The search keeps only its direction from substep to substep,
-#: not its simplex, so one step a substep does not converge in a moving pile: ring pieces
-#: resting on each other read 0.7 mm closer than their hulls in the median, 2.7 mm at the
+#: not its simplex, so one step a substep does not converge in a moving pile: tilted rings
+#: resting on each other read 0.5 mm closer than their hulls in the median, 2.5 mm at the
 #: 90th percentile, and were pushed apart where they did not touch (the jolts that kept the
-#: 13 rings' pieces awake). Four steps: 0.02 and 0.4 mm; six: 0.00 and 0.07 mm, at a
-#: quarter more time for the unbroken 13 rings (``taichi-frac bench dynamics --contact-only``).
+#: 13 rings' pieces awake). Four steps: 0.02 and 0.3 mm; six: under 0.01 mm, at a quarter
+#: more time for the unbroken 13 rings (``taichi-frac bench dynamics --contact-only``).
 HULL_WARM_ITERATIONS = 4
 
 #: The search runs on the hulls moved apart along the first direction by their overlap
