@@ -355,7 +355,9 @@ class RigidBodyOptions:
         sleep_time: ... for this long goes to sleep [s] (velocity zeroed, no integration)
             until woken, together with the bodies it touches (when they have all been
             slow that long). A substep under three times those speeds takes four substeps
-            off that time, a faster one all of it; a sleeping body is woken by the touch of
+            off that time, a faster one all of it, unless every point of the body is still
+            within a tenth of its mean collision-sphere radius of where it was (a body
+            jittering in place counts as slow); a sleeping body is woken by the touch of
             a body moving faster than three times sleep_linear_speed.
         rolling_resistance: lever arm of the rolling resistance, as a fraction of the
             contact's (smaller) collision-sphere radius [-]: a contact carrying normal

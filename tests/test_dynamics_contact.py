@@ -364,3 +364,30 @@ def test_only_a_moving_body_wakes_a_sleeping_one(speed, wakes):
         np.testing.assert_allclose(end["position"][0], start["position"][0], atol=1e-9)
         # It stopped against the block and did not push into it.
         assert abs(end["linear_velocity"][1][0]) < 1e-3 and sphere_gap() > -0.002
+
+
+@pytest.mark.parametrize("shake, sleeps", [(True, True), (False, False)])
+def test_a_body_shaking_in_place_sleeps_one_travelling_does_not(shake, sleeps):
+    """A free block (no gravity) whose velocity is set before every 2 ms substep to 5 cm/s,
+    five times the sleep speed: shaken back and forth (its direction reversed each
+    substep, 0.1 mm about one place) it sleeps within sleep_time plus a tenth, as a
+    resting body jolted by a contact made and lost does; sent one way it travels and
+    never sleeps."""
+    world = fresh_world(gravity=(0.0, 0.0, 0.0))
+    block = world.add_body(box_model(0.05, 0.05, 0.05, pieces=60), (0, 0, 0.5))
+    sleep_time = world.options.sleep_time
+    speed, dt = 0.05, 0.002
+    asleep_at = None
+    for step in range(int(2 * sleep_time / dt)):
+        v = world.bodies.linear_velocity.to_numpy()
+        v[block] = (speed * (-1) ** step if shake else speed, 0.0, 0.0)
+        world.bodies.linear_velocity.from_numpy(v)
+        world.advance(dt, 1)
+        if world.body_state([block])["sleeping"][0]:
+            asleep_at = (step + 1) * dt
+            break
+    if sleeps:
+        assert asleep_at is not None and asleep_at <= 1.1 * sleep_time, asleep_at
+        assert np.linalg.norm(world.body_state([block])["position"][0] - (0, 0, 0.5)) < 2e-4
+    else:
+        assert asleep_at is None

@@ -160,29 +160,46 @@ def _cached(particles: ti.template(), query, key):
 
 
 @ti.func
+def _carried(particles: ti.template(), query, key):
+    """Whether the contact of particle ``query`` with partner ``key`` carried a normal
+    impulse at the end of the last substep."""
+    previous = particles.parity[None]
+    carried = False
+    if particles.cache_stamp[previous, query] == particles.cache_epoch[None]:
+        for k in range(particles.cache_count[previous, query]):
+            if particles.cache_key[previous, query, k] == key and particles.cache_normal[previous, query, k] > 0.0:
+                carried = True
+    return carried
+
+
+@ti.func
 def _hull_warm(particles: ti.template(), query, key):
-    """The normal (vec3 unit, partner body's frame) the hull search of particle ``query``
-    with particle ``key`` found last substep, contact or not (zero when there was none):
-    where this substep's search starts (``surface.hull_pair``'s ``warm``)."""
+    """The normal (vec3 unit, partner body's frame) and simplex (ivec3) the hull search of
+    particle ``query`` with particle ``key`` found last substep, contact or not (zero and
+    -1 when there was none): where this substep's search starts (``surface.hull_pair``'s
+    ``warm`` and ``simplex``)."""
     previous = particles.parity[None]
     direction = vec3(0.0)
+    simplex = ti.Vector([-1, -1, -1], dt=ti.i32)
     if particles.hull_stamp[previous, query] == particles.cache_epoch[None]:
         for k in range(particles.hull_count[previous, query]):
             if particles.hull_key[previous, query, k] == key:
                 direction = particles.hull_direction[previous, query, k]
-    return direction
+                simplex = particles.hull_simplex[previous, query, k]
+    return direction, simplex
 
 
 @ti.func
-def _keep_hull(particles: ti.template(), query, key, direction):
+def _keep_hull(particles: ti.template(), query, key, direction, simplex):
     """Keep the hull search's normal of particle ``query`` with particle ``key``
-    (``direction``, partner body's frame) for the next substep's ``_hull_warm``. Only the
+    (``direction``, partner body's frame) and its simplex for the next substep's ``_hull_warm``. Only the
     thread of ``query`` writes its rows (``particle_contacts``): no atomics."""
     following = 1 - particles.parity[None]
     k = particles.hull_count[following, query]
     if k < particles.hull_key.shape[2]:
         particles.hull_key[following, query, k] = key
         particles.hull_direction[following, query, k] = direction
+        particles.hull_simplex[following, query, k] = simplex
         particles.hull_count[following, query] = k + 1
 
 
@@ -296,7 +313,16 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
     d = local - vec3(sphere[0], sphere[1], sphere[2])
     mean_r = 0.5 * (ri + rj)
     limit = ri + rj + margin * mean_r + closing
-    if d.norm_sqr() < limit * limit:
+    near = d.norm_sqr() < limit * limit
+    if ti.static(patches):
+        # A patch may stand out of its sphere (``Particles.overhang``): a pair that carried
+        # load last substep is kept while its patches may still touch, or a resting contact
+        # is made and lost as the closing bound varies, and the body on it falls a substep.
+        if not near:
+            reach = limit + particles.overhang[i] + particles.overhang[j]
+            if d.norm_sqr() < reach * reach:
+                near = _carried(particles, i, j)
+    if near:
         dist = d.norm()
         gap = dist - ri - rj
         n = vec3(0.0, 0.0, 1.0)
@@ -315,10 +341,10 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
                 spot_a = x_a
                 spot_o = x_o
                 if hulls:
-                    warm = _hull_warm(particles, i, j)
-                    n_patch, gap_patch, spot_a, spot_o = surface.hull_pair(
-                        bodies, particles, a, i, o, j, n, margin * mean_r + closing, rot @ warm)
-                    _keep_hull(particles, i, j, rot.transpose() @ n_patch)
+                    warm, simplex = _hull_warm(particles, i, j)
+                    n_patch, gap_patch, spot_a, spot_o, simplex = surface.hull_pair(
+                        bodies, particles, a, i, o, j, n, margin * mean_r + closing, rot @ warm, simplex)
+                    _keep_hull(particles, i, j, rot.transpose() @ n_patch, simplex)
                 else:
                     n_patch, gap_patch, spot_a, spot_o = surface.pair(bodies, particles, a, i, o, j, n)
                 if gap_patch >= -ti.static(surface.TRUSTED_DEPTH) * ti.max(ri, rj):

@@ -61,6 +61,8 @@ def write_bodies(bodies: ti.template(), particles: ti.template(),
         bodies.fixed[slot] = ints[b, I.fixed]
         bodies.sleeping[slot] = 0
         bodies.sleep_timer[slot] = 0.0
+        bodies.sleep_anchor[slot] = bodies.position[slot]
+        bodies.sleep_anchor_orientation[slot] = bodies.orientation[slot]
         bodies.wake_request[slot] = 0
         bodies.particle_start[slot] = start
         bodies.particle_count[slot] = end - begin

@@ -45,6 +45,8 @@ def _copy_motion(source: ti.template(), target: ti.template(), b):
     target.angular_velocity[b] = source.angular_velocity[b]
     target.sleeping[b] = source.sleeping[b]
     target.sleep_timer[b] = source.sleep_timer[b]
+    target.sleep_anchor[b] = source.sleep_anchor[b]
+    target.sleep_anchor_orientation[b] = source.sleep_anchor_orientation[b]
     target.wake_request[b] = source.wake_request[b]
 
 

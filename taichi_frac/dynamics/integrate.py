@@ -15,7 +15,7 @@ import taichi as ti
 
 from .. import runtime
 from ..collision import surface
-from ..kinematics.bounds import fastest_point_speed, is_idle, motion_speed, near_statics
+from ..kinematics.bounds import anchor_drift, fastest_point_speed, is_idle, motion_speed, near_statics
 from ..kinematics.quaternion import quat_integrate, quat_to_matrix
 
 vec3 = ti.math.vec3
@@ -98,9 +98,17 @@ def _integrate_position(bodies: ti.template(), gravity, b, dt, max_rotation, sle
         # (whether it sleeps is decided with the bodies it touches: sleep_together)
         # A substep a little over the sleep speeds (a jolt in a settling heap) costs the timer a
         # few substeps, not all it has: resetting it kept whole heaps awake for one chip's jolts.
+        # A body that stays within STILL_FRACTION of a particle radius of its anchor counts
+        # as slow however fast it jitters: a resting contact made one substep and lost the
+        # next drops a piece by one substep of free fall (~9 cm/s) and lifts it back, and
+        # such jolts kept a fifth of the 13 rings' pieces awake to the end.
         spin = w.norm()
         speed = fastest_point_speed(bodies, b)
-        if speed < sleep_linear_speed and spin < sleep_angular_speed:
+        still = anchor_drift(bodies, b) < STILL_FRACTION * bodies.mean_particle_radius[b]
+        if not still:
+            bodies.sleep_anchor[b] = bodies.position[b]
+            bodies.sleep_anchor_orientation[b] = q
+        if still or (speed < sleep_linear_speed and spin < sleep_angular_speed):
             bodies.sleep_timer[b] += dt
         elif speed < JOLT_FACTOR * sleep_linear_speed and spin < JOLT_FACTOR * sleep_angular_speed:
             bodies.sleep_timer[b] = ti.max(bodies.sleep_timer[b] - JOLT_PENALTY * dt, 0.0)
@@ -112,6 +120,11 @@ def _integrate_position(bodies: ti.template(), gravity, b, dt, max_rotation, sle
 #: timer instead of resetting it: a body must be slow over four fifths of its substeps to sleep.
 JOLT_FACTOR = 3.0
 JOLT_PENALTY = 4.0
+
+#: A body whose points all stay within this fraction of its mean collision-sphere radius of
+#: where they were (``kinematics.bounds.anchor_drift``) counts as slow for the sleep timer,
+#: whatever its speed in a substep.
+STILL_FRACTION = 0.1
 
 
 @ti.func

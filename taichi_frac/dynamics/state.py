@@ -40,7 +40,10 @@ class BodyMotion:
         orientation: vec4 (w, x, y, z) unit, body -> world. Writer: add_body, integrate.
         linear_velocity: vec3 [m/s]. Writer: add_body, integrate_velocities, solver.
         angular_velocity: vec3 [rad/s], world frame. Writer: same.
-        sleeping: i32 1 = asleep. sleep_timer: [s] time spent slow. Writer: integrate, wake.
+        sleeping: i32 1 = asleep. sleep_timer: [s] time spent slow or still. Writer: integrate, wake.
+        sleep_anchor, sleep_anchor_orientation: vec3 [m], vec4: the pose the body has stayed
+            near (``kinematics.bounds.anchor_drift``); moved to the body's pose whenever it
+            leaves it. Writer: add_body, integrate.
         wake_request: i32 set by the narrowphase when an awake moving body touches a
             sleeping one; applied at the start of the next substep's broadphase (body_cull).
     """
@@ -52,6 +55,8 @@ class BodyMotion:
         self.angular_velocity = vec3.field(shape=capacity)
         self.sleeping = ti.field(ti.i32, shape=capacity)
         self.sleep_timer = ti.field(ti.f32, shape=capacity)
+        self.sleep_anchor = vec3.field(shape=capacity)
+        self.sleep_anchor_orientation = vec4.field(shape=capacity)
         self.wake_request = ti.field(ti.i32, shape=capacity)
 
 
@@ -118,6 +123,8 @@ class Bodies:
         self.angular_velocity = self.motion_state.angular_velocity
         self.sleeping = self.motion_state.sleeping
         self.sleep_timer = self.motion_state.sleep_timer
+        self.sleep_anchor = self.motion_state.sleep_anchor
+        self.sleep_anchor_orientation = self.motion_state.sleep_anchor_orientation
         self.wake_request = self.motion_state.wake_request
         # Static.
         self.inverse_mass = ti.field(ti.f32, shape=capacity)
@@ -186,7 +193,9 @@ class Particles:
         Hull searches (``surface.hull_pair``), in the same two halves: hull_count (2, P)
         searches kept for particle P as the querying side; hull_key (2, P, HULL_SLOTS) the
         partner particle; hull_direction (vec3 unit, partner body frame) the normal found,
-        contact or not, where the same pair's search starts next substep; hull_stamp (2, P)
+        contact or not, where the same pair's search starts next substep; hull_simplex
+        (ivec3) the search's last simplex, as ids of pairs of patch rows
+        (``surface._corner``), where it resumes; hull_stamp (2, P)
         as cache_stamp (the substep's epoch is ``cache_epoch`` + 1 until the store).
         Writer: the narrowphase (each particle's own thread).
         Contact patches (``geometry.contact_patches.ContactPatches``): point_start, point_count (i32) the rows
@@ -224,6 +233,7 @@ class Particles:
         self.hull_count = ti.field(ti.i32, shape=(2, capacity))
         self.hull_key = ti.field(ti.i32, shape=(2, capacity, HULL_SLOTS))
         self.hull_direction = vec3.field(shape=(2, capacity, HULL_SLOTS))
+        self.hull_simplex = ti.types.vector(3, ti.i32).field(shape=(2, capacity, HULL_SLOTS))
         self.hull_stamp = ti.field(ti.i32, shape=(2, capacity))
         self.cache_stamp = ti.field(ti.i32, shape=(2, capacity))
         self.parity = ti.field(ti.i32, shape=())

@@ -4,6 +4,8 @@ around it reaches a static collider."""
 
 import taichi as ti
 
+from .quaternion import quat_mul
+
 vec3 = ti.math.vec3
 
 
@@ -18,6 +20,19 @@ def fastest_point_speed(bodies: ti.template(), b):
     """|v| + |w| x bounding radius [m/s]: no point of body ``b`` moves faster now (the sleep
     test, and whether a touch wakes a sleeping body)."""
     return bodies.linear_velocity[b].norm() + bodies.angular_velocity[b].norm() * bodies.bounding_radius[b]
+
+
+@ti.func
+def anchor_drift(bodies: ti.template(), b):
+    """How far [m] any point of body ``b`` may be from where it was at its sleep anchor
+    (``sleep_anchor``, ``sleep_anchor_orientation``): the centre's distance plus the
+    rotation angle x bounding radius. A body that stays within a small drift while its
+    speed jumps is jittering in place, not moving (the sleep test)."""
+    qa = bodies.sleep_anchor_orientation[b]
+    turn = quat_mul(ti.math.vec4(qa[0], -qa[1], -qa[2], -qa[3]), bodies.orientation[b])
+    # (|vector part| = sin(angle / 2): twice it is the angle to within 1 % up to 0.5 rad)
+    angle = 2.0 * ti.math.vec3(turn[1], turn[2], turn[3]).norm()
+    return (bodies.position[b] - bodies.sleep_anchor[b]).norm() + angle * bodies.bounding_radius[b]
 
 
 @ti.func
