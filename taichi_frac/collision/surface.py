@@ -300,7 +300,8 @@ HULL_CONE = 0.5
 #: slows. A patch may stand out of its sphere (``Particles.overhang``; half a radius in the
 #: median for the 13 rings' pieces), so two patches can touch while their spheres are
 #: still apart; between bodies the spheres are tested without the overhangs (with them,
-#: so many more pairs were tested that the unbroken 13 rings took three times as long).
+#: so many more pairs were tested that the unbroken 13 rings took three times as long),
+#: except a pair whose contact carried load in the last substep (``narrowphase._carried``).
 HULL_APPROACH = 0.5
 
 #: The gap [m] ``hull_pair`` reports for two patches side by side (``HULL_CONE``): too
