@@ -160,19 +160,6 @@ def _cached(particles: ti.template(), query, key):
 
 
 @ti.func
-def _carried(particles: ti.template(), query, key):
-    """Whether the contact of particle ``query`` with partner ``key`` carried a normal
-    impulse at the end of the last substep."""
-    previous = particles.parity[None]
-    carried = False
-    if particles.cache_stamp[previous, query] == particles.cache_epoch[None]:
-        for k in range(particles.cache_count[previous, query]):
-            if particles.cache_key[previous, query, k] == key and particles.cache_normal[previous, query, k] > 0.0:
-                carried = True
-    return carried
-
-
-@ti.func
 def _hull_warm(particles: ti.template(), query, key):
     """The normal (vec3 unit, partner body's frame) and simplex (ivec3) the hull search of
     particle ``query`` with particle ``key`` found last substep, contact or not (zero and
@@ -313,15 +300,17 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
     d = local - vec3(sphere[0], sphere[1], sphere[2])
     mean_r = 0.5 * (ri + rj)
     limit = ri + rj + margin * mean_r + closing
-    near = d.norm_sqr() < limit * limit
+    d2 = d.norm_sqr()
+    near = d2 < limit * limit
     if ti.static(patches):
         # A patch may stand out of its sphere (``Particles.overhang``): a pair that carried
         # load last substep is kept while its patches may still touch, or a resting contact
         # is made and lost as the closing bound varies, and the body on it falls a substep.
         if not near:
             reach = limit + particles.overhang[i] + particles.overhang[j]
-            if d.norm_sqr() < reach * reach:
-                near = _carried(particles, i, j)
+            if d2 < reach * reach:
+                carried, _ = _cached(particles, i, j)
+                near = carried > 0.0
     if near:
         dist = d.norm()
         gap = dist - ri - rj

@@ -301,7 +301,7 @@ HULL_CONE = 0.5
 #: median for the 13 rings' pieces), so two patches can touch while their spheres are
 #: still apart; between bodies the spheres are tested without the overhangs (with them,
 #: so many more pairs were tested that the unbroken 13 rings took three times as long),
-#: except a pair whose contact carried load in the last substep (``narrowphase._carried``).
+#: except a pair whose contact carried load in the last substep (``narrowphase._test_pair``).
 HULL_APPROACH = 0.5
 
 #: The gap [m] ``hull_pair`` reports for two patches side by side (``HULL_CONE``): too
