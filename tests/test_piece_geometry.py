@@ -13,6 +13,7 @@ import trimesh
 from taichi_frac.fracture.cracks import CrackPlane, RingCrack, analyze_impact, tangent_frame
 from taichi_frac.fracture.fragments import make_fragments, split_body
 from taichi_frac.geometry.piece_checks import crack_deviation, edge_counts, inside, piece_quality, signed_volume
+from taichi_frac.geometry.piece_reach import BALL_BOUND, REACH_FACTOR
 from taichi_frac.geometry.piece_surface import cut_render_solid, piece_mesh
 from taichi_frac.geometry.render_solid import render_solid_from_surface
 from taichi_frac.geometry.prepare import prepare_body
@@ -604,6 +605,9 @@ def _check_struck(pieces, renders, counts, mean_volume_error=0.02, fallback_shar
         quality = piece_quality(piece_mesh(solid), piece.model)
         assert quality["watertight"] and quality["outward"], quality
         assert quality["crack_rms_spacings"] < 0.02, quality
+        # A wedge past the piece's tets is cut at the reach (the grown tets' hull: at most
+        # BALL_BOUND times it).
+        assert quality["distance_to_tets_spacings"] <= BALL_BOUND * REACH_FACTOR + 1e-6, quality
         if piece.model.tet_count >= 300:
             assert abs(quality["volume_error"]) < large_volume_error, quality
         errors.append(abs(quality["volume_error"]))

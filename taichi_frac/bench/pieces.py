@@ -100,6 +100,17 @@ def measure_pieces(records) -> dict:
     )
 
 
+def _trimmed(render_cuts, records) -> str:
+    """'pieces (volume [cm^3], share of the pieces' tets' volume)' the cuts trimmed to their
+    tets' reach (``records``: the pieces, None: the share is left out)."""
+    pieces = sum(c.get("trimmed_pieces", 0) for _, c in render_cuts)
+    volume = sum(c.get("trimmed_volume", 0.0) for _, c in render_cuts)
+    if records is None:
+        return f"{pieces} ({1e6 * volume:.2f} cm³)"
+    total = sum(rec.model.volume for rec in records)
+    return f"{pieces} ({1e6 * volume:.2f} cm³, {100 * volume / max(total, 1e-300):.3f} %)"
+
+
 def _spread(values) -> str:
     """'median / 95th percentile / max' of ``values``, two decimals ('-' when empty)."""
     values = np.asarray(values, dtype=np.float64)
@@ -146,6 +157,7 @@ def _mesh_case(ctx: BenchContext, fit_rounds: int | None = None):
 def run(ctx: BenchContext) -> Section:
     from ..geometry.piece_parts import (FOREIGN_DEPTH_FACTOR, GAINED_VOLUME_FACTOR, GAINED_VOLUME_SHARE,
                                         LOST_VOLUME_SHARE, OVERREACH_FACTOR)
+    from ..geometry.piece_reach import BALL_BOUND, REACH_FACTOR
     from ..geometry.crack_offsets import FITTED_PIECE_TETS, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR, VOLUME_TOLERANCE
     from ..options import FractureOptions
     from .tables import run_scene
@@ -163,7 +175,7 @@ def run(ctx: BenchContext) -> Section:
             fallbacks = sum(c.get("fallback_pieces", 0) for _, c in sim.render_cuts)
             cells = sum(c.get("cell_pieces", 0) for _, c in sim.render_cuts)
             fit_cuts = [c.get("fit_cuts", 0) for _, c in sim.render_cuts]
-            cost_rows.append([label, len(cuts), f"{fallbacks} ({cells})",
+            cost_rows.append([label, len(cuts), f"{fallbacks} ({cells})", _trimmed(sim.render_cuts, records),
                               f"{np.mean(fit_cuts):.1f}" if cuts else "-",
                               f"{1e3 * np.mean(cuts):.0f}" if cuts else "-",
                               f"{1e3 * np.max(cuts):.0f}" if cuts else "-", f"{split_ms:.2f}",
@@ -174,7 +186,8 @@ def run(ctx: BenchContext) -> Section:
             m, cuts, triangles, counts = _mesh_case(ctx, fit_rounds)
             rows.append((f"{SHARED_MESH.name} ({triangles:,} triangles), one impact{suffix}", m))
             cost_rows.append([f"{SHARED_MESH.name}, one impact{suffix}", 1,
-                              f"{counts['fallback_pieces']} ({counts['cell_pieces']})", counts["fit_cuts"],
+                              f"{counts['fallback_pieces']} ({counts['cell_pieces']})", _trimmed([(0, counts)], None),
+                              counts["fit_cuts"],
                               f"{1e3 * cuts[0]:.0f}", f"{1e3 * cuts[0]:.0f}", "-", "-"])
     quality_rows = [[label, m["pieces"], m["fallback"],
                      f"{m['before_nonmanifold']} in {m['before_pieces_nonmanifold']}",
@@ -203,6 +216,9 @@ def run(ctx: BenchContext) -> Section:
         "V^(1/3)). A flat crack face crosses the tets' staircase, so it lies up to "
         "about a tet's height (last column) from its piece's tets and its volume differs from theirs by that "
         "layer: the distance and volume columns measure that difference, not an error of the cut alone. "
+        f"What lies farther than {REACH_FACTOR:g} spacings from a piece's tets and within that of another's "
+        "(the tip of a wedge between two cracks meeting at a sharp angle) is cut away along its tets grown "
+        f"by that reach, a hull within {BALL_BOUND:.2f} times it: the distance's bound. "
         f"Each crack plane is then shifted along its normal by at most {MAX_OFFSET_FACTOR:g} spacings and, where "
         f"shifts cannot do it, tilted by at most {MAX_TILT_FACTOR:g} more at its far end, and each ring crack's sphere "
         f"resized by at most {MAX_OFFSET_FACTOR:g}, so the pieces of {FITTED_PIECE_TETS} tets or more come "
@@ -224,6 +240,7 @@ def run(ctx: BenchContext) -> Section:
         "What cutting the render solids costs (only runs that write a cache pay it):",
         "",
         md_table(["case", "splits", "pieces the cuts failed (given the solid nearest their tets)",
+                  "pieces trimmed to their tets' reach (volume cut away, share of the pieces')",
                   "cuts for the volume fit, per split", "ms per split, mean", "max", "ms per frame from it",
                   "ms per frame, whole run"], cost_rows),
         "",

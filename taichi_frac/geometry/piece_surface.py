@@ -14,6 +14,8 @@ they hold. So:
 - the outside is the artist's triangles clipped at the crack faces, keeping their UVs and
   normals (interpolated where a triangle is cut); inner faces get a planar projection along
   their crack as UVs and their own flat normal;
+- the tip of a wedge a piece's flat faces run past its tets, into a neighbour's, is cut
+  away at ``piece_reach.REACH_FACTOR`` spacings from its tets (``piece_reach.py``);
 - every piece is closed, manifold and outward wound (the boolean library guarantees it);
 - a piece that breaks again cuts its own render solid.
 
@@ -55,6 +57,7 @@ from .crack_offsets import MOVES, moved_crack, piece_target_volumes, tilt_frames
 from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
                           overfull_pieces, overreaching_pieces)
 from .piece_shells import join_stray_shells, without_crumbs
+from .piece_reach import trim_overreach
 from .render_solid import (_CRACK, _NORMAL, _PROPERTY_COUNT, _UV, DUST_VOLUME_FACTOR, HULL_FACE,
                            SLAB_REACH_FACTOR, SLAB_THICKNESS_FACTOR, SPHERE_SAGITTA_FACTOR, WELD_REACH_FACTOR,
                            WELD_THICKNESS_FACTOR, CrackSurface, PieceMesh, RenderSolid, tangent_frame, without_dust)
@@ -256,7 +259,8 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     ``VOLUME_TOLERANCE`` (up to ``fit_rounds`` times), again with the cracks moved (planes
     shifted and tilted, ring cracks' spheres resized) by what brings those pieces' volumes
     nearest their tets' (``crack_offsets``), kept when it is nearer (else with half those
-    moves, see FIT_STEPS).
+    moves, see FIT_STEPS). Last, each piece loses the wedge tips its flat faces run past its
+    tets into a neighbour's (``piece_reach.trim_overreach``).
 
     Returns (pieces, stats): pieces a list of F RenderSolid or None (the caller then gives the
     piece its tets' boundary, exact in volume); stats a dict of counts (slabs, parts,
@@ -266,7 +270,8 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     joined to another piece, see ``piece_shells.join_stray_shells``; ``moved_cracks``: cracks
     the kept cut moved, ``largest_offset`` [particle spacings]: the largest shift of a moved
     crack (a plane's at its pivot plus its tilt's at its reach), ``fit_cuts``: cuts made for
-    the fit besides the first).
+    the fit besides the first; ``trimmed_pieces`` and ``trimmed_volume`` [m^3]: the wedge
+    tips cut away).
     """
     spacing = render.spacing
     roughness_scale = 4.0 * spacing if roughness_scale is None else float(roughness_scale)
@@ -281,8 +286,35 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
             roughness_scale, seed, scale)
     pieces, stats, index_of = _cut(*args, np.zeros((len(cracks), MOVES)))
     stats.update(moved_cracks=0, largest_offset=0.0, fit_cuts=0)
-    if not fit_rounds:
-        return pieces, stats
+    if fit_rounds:
+        pieces, stats = _fit(pieces, stats, args, index_of, fit_rounds)
+    return _trimmed(pieces, stats, model, labels, piece_origins)
+
+
+def _trimmed(pieces, stats, model, labels, piece_origins):
+    """``pieces`` each less its wedges past its tets (``piece_reach.trim_overreach``);
+    ``stats`` gains ``trimmed_pieces`` and ``trimmed_volume`` [m^3]."""
+    stats.update(trimmed_pieces=0, trimmed_volume=0.0)
+    pieces = list(pieces)
+    for k, piece in enumerate(pieces):
+        if piece is None:
+            continue
+        origin = np.asarray(piece_origins[k], dtype=np.float64)
+        solid, volume = trim_overreach(piece.solid.translate(tuple(origin)), model, labels, k, piece.spacing)
+        if volume > 0.0:
+            bits = without_dust(solid, piece.spacing)
+            solid = m3.Manifold.compose(bits) if len(bits) > 1 else (bits[0] if bits else m3.Manifold())
+            pieces[k] = RenderSolid(solid.translate(tuple(-origin)), piece.cracks, piece.spacing, piece.volume_scale)
+            stats["trimmed_pieces"] += 1
+            stats["trimmed_volume"] += volume
+    return pieces, stats
+
+
+def _fit(pieces, stats, args, index_of, fit_rounds):
+    """The cut of ``cut_render_solid`` whose moved cracks bring the pieces nearest their tets'
+    volumes, starting from the first cut's ``pieces`` (``args``: ``_cut``'s but the offsets)."""
+    render, model, fragment_tets, _, cracks, _, frames, piece_origins = args[:8]
+    spacing, scale = render.spacing, args[-1]
     targets = piece_target_volumes(scale, model, fragment_tets)
     solids = [p.solid if p is not None else None for p in pieces]
     best, moved, cuts = volume_misfit(solids, targets, fragment_tets), np.zeros((len(cracks), MOVES)), 0

@@ -1,0 +1,107 @@
+"""A piece's render solid kept within reach of its tets (geometry/piece_reach.py), checked on a
+grid of tets whose union is a box: the distance to it has a closed form."""
+
+from types import SimpleNamespace
+
+import manifold3d as m3
+import numpy as np
+
+from taichi_frac.geometry.piece_reach import REACH_FACTOR, _ball, distance_to_tets, trim_overreach
+
+#: The grid: unit cubes over [0, 8] x [0, 4] x [0, 4] [m], six tets each.
+CELLS = (8, 4, 4)
+#: The grown tets' hull lies within this factor of the reach (an icosahedron's circumradius
+#: over its inradius).
+BALL_BOUND = 1.26
+
+
+def _grid():
+    """(model, labels): the cubes' tets (Kuhn's six per cube, sharing the diagonal), piece 0
+    the cubes with x < 3 and piece 1 the rest."""
+    nx, ny, nz = CELLS
+    index = np.arange((nx + 1) * (ny + 1) * (nz + 1)).reshape(nx + 1, ny + 1, nz + 1)
+    vertices = np.stack(np.meshgrid(*(np.arange(n + 1.0) for n in CELLS), indexing="ij"), axis=-1).reshape(-1, 3)
+    paths = [(0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)]
+    tets = []
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                for path in paths:
+                    corner, tet = np.array([i, j, k]), [index[i, j, k]]
+                    for axis in path:
+                        corner = corner.copy()
+                        corner[axis] += 1
+                        tet.append(index[tuple(corner)])
+                    tets.append(tet)
+    tets = np.array(tets)
+    centroids = vertices[tets].mean(axis=1)
+    model = SimpleNamespace(vertices=vertices, tets=tets, particle_position=centroids)
+    return model, (centroids[:, 0] > 3.0).astype(np.int64)
+
+
+def _box_distance(points, low, high):
+    """Closed form: each point's distance to the box [low, high]."""
+    return np.linalg.norm(np.maximum(0.0, np.maximum(low - points, points - high)), axis=1)
+
+
+def _box(low, high):
+    low = np.asarray(low, dtype=np.float64)
+    return m3.Manifold.cube(tuple(np.asarray(high, dtype=np.float64) - low)).translate(tuple(low))
+
+
+def test_distance_to_tets_is_the_distance_to_their_union():
+    model, _ = _grid()
+    rng = np.random.default_rng(3)
+    points = rng.uniform([-2.0, -2.0, -2.0], [10.0, 6.0, 6.0], size=(400, 3))
+    corners = model.vertices[model.tets]
+    measured = distance_to_tets(points, corners, model.particle_position)
+    exact = _box_distance(points, np.zeros(3), np.array(CELLS, dtype=np.float64))
+    assert np.allclose(measured, exact, atol=1e-9)
+
+
+def test_ball_directions_span_the_unit_ball_within_the_bound():
+    directions = _ball()
+    hull = m3.Manifold.hull_points(np.ascontiguousarray(directions))
+    # Every unit direction's support is at least 1 (the ball inside) and the corners reach
+    # at most the bound.
+    rng = np.random.default_rng(0)
+    probe = rng.normal(size=(2000, 3))
+    probe /= np.linalg.norm(probe, axis=1, keepdims=True)
+    assert np.all((probe @ directions.T).max(axis=1) >= 1.0 - 1e-12)
+    assert np.linalg.norm(directions, axis=1).max() <= BALL_BOUND
+    assert hull.volume() > 4.0 / 3.0 * np.pi
+
+
+def test_a_wedge_past_the_pieces_tets_is_cut_at_the_reach():
+    """Piece 0's tets fill [0, 3] x [0, 4]^2 (spacing 1 here); its solid also has a spike of
+    cross-section 0.5 x 0.5 running on to x = 7 through piece 1's tets. What lies past the
+    reach (1.5 to 1.89 from x = 3) goes; the box and the spike's first 1.5 stay."""
+    model, labels = _grid()
+    spacing = 1.0
+    reach = REACH_FACTOR * spacing
+    spike = _box([2.0, 1.75, 1.75], [7.0, 2.25, 2.25])
+    solid = _box([0.0, 0.0, 0.0], [3.0, 4.0, 4.0]) + spike
+    trimmed, volume = trim_overreach(solid, model, labels, 0, spacing)
+    mesh = trimmed.to_mesh()
+    vertices = np.asarray(mesh.vert_properties)[:, :3]
+    distance = _box_distance(vertices, np.zeros(3), np.array([3.0, 4.0, 4.0]))
+    assert distance.max() <= BALL_BOUND * reach + 1e-9
+    area = 0.25
+    assert area * (4.0 - BALL_BOUND * reach) - 1e-9 <= volume <= area * (4.0 - reach) + 1e-9
+    assert np.isclose(trimmed.volume(), solid.volume() - volume)
+    # What lies within the reach is all kept.
+    assert np.isclose((trimmed ^ _box([0.0, 0.0, 0.0], [3.0 + reach, 4.0, 4.0])).volume(),
+                      (solid ^ _box([0.0, 0.0, 0.0], [3.0 + reach, 4.0, 4.0])).volume())
+    assert len(trimmed.decompose()) == 1
+
+
+def test_a_solid_within_reach_and_detail_past_every_tet_stay():
+    model, labels = _grid()
+    near = _box([0.0, 0.0, 0.0], [4.2, 4.0, 4.0])  # 1.2 past piece 0's tets: within reach
+    same, volume = trim_overreach(near, model, labels, 0, 1.0)
+    assert same is near and volume == 0.0
+    # A horn out of the tets' union where no other piece's tets are (the artist's detail
+    # the mesher left out) is not another piece's material: it stays.
+    horn = _box([0.0, 0.0, 0.0], [3.0, 4.0, 4.0]) + _box([-4.0, 1.75, 1.75], [0.5, 2.25, 2.25])
+    same, volume = trim_overreach(horn, model, labels, 0, 1.0)
+    assert same is horn and volume == 0.0
