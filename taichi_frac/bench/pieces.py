@@ -100,15 +100,12 @@ def measure_pieces(records) -> dict:
     )
 
 
-def _trimmed(render_cuts, records) -> str:
-    """'pieces (volume [cm^3], share of the pieces' tets' volume)' the cuts trimmed to their
-    tets' reach (``records``: the pieces, None: the share is left out)."""
+def _trimmed(render_cuts, volume: float) -> str:
+    """'pieces (volume [cm^3], share of ``volume`` [m^3])' the ``render_cuts`` trimmed to their
+    tets' reach."""
     pieces = sum(c.get("trimmed_pieces", 0) for _, c in render_cuts)
-    volume = sum(c.get("trimmed_volume", 0.0) for _, c in render_cuts)
-    if records is None:
-        return f"{pieces} ({1e6 * volume:.2f} cm³)"
-    total = sum(rec.model.volume for rec in records)
-    return f"{pieces} ({1e6 * volume:.2f} cm³, {100 * volume / max(total, 1e-300):.3f} %)"
+    trimmed = sum(c.get("trimmed_volume", 0.0) for _, c in render_cuts)
+    return f"{pieces} ({1e6 * trimmed:.2f} cm³, {100 * trimmed / max(volume, 1e-300):.3f} %)"
 
 
 def _spread(values) -> str:
@@ -149,6 +146,7 @@ def _mesh_case(ctx: BenchContext, fit_rounds: int | None = None):
     renders, counts = cut_render_solid(render, model, split.fragment_tets, analysis.cracks,
                                        [p.model.com_in_source for p in pieces], fit_rounds=options.crack_fit_rounds)
     seconds = time.perf_counter() - t
+    counts = dict(counts, volume=model.volume)
     records = [BodyRecord(name="spot", model=p.model, root=model, material=material, fracture=options,
                           particles=particles, breakable=True, render=r) for p, r in zip(pieces, renders)]
     return measure_pieces(records), [seconds], len(report.surface.faces), counts
@@ -175,7 +173,8 @@ def run(ctx: BenchContext) -> Section:
             fallbacks = sum(c.get("fallback_pieces", 0) for _, c in sim.render_cuts)
             cells = sum(c.get("cell_pieces", 0) for _, c in sim.render_cuts)
             fit_cuts = [c.get("fit_cuts", 0) for _, c in sim.render_cuts]
-            cost_rows.append([label, len(cuts), f"{fallbacks} ({cells})", _trimmed(sim.render_cuts, records),
+            cost_rows.append([label, len(cuts), f"{fallbacks} ({cells})",
+                              _trimmed(sim.render_cuts, sum(rec.model.volume for rec in records)),
                               f"{np.mean(fit_cuts):.1f}" if cuts else "-",
                               f"{1e3 * np.mean(cuts):.0f}" if cuts else "-",
                               f"{1e3 * np.max(cuts):.0f}" if cuts else "-", f"{split_ms:.2f}",
@@ -186,7 +185,7 @@ def run(ctx: BenchContext) -> Section:
             m, cuts, triangles, counts = _mesh_case(ctx, fit_rounds)
             rows.append((f"{SHARED_MESH.name} ({triangles:,} triangles), one impact{suffix}", m))
             cost_rows.append([f"{SHARED_MESH.name}, one impact{suffix}", 1,
-                              f"{counts['fallback_pieces']} ({counts['cell_pieces']})", _trimmed([(0, counts)], None),
+                              f"{counts['fallback_pieces']} ({counts['cell_pieces']})", _trimmed([(0, counts)], counts["volume"]),
                               counts["fit_cuts"],
                               f"{1e3 * cuts[0]:.0f}", f"{1e3 * cuts[0]:.0f}", "-", "-"])
     quality_rows = [[label, m["pieces"], m["fallback"],

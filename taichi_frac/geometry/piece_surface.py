@@ -292,8 +292,9 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
 
 
 def _trimmed(pieces, stats, model, labels, piece_origins):
-    """``pieces`` each less its wedges past its tets (``piece_reach.trim_overreach``);
-    ``stats`` gains ``trimmed_pieces`` and ``trimmed_volume`` [m^3]."""
+    """``pieces`` each less its wedges past its tets (``piece_reach.trim_overreach``) and
+    the crumbs a trim leaves apart; ``stats`` gains ``trimmed_pieces`` and ``trimmed_volume``
+    [m^3] (what they lost)."""
     stats.update(trimmed_pieces=0, trimmed_volume=0.0)
     pieces = list(pieces)
     for k, piece in enumerate(pieces):
@@ -302,11 +303,11 @@ def _trimmed(pieces, stats, model, labels, piece_origins):
         origin = np.asarray(piece_origins[k], dtype=np.float64)
         solid, volume = trim_overreach(piece.solid.translate(tuple(origin)), model, labels, k, piece.spacing)
         if volume > 0.0:
-            bits = without_dust(solid, piece.spacing)
+            bits = without_crumbs(without_dust(solid, piece.spacing), piece.spacing)
             solid = m3.Manifold.compose(bits) if len(bits) > 1 else (bits[0] if bits else m3.Manifold())
             pieces[k] = RenderSolid(solid.translate(tuple(-origin)), piece.cracks, piece.spacing, piece.volume_scale)
             stats["trimmed_pieces"] += 1
-            stats["trimmed_volume"] += volume
+            stats["trimmed_volume"] += piece.solid.volume() - solid.volume()
     return pieces, stats
 
 
