@@ -105,3 +105,21 @@ def test_a_solid_within_reach_and_detail_past_every_tet_stay():
     horn = _box([0.0, 0.0, 0.0], [3.0, 4.0, 4.0]) + _box([-4.0, 1.75, 1.75], [0.5, 2.25, 2.25])
     same, volume = trim_overreach(horn, model, labels, 0, 1.0)
     assert same is horn and volume == 0.0
+
+
+def test_a_piece_mostly_past_its_tets_is_left_to_the_cuts_checks():
+    """A solid lying wholly in the other piece's tets is not a wedge: the trim would take all
+    of it, so the piece keeps it (the cut's own checks judge such a piece)."""
+    from taichi_frac.geometry.piece_surface import _trimmed
+    from taichi_frac.geometry.render_solid import RenderSolid
+
+    model, labels = _grid()
+    astray = RenderSolid(_box([5.0, 1.0, 1.0], [7.0, 3.0, 3.0]), (), 1.0)
+    wedged = RenderSolid(_box([0.0, 0.0, 0.0], [3.0, 4.0, 4.0]) + _box([2.0, 1.75, 1.75], [7.0, 2.25, 2.25]), (), 1.0)
+    _, volume = trim_overreach(astray.solid, model, labels, 0, 1.0)
+    assert volume > 0.5 * astray.solid.volume()
+    pieces, stats = _trimmed([astray], {}, model, labels, np.zeros((1, 3)))
+    assert pieces[0] is astray and stats["trimmed_pieces"] == 0
+    pieces, stats = _trimmed([wedged], {}, model, labels, np.zeros((1, 3)))
+    assert stats["trimmed_pieces"] == 1 and np.isclose(pieces[0].solid.volume(),
+                                                       wedged.solid.volume() - stats["trimmed_volume"])

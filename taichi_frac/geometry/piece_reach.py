@@ -23,6 +23,9 @@ import numpy as np
 #: A piece's render solid keeps what lies within this [particle spacings] of its tets: past the
 #: 1.4 spacings a flat crack face can lie from the staircase of tets it crosses.
 REACH_FACTOR = 1.5
+#: A trim is kept only where the piece keeps at least this share of its volume: a solid
+#: mostly past its tets is not a wedge but a failed cut, which the cut's own checks judge.
+KEPT_SHARE = 0.5
 #: The grown tets' hull lies within this factor of the reach from them: an icosahedron's
 #: circumradius over its inradius.
 BALL_BOUND = float(np.sqrt(10.0 + 2.0 * np.sqrt(5.0)) / 4.0 / ((3.0 + np.sqrt(5.0)) * np.sqrt(3.0) / 12.0))

@@ -57,7 +57,7 @@ from .crack_offsets import MOVES, moved_crack, piece_target_volumes, tilt_frames
 from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
                           overfull_pieces, overreaching_pieces)
 from .piece_shells import join_stray_shells, without_crumbs
-from .piece_reach import trim_overreach
+from .piece_reach import KEPT_SHARE, trim_overreach
 from .render_solid import (_CRACK, _NORMAL, _PROPERTY_COUNT, _UV, DUST_VOLUME_FACTOR, HULL_FACE,
                            SLAB_REACH_FACTOR, SLAB_THICKNESS_FACTOR, SPHERE_SAGITTA_FACTOR, WELD_REACH_FACTOR,
                            WELD_THICKNESS_FACTOR, CrackSurface, PieceMesh, RenderSolid, tangent_frame, without_dust)
@@ -305,6 +305,7 @@ def _trimmed(pieces, stats, model, labels, piece_origins):
         if volume > 0.0:
             bits = without_crumbs(without_dust(solid, piece.spacing), piece.spacing)
             solid = m3.Manifold.compose(bits) if len(bits) > 1 else (bits[0] if bits else m3.Manifold())
+        if volume > 0.0 and solid.volume() >= KEPT_SHARE * piece.solid.volume():
             pieces[k] = RenderSolid(solid.translate(tuple(-origin)), piece.cracks, piece.spacing, piece.volume_scale)
             stats["trimmed_pieces"] += 1
             stats["trimmed_volume"] += piece.solid.volume() - solid.volume()
