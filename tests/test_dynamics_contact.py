@@ -38,7 +38,7 @@ def test_block_on_incline_sticks_or_slides_per_coulomb(mu, slides):
     half = np.array([1.0, 0.5, 0.05])
     world.add_static_box((0, 0, 0), half, q, friction=mu, restitution=0.0)
     rot = np.array([[math.cos(theta), 0, math.sin(theta)], [0, 1, 0], [-math.sin(theta), 0, math.cos(theta)]])
-    up, down = rot @ np.array([0, 0, 1.0]), rot @ np.array([1.0, 0, 0])
+    down = rot @ np.array([1.0, 0, 0])  # down the slope
     x0 = rot @ np.array([-0.3, 0, half[2] - lowest_point(model)])
     body = world.add_body(model, x0, q, friction=mu, restitution=0.0)
     t = 1.0
