@@ -185,8 +185,8 @@ def run(ctx: BenchContext) -> Section:
             m, cuts, triangles, counts = _mesh_case(ctx, fit_rounds)
             rows.append((f"{SHARED_MESH.name} ({triangles:,} triangles), one impact{suffix}", m))
             cost_rows.append([f"{SHARED_MESH.name}, one impact{suffix}", 1,
-                              f"{counts['fallback_pieces']} ({counts['cell_pieces']})", _trimmed([(0, counts)], counts["volume"]),
-                              counts["fit_cuts"],
+                              f"{counts['fallback_pieces']} ({counts['cell_pieces']})",
+                              _trimmed([(0, counts)], counts["volume"]), counts["fit_cuts"],
                               f"{1e3 * cuts[0]:.0f}", f"{1e3 * cuts[0]:.0f}", "-", "-"])
     quality_rows = [[label, m["pieces"], m["fallback"],
                      f"{m['before_nonmanifold']} in {m['before_pieces_nonmanifold']}",

@@ -35,17 +35,12 @@ NEAREST_TETS = 16
 
 @functools.lru_cache(maxsize=1)
 def _ball() -> np.ndarray:
-    """(12,3) directions whose convex hull holds the unit ball: an icosahedron's vertices
-    scaled by its inradius, so a tet's corners moved by r along them span the tet grown by r
-    (and lie within BALL_BOUND r of it)."""
+    """(12,3) directions whose convex hull holds the unit ball: a unit icosahedron's vertices
+    scaled by BALL_BOUND to inradius 1. A tet's corners moved by r along them span the tet
+    grown by r (and lie within BALL_BOUND r of it)."""
     import trimesh
 
-    sphere = trimesh.creation.icosphere(subdivisions=0)
-    corners = sphere.vertices[sphere.faces]
-    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-    inradius = float(np.min(np.einsum("ij,ij->i", normal, corners[:, 0])))
-    return np.asarray(sphere.vertices) / inradius
+    return BALL_BOUND * np.asarray(trimesh.creation.icosphere(subdivisions=0).vertices)
 
 
 def distance_to_tets(points: np.ndarray, corners: np.ndarray, centroids: np.ndarray) -> np.ndarray:
@@ -101,17 +96,18 @@ def trim_overreach(solid: m3.Manifold, model, labels: np.ndarray, k: int, spacin
     reach = REACH_FACTOR * spacing
     props, _ = solid_arrays(solid)
     vertices = props[:, :3]
-    corners = model.vertices[model.tets]
     # Vertices beyond reach of the piece's tets and within it of another's (a vertex within
     # reach of a tet centroid is within reach of its tet).
     centroids = model.particle_position
     candidates = np.nonzero(cKDTree(centroids[mine]).query(vertices)[0] > reach)[0]
-    if len(candidates):
-        distance = distance_to_tets(vertices[candidates], corners[mine], centroids[mine])
-        candidates, distance = candidates[distance > reach], distance[distance > reach]
+    if not len(candidates):
+        return solid, 0.0
+    own_corners = model.vertices[model.tets[mine]]  # (T,4,3)
+    distance = distance_to_tets(vertices[candidates], own_corners, centroids[mine])
+    candidates, distance = candidates[distance > reach], distance[distance > reach]
     others = np.nonzero(labels != k)[0]
     if len(candidates) and len(others):
-        held = distance_to_tets(vertices[candidates], corners[others], centroids[others]) <= reach
+        held = distance_to_tets(vertices[candidates], model.vertices[model.tets[others]], centroids[others]) <= reach
         candidates, distance = candidates[held], distance[held]
     if not len(candidates):
         return solid, 0.0
@@ -119,11 +115,10 @@ def trim_overreach(solid: m3.Manifold, model, labels: np.ndarray, k: int, spacin
     # (the wedge runs back from its tip to where it comes within reach)
     margin = float(distance.max()) - reach + spacing
     low, high = far.min(axis=0) - margin, far.max(axis=0) + margin
-    own = mine[np.all((corners[mine].max(axis=1) >= low - reach) & (corners[mine].min(axis=1) <= high + reach),
-                      axis=1)]
+    own = np.all((own_corners.max(axis=1) >= low - reach) & (own_corners.min(axis=1) <= high + reach), axis=1)
     removed = m3.Manifold.cube(tuple(high - low)).translate(tuple(low))
-    if len(own):
-        removed = removed - _grown(corners[own], reach)
+    if own.any():
+        removed = removed - _grown(own_corners[own], reach)
     if removed.is_empty():
         return solid, 0.0
     trimmed = solid - _with_crack_index(removed, HULL_FACE)

@@ -286,37 +286,8 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
             roughness_scale, seed, scale)
     pieces, stats, index_of = _cut(*args, np.zeros((len(cracks), MOVES)))
     stats.update(moved_cracks=0, largest_offset=0.0, fit_cuts=0)
-    if fit_rounds:
-        pieces, stats = _fit(pieces, stats, args, index_of, fit_rounds)
-    return _trimmed(pieces, stats, model, labels, piece_origins)
-
-
-def _trimmed(pieces, stats, model, labels, piece_origins):
-    """``pieces`` each less its wedges past its tets (``piece_reach.trim_overreach``) and
-    the crumbs a trim leaves apart; ``stats`` gains ``trimmed_pieces`` and ``trimmed_volume``
-    [m^3] (what they lost)."""
-    stats.update(trimmed_pieces=0, trimmed_volume=0.0)
-    pieces = list(pieces)
-    for k, piece in enumerate(pieces):
-        if piece is None:
-            continue
-        origin = np.asarray(piece_origins[k], dtype=np.float64)
-        solid, volume = trim_overreach(piece.solid.translate(tuple(origin)), model, labels, k, piece.spacing)
-        if volume > 0.0:
-            bits = without_crumbs(without_dust(solid, piece.spacing), piece.spacing)
-            solid = m3.Manifold.compose(bits) if len(bits) > 1 else (bits[0] if bits else m3.Manifold())
-        if volume > 0.0 and solid.volume() >= KEPT_SHARE * piece.solid.volume():
-            pieces[k] = RenderSolid(solid.translate(tuple(-origin)), piece.cracks, piece.spacing, piece.volume_scale)
-            stats["trimmed_pieces"] += 1
-            stats["trimmed_volume"] += piece.solid.volume() - solid.volume()
-    return pieces, stats
-
-
-def _fit(pieces, stats, args, index_of, fit_rounds):
-    """The cut of ``cut_render_solid`` whose moved cracks bring the pieces nearest their tets'
-    volumes, starting from the first cut's ``pieces`` (``args``: ``_cut``'s but the offsets)."""
-    render, model, fragment_tets, _, cracks, _, frames, piece_origins = args[:8]
-    spacing, scale = render.spacing, args[-1]
+    if not fit_rounds:
+        return _trimmed(pieces, stats, model, labels, piece_origins)
     targets = piece_target_volumes(scale, model, fragment_tets)
     solids = [p.solid if p is not None else None for p in pieces]
     best, moved, cuts = volume_misfit(solids, targets, fragment_tets), np.zeros((len(cracks), MOVES)), 0
@@ -340,6 +311,29 @@ def _fit(pieces, stats, args, index_of, fit_rounds):
         else:
             break
     stats["fit_cuts"] = cuts
+    return _trimmed(pieces, stats, model, labels, piece_origins)
+
+
+def _trimmed(pieces, stats, model, labels, piece_origins):
+    """``pieces`` each less its wedges past its tets (``piece_reach.trim_overreach``) and
+    the crumbs a trim leaves apart; ``stats`` gains ``trimmed_pieces`` and ``trimmed_volume``
+    [m^3] (what they lost)."""
+    stats.update(trimmed_pieces=0, trimmed_volume=0.0)
+    pieces = list(pieces)
+    for k, piece in enumerate(pieces):
+        if piece is None:
+            continue
+        origin = np.asarray(piece_origins[k], dtype=np.float64)
+        solid, volume = trim_overreach(piece.solid.translate(tuple(origin)), model, labels, k, piece.spacing)
+        if not volume > 0.0:
+            continue
+        bits = without_crumbs(without_dust(solid, piece.spacing), piece.spacing)
+        solid = m3.Manifold.compose(bits) if len(bits) > 1 else (bits[0] if bits else m3.Manifold())
+        before, after = piece.solid.volume(), solid.volume()
+        if after >= KEPT_SHARE * before:
+            pieces[k] = RenderSolid(solid.translate(tuple(-origin)), piece.cracks, piece.spacing, piece.volume_scale)
+            stats["trimmed_pieces"] += 1
+            stats["trimmed_volume"] += before - after
     return pieces, stats
 
 
