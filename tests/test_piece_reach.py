@@ -59,6 +59,15 @@ def test_distance_to_tets_is_the_distance_to_their_union():
     assert np.allclose(measured, exact, atol=1e-9)
 
 
+def test_a_flat_tet_holds_no_point():
+    """A tet of no volume (four corners in a plane) is measured by its faces alone: a point
+    a metre off its plane is a metre from it."""
+    corners = np.array([[[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 0.0], [1.0, 1.0, 0.0]]])
+    points = np.array([[0.2, 0.2, 0.5], [0.5, 0.5, -1.0]])
+    measured = distance_to_tets(points, corners, corners.mean(axis=1))
+    assert np.allclose(measured, [0.5, 1.0], atol=1e-12)
+
+
 def test_ball_directions_span_the_unit_ball_within_the_bound():
     directions = _ball()
     hull = m3.Manifold.hull_points(np.ascontiguousarray(directions))

@@ -60,11 +60,9 @@ def distance_to_tets(points: np.ndarray, corners: np.ndarray, centroids: np.ndar
     p = np.broadcast_to(points[:, None, :], (len(points), k, 3))
     # Inside a tet: every barycentric coordinate of the point non-negative.
     edges = np.stack([tet[:, :, i] - tet[:, :, 0] for i in (1, 2, 3)], axis=-1)  # (N,K,3,3)
-    det = np.linalg.det(edges)
-    safe = np.where(np.abs(det) > 1e-300, det, 1.0)
-    bary = np.linalg.solve(np.where(np.abs(det)[..., None, None] > 1e-300, edges, np.eye(3)),
-                           (p - tet[:, :, 0])[..., None])[..., 0]
-    inside = (np.abs(safe) > 0) & np.all(bary >= 0.0, axis=-1) & (bary.sum(axis=-1) <= 1.0)
+    flat = np.abs(np.linalg.det(edges)) <= 1e-300  # (a tet of no volume holds no point)
+    bary = np.linalg.solve(np.where(flat[..., None, None], np.eye(3), edges), (p - tet[:, :, 0])[..., None])[..., 0]
+    inside = ~flat & np.all(bary >= 0.0, axis=-1) & (bary.sum(axis=-1) <= 1.0)
     faces = tet[:, :, [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]]]  # (N,K,4,3,3)
     q = np.broadcast_to(p[:, :, None, :], faces.shape[:3] + (3,)).reshape(-1, 3)
     nearest = trimesh.triangles.closest_point(faces.reshape(-1, 3, 3), q)
