@@ -419,15 +419,10 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
         # A patch may stand out of its sphere (``Particles.overhang``): a chip's corner 3 mm
         # past it touched the floor, its contact made or not as the motion bound varied,
         # and the chip rocked on it for good.
-        bound = gap  # [m] a lower bound of the gap of every point the contacts may use
+        over = 0.0
         if ti.static(patches):
-            bound = gap - particles.overhang[i]
-            if patch:  # (the patch's box along n: nearer than the overhang's ball on a flat face)
-                axis = bodies.rotation[a].transpose() @ n
-                centre = 0.5 * (particles.patch_low[i] + particles.patch_high[i])
-                half = 0.5 * (particles.patch_high[i] - particles.patch_low[i])
-                bound = ti.max(bound, bodies.position[a].dot(n) + centre.dot(axis) - half.dot(ti.abs(axis)) - level)
-        if bound < margin * r + bodies.motion[a]:
+            over = particles.overhang[i]
+        if gap - over < margin * r + bodies.motion[a]:
             if ti.static(patches):
                 _collider_contacts(bodies, particles, statics, contacts, margin, dt, bounce_speed, i, a, x, patch, n,
                                    gap, point, level, kind, k, key, mu, e)

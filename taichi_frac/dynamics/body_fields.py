@@ -135,19 +135,13 @@ def write_patches(bodies: ti.template(), particles: ti.template(), ints: ti.type
         centre = particles.offset[p]
         radius = particles.radius[p]
         reach = radius
-        low = centre
-        high = centre
         for k in range(ints[s, 2]):
             row = ints[s, 3] + k
             x = ti.math.vec3(points[row, 0], points[row, 1], points[row, 2])
             particles.surface_point[start + k] = x
             reach = ti.max(reach, (x - centre).norm())
-            low = ti.min(low, x)
-            high = ti.max(high, x)
         over = reach - radius
         particles.overhang[p] = over
-        particles.patch_low[p] = low
-        particles.patch_high[p] = high
         b = particles.body[p]
         ti.atomic_max(bodies.bounding_radius[b], centre.norm() + reach)
         for d in ti.static(range(3)):

@@ -208,9 +208,7 @@ class Particles:
             in one contiguous range. overhang (f32 [m]): how far sphere P's patch reaches
             past the sphere (a sphere covers its members' centroids, not every corner of
             their boundary triangles: a chip's patch stood out of its sphere by 3 mm); the
-            narrowphase looks that much further before it tries the patch. patch_low,
-            patch_high (vec3 [m] body frame): the box of the patch's points, a tighter bound
-            along a collider's normal than the overhang's ball. Writer: add_body.
+            narrowphase looks that much further before it tries the patch. Writer: add_body.
         slot_end: one past the highest slot in use.
     """
 
@@ -220,8 +218,6 @@ class Particles:
         self.point_count = ti.field(ti.i32, shape=capacity)
         self.patch_normal = vec3.field(shape=capacity)
         self.overhang = ti.field(ti.f32, shape=capacity)
-        self.patch_low = vec3.field(shape=capacity)
-        self.patch_high = vec3.field(shape=capacity)
         self.patch_facet = vec3.field(shape=(capacity, MAX_FACETS))
         self.surface_point = vec3.field(shape=max_surface_points)
         self.body = ti.field(ti.i32, shape=capacity)
