@@ -160,7 +160,7 @@ def _cached(particles: ti.template(), query, key):
 
 
 @ti.func
-def _carries_with(bodies: ti.template(), particles: ti.template(), query, o):
+def _carries_with(particles: ti.template(), query, o):
     """Whether particle ``query``'s contact with some sphere of body ``o`` carried load at
     the end of the last substep (``_cached``'s rows, read once for all of o's candidates:
     looked up per candidate, the rows cost a ninth of the 13 rings' narrowphase)."""
@@ -280,7 +280,7 @@ def _pair_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.
             if near == 1:
                 carried = False
                 if ti.static(patches):
-                    carried = _carries_with(bodies, particles, i, o)
+                    carried = _carries_with(particles, i, o)
                 edge = bodies.grid_edge[o]
                 dims = bodies.grid_dims[o]
                 rel = local - bodies.grid_origin[o]
