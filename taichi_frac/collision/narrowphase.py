@@ -162,8 +162,9 @@ def _cached(particles: ti.template(), query, key):
 @ti.func
 def _carries_with(particles: ti.template(), query, o):
     """Whether particle ``query``'s contact with some sphere of body ``o`` carried load at
-    the end of the last substep (``_cached``'s rows, read once for all of o's candidates:
-    looked up per candidate, the rows cost a ninth of the 13 rings' narrowphase)."""
+    the end of the last substep (``_cached``'s rows). Read once for all of o's candidate
+    spheres: most particles carried nothing against o, and then none of its candidates
+    needs the per-pair lookup."""
     previous = particles.parity[None]
     carried = False
     if particles.cache_stamp[previous, query] == particles.cache_epoch[None]:
