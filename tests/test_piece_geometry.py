@@ -426,11 +426,11 @@ def test_stray_shells_join_the_main_shell_they_touch():
     touching nothing (it stays apart). Closed form: the bridge over the 1 x 1 contact fills
     the gap and no more (it lies inside the boxes elsewhere), so each joined solid is 4^3 + 1."""
     from taichi_frac.geometry.piece_shells import join_stray_shells
-    from taichi_frac.geometry.piece_surface import _with_crack_index
+    from taichi_frac.geometry.render_solid import with_crack_index
 
     def cube(low, high):
         low, high = np.asarray(low, float), np.asarray(high, float)
-        return _with_crack_index(m3.Manifold.cube(tuple(high - low)).translate(tuple(low)), -1)
+        return with_crack_index(m3.Manifold.cube(tuple(high - low)).translate(tuple(low)), -1)
 
     gap = 2e-4
     own_bit = cube([4 + gap, 0, 0], [5, 1, 1])

@@ -10,7 +10,7 @@ from __future__ import annotations
 import manifold3d as m3
 import numpy as np
 
-from .render_solid import solid_arrays
+from .render_solid import solid_arrays, with_crack_index
 
 #: A part's vote reads at most about this many of its faces (evenly spread over its list).
 MAX_VOTING_FACES = 256
@@ -155,7 +155,6 @@ def carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing):
     the part are then the cells', not a crack's: counted in the stats. The carving can cut
     the rest in two or more: the largest stays with its owner, the others are voted for again
     (a chip beyond it belongs to the tets around it)."""
-    from .piece_surface import _with_crack_index
     from .render_solid import HULL_FACE, without_dust
 
     parts, owner = list(parts), list(owner)
@@ -168,7 +167,7 @@ def carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing):
             continue
         hull = _own_cells(model, labels, k, spacing, np.arange(len(labels)))
         if hull is None:  # (a degenerate diagram)
-            hull = _with_crack_index(m3.Manifold.hull_points(
+            hull = with_crack_index(m3.Manifold.hull_points(
                 np.ascontiguousarray(model.vertices[model.tets[tets]].reshape(-1, 3))), HULL_FACE)
         carved = parts[best] ^ hull
         if carved.is_empty():

@@ -20,6 +20,8 @@ import functools
 import manifold3d as m3
 import numpy as np
 
+from .render_solid import HULL_FACE, solid_arrays, with_crack_index
+
 #: A piece's render solid keeps what lies within this [particle spacings] of its tets: past the
 #: 1.4 spacings a flat crack face can lie from the staircase of tets it crosses.
 REACH_FACTOR = 1.5
@@ -85,9 +87,6 @@ def trim_overreach(solid: m3.Manifold, model, labels: np.ndarray, k: int, spacin
     solid (``solid`` itself where nothing is that far) and the volume cut away [m^3]."""
     from scipy.spatial import cKDTree
 
-    from .piece_surface import _with_crack_index
-    from .render_solid import HULL_FACE, solid_arrays
-
     mine = np.nonzero(labels == k)[0]
     if solid.is_empty() or not len(mine):
         return solid, 0.0
@@ -119,5 +118,5 @@ def trim_overreach(solid: m3.Manifold, model, labels: np.ndarray, k: int, spacin
         removed = removed - _grown(own_corners[own], reach)
     if removed.is_empty():
         return solid, 0.0
-    trimmed = solid - _with_crack_index(removed, HULL_FACE)
+    trimmed = solid - with_crack_index(removed, HULL_FACE)
     return trimmed, solid.volume() - trimmed.volume()

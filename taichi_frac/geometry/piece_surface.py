@@ -58,9 +58,10 @@ from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_part
                           overfull_pieces, overreaching_pieces)
 from .piece_shells import join_stray_shells, without_crumbs
 from .piece_reach import KEPT_SHARE, trim_overreach
-from .render_solid import (_CRACK, _NORMAL, _PROPERTY_COUNT, _UV, DUST_VOLUME_FACTOR, HULL_FACE,
+from .render_solid import (_CRACK, _NORMAL, _UV, DUST_VOLUME_FACTOR, HULL_FACE,
                            SLAB_REACH_FACTOR, SLAB_THICKNESS_FACTOR, SPHERE_SAGITTA_FACTOR, WELD_REACH_FACTOR,
-                           WELD_THICKNESS_FACTOR, CrackSurface, PieceMesh, RenderSolid, tangent_frame, without_dust)
+                           WELD_THICKNESS_FACTOR, CrackSurface, PieceMesh, RenderSolid, tangent_frame, with_crack_index,
+                           without_dust)
 
 #: The shares of the fitted plane offsets tried in turn until a cut's pieces come nearer their
 #: tets' volumes than the first cut's: a moved plane can hand a small part where cracks meet
@@ -184,18 +185,6 @@ def _sphere_shell(crack: CrackSurface, spacing: float) -> m3.Manifold:
     outer = m3.Manifold.sphere(crack.radius + half, segments)
     inner = m3.Manifold.sphere(max(crack.radius - half, 1e-9), segments)
     return (outer - inner).translate(tuple(crack.point))
-
-
-def _with_crack_index(slab: m3.Manifold, index: int) -> m3.Manifold:
-    """``slab`` with every vertex's crack-index property set to ``index`` (normals and UVs
-    zero: the piece's inner faces get theirs in ``piece_mesh``)."""
-    mesh = slab.to_mesh64()
-    positions = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3]
-    props = np.zeros((len(positions), _PROPERTY_COUNT))
-    props[:, :3] = positions
-    props[:, _CRACK] = index
-    return m3.Manifold(m3.Mesh64(vert_properties=props,
-                                 tri_verts=np.array(mesh.tri_verts, dtype=np.uint64)))
 
 
 def _separating_cracks(model, bonds, labels, cracks):
@@ -363,7 +352,7 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
             continue
         new_cracks.append(surface)
         index_of[i] = index
-        slabs.append(_with_crack_index(slab, index))
+        slabs.append(with_crack_index(slab, index))
         if isinstance(crack, CrackPlane):
             planes.append((surface, sites, inside_one, index))
     stats = dict(slabs=len(slabs), parts=0, unassigned_parts=0, empty_pieces=0, welded_pieces=0, cell_pieces=0)
@@ -443,7 +432,7 @@ def _weld_bits(solid: m3.Manifold, planes, spheres, split_up: set, spacing: floa
                                reach_factor=WELD_REACH_FACTOR,
                                apart_from=[other for other, _, _, _ in planes if other is not surface])
             if weld is not None and not weld.is_empty():
-                welds.append(_with_crack_index(weld, index))
+                welds.append(with_crack_index(weld, index))
         if welds:
             bits[k] = [solid ^ (m3.Manifold.batch_boolean(welds, m3.OpType.Add) if len(welds) > 1 else welds[0])]
     return bits

@@ -190,3 +190,13 @@ def without_dust(solid: m3.Manifold, spacing: float) -> list:
     return [shell for shell in solid.decompose() if shell.volume() >= DUST_VOLUME_FACTOR * spacing**3]
 
 
+def with_crack_index(slab: m3.Manifold, index: int) -> m3.Manifold:
+    """``slab`` with every vertex's crack-index property set to ``index`` (normals and UVs
+    zero: the piece's inner faces get theirs in ``piece_mesh``)."""
+    mesh = slab.to_mesh64()
+    positions = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3]
+    props = np.zeros((len(positions), _PROPERTY_COUNT))
+    props[:, :3] = positions
+    props[:, _CRACK] = index
+    return m3.Manifold(m3.Mesh64(vert_properties=props,
+                                 tri_verts=np.array(mesh.tri_verts, dtype=np.uint64)))
