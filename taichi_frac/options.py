@@ -278,7 +278,10 @@ class FractureOptions:
             half a spacing more at their far end; ring cracks' spheres resized by at most half
             a spacing: within the tets' staircase along the crack) so that each piece's
             render surface holds its tets' volume; 0 leaves them where the analysis put them. Each round cuts the split's render solid again
-            once or twice, and only when a piece of 100 tets or more is off by over 1 %.
+            once or twice, and only when a piece of 100 tets or more is off by over 1 %. Where
+            the whole planes cannot do it, up to as many rounds more shift the stretch of a
+            plane between each pair of pieces on its own (at most half a spacing more; not
+            for rough cracks).
     """
 
     crack_count: int = 1

@@ -15,7 +15,7 @@ LAYERS = [
     ("io", 2), ("fracture.stage", 2), ("scene_setup", 2),
     ("scenes", 3), ("geometry.prepare", 3), ("geometry.piece_surface", 3), ("geometry.piece_parts", 3),
     ("geometry.piece_checks", 3), ("geometry.piece_shells", 3), ("geometry.crack_offsets", 3),
-    ("geometry.render_solid", 3), ("geometry.piece_reach", 3),
+    ("geometry.render_solid", 3), ("geometry.piece_reach", 3), ("geometry.crack_slabs", 3),
     ("fracture", 4),
     ("dynamics", 5),
     ("collision", 6),

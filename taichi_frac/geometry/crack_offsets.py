@@ -221,3 +221,143 @@ def _fit(free: np.ndarray, pieces, already: np.ndarray, now: float, spacing: flo
     change[free] = fit.x * spacing
     # (the pieces without faces on a free crack keep their errors)
     return change, now - float(np.sum(misfits**2)) + float(np.sum((rows @ fit.x + misfits) ** 2))
+
+
+# Segments: one plane crack, a shift of its own under each pair of pieces it parts.
+
+#: The sparse segment fit's price of a piece's relative volume error against a shift of a
+#: segment by one particle spacing.
+ERROR_PRICE = 1e3
+
+@dataclass(frozen=True)
+class CrackSegments:
+    """The stretches of the plane cracks between one pair of pieces each. A plane crack that
+    parts many pieces (a radial crack of a pane, a row of shards on each side) has a dozen
+    volumes to suit and three moves to do it with; giving each of its pairs of pieces its own
+    shift along the normal fits them one by one. ``crack`` (S,) the crack each segment lies
+    on; ``of_site`` for each crack, (N,) the segment of each of its bond crossings (the sites
+    of ``piece_surface._separating_cracks``; -1: a crossing cut inside one piece, or one it
+    does not cut), or None for a crack without segments (a ring crack, or a plane between one
+    pair of pieces: its own shift does that); ``pieces`` (S,2) the pair (-1: dropped tets);
+    ``trees`` each crack's k-d tree of its cut
+    crossings (None: none), ``cut_segment`` (M,) their segments."""
+
+    crack: np.ndarray
+    pieces: np.ndarray
+    of_site: list
+    trees: list
+    cut_segment: list
+
+    @property
+    def count(self) -> int:
+        return len(self.crack)
+
+
+def crack_segments(per_crack, piece_count: int) -> CrackSegments:
+    """The segments of the plane cracks: ``per_crack`` each crack's (sites (N,3) [m], cut (N,)
+    bool, inside (N,), pieces (N,2) the pieces on the bond's two ends, -1: a dropped tet) as
+    ``piece_surface._separating_cracks`` gives them (a ring crack's sites None)."""
+    from scipy.spatial import cKDTree
+
+    crack, pieces, of_site, trees, cut_segment = [], [], [], [], []
+    for i, (sites, cut, inside, ends) in enumerate(per_crack):
+        if sites is None or not len(sites):
+            of_site.append(None), trees.append(None), cut_segment.append(None)
+            continue
+        between = cut & (inside < 0)
+        ends = np.sort(ends, axis=1) + 1
+        code = np.where(between, ends[:, 0] * (piece_count + 1) + ends[:, 1], -1)
+        pairs = np.unique(code[between])
+        if len(pairs) < 2:
+            of_site.append(None), trees.append(None), cut_segment.append(None)
+            continue
+        segment = np.full(len(sites), -1, dtype=np.int64)
+        segment[between] = len(crack) + np.searchsorted(pairs, code[between])
+        crack.extend([i] * len(pairs))
+        pieces.extend(np.stack([pairs // (piece_count + 1), pairs % (piece_count + 1)], axis=1) - 1)
+        of_site.append(segment)
+        trees.append(cKDTree(sites[cut]))
+        cut_segment.append(segment[cut])
+    return CrackSegments(np.array(crack, dtype=np.int64), np.array(pieces, dtype=np.int64).reshape(-1, 2), of_site,
+                         trees, cut_segment)
+
+
+def segment_face_moves(solid, origin, sources: np.ndarray, cracks, segments: CrackSegments) -> np.ndarray:
+    """(S,) [m^2] how ``solid``'s volume changes per metre each segment is shifted along its
+    crack's normal: the sum of (outward area vector . normal) over the crack faces nearer
+    that segment's crossings than any other cut crossing of the crack. ``sources`` (K,) the
+    crack behind each crack index of the solid's faces (-1: one it inherited); ``origin``
+    (3,) [m] the solid's frame origin in the body's."""
+    from .render_solid import _CRACK, solid_arrays
+
+    props, tri = solid_arrays(solid)
+    index = np.rint(np.nan_to_num(props[tri, _CRACK], nan=-1.0)).astype(np.int64)  # (F,3)
+    on_one = (index == index[:, :1]).all(axis=1) & (index[:, 0] >= 0)
+    source = np.full(len(tri), -1, dtype=np.int64)
+    source[on_one] = np.asarray(sources, dtype=np.int64)[index[on_one, 0]]
+    moves = np.zeros(segments.count)
+    for k in np.unique(source[source >= 0]):
+        if segments.trees[k] is None:
+            continue
+        rows = source == k
+        corners = props[tri[rows], :3] + np.asarray(origin, dtype=np.float64)
+        flux = 0.5 * np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]) @ np.asarray(
+            cracks[k].normal, dtype=np.float64)
+        segment = segments.cut_segment[k][segments.trees[k].query(corners.mean(axis=1))[1]]
+        mine = segment >= 0
+        moves += np.bincount(segment[mine], weights=flux[mine], minlength=segments.count)
+    return moves
+
+
+def segment_shifts(solids, origins, sources: np.ndarray, cracks, segments: CrackSegments, targets: np.ndarray,
+                   fragment_tets, spacing: float, already: np.ndarray, frozen=None) -> tuple[np.ndarray, float]:
+    """The further shifts (S,) [m] of the segments that bring the pieces' volumes nearest
+    ``targets`` (least squares over the ``volume_errors``, as ``volume_offsets``), each
+    segment's whole shift within MAX_OFFSET_FACTOR ``spacing``; ``already`` (S,) [m] the
+    shifts the ``solids`` were cut with, ``sources`` their cut's crack behind each crack
+    index; ``frozen`` (S,) bool the segments that stay. Returns (change, predicted misfit)."""
+    errors = volume_errors(solids, targets, fragment_tets)
+    now = float(np.nansum(errors**2))
+    if not segments.count or not np.nanmax(np.abs(errors), initial=0.0) > VOLUME_TOLERANCE:
+        return np.zeros(segments.count), now
+    origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    pieces = [(segment_face_moves(solid, origin, sources, cracks, segments)[:, None] * spacing / target, error)
+              for solid, origin, target, error in zip(solids, origins, targets, errors) if not np.isnan(error)]
+    free = np.ones((segments.count, 1), dtype=bool) if frozen is None else ~np.asarray(frozen, dtype=bool)[:, None]
+    already = np.asarray(already, dtype=np.float64)[:, None] / spacing
+    change, predicted = _fit(free, pieces, already, now, spacing)
+    # Least squares spreads the moves over every segment a fitted piece touches, most of them
+    # by a hair; each moved segment is a slab of its own, and each step between two a wall
+    # the cut must also make. The fit with the fewest moves (least total shift, a linear
+    # program) is kept when it promises about as much.
+    sparse = _sparse_fit(free, pieces, already, now, spacing)
+    if sparse is not None and sparse[1] <= predicted + 0.25 * VOLUME_TOLERANCE**2:
+        change, predicted = sparse
+    return change[:, 0], predicted
+
+
+def _sparse_fit(free: np.ndarray, pieces, already: np.ndarray, now: float, spacing: float):
+    """As ``_fit``, but minimising ERROR_PRICE x the sum of the pieces' absolute relative
+    volume errors plus the sum of the absolute moves [spacings] (a linear program, so most
+    moves come out exactly 0). None when the program fails."""
+    from scipy.optimize import linprog
+
+    rows = [(moves[free], error) for moves, error in pieces if np.any(moves[free])]
+    if not rows:
+        return None
+    errors = np.array([error for _, error in rows])
+    a = np.array([row for row, _ in rows])  # (P, n): error change per spacing of each move
+    n, p = a.shape[1], a.shape[0]
+    bound = np.where(np.nonzero(free)[1] == 0, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR / np.sqrt(2.0))
+    lo, hi = -bound - already[free], bound - already[free]
+    # Variables: moves up, moves down, errors over, errors under (all >= 0); a (up - down) - (over - under) = -e.
+    cost = np.concatenate([np.ones(2 * n), ERROR_PRICE * np.ones(2 * p)])
+    equality = np.hstack([a, -a, -np.eye(p), np.eye(p)])
+    bounds = ([(0.0, max(h, 0.0)) for h in hi] + [(0.0, max(-l, 0.0)) for l in lo] + [(0.0, None)] * (2 * p))
+    result = linprog(cost, A_eq=equality, b_eq=-errors, bounds=bounds, method="highs")
+    if result.status != 0:
+        return None
+    x = result.x[:n] - result.x[n:2 * n]
+    change = np.zeros(free.shape)
+    change[free] = x * spacing
+    return change, now - float(np.sum(errors**2)) + float(np.sum((a @ x + errors) ** 2))

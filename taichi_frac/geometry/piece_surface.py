@@ -10,7 +10,10 @@ different pieces, and the connected parts that remain are handed to the pieces w
 they hold. So:
 
 - crack faces lie on their crack plane (or ring sphere) to within half the slab thickness
-  (``SLAB_THICKNESS_FACTOR`` x the particle spacing), not on the tets' staircase;
+  (``SLAB_THICKNESS_FACTOR`` x the particle spacing), not on the tets' staircase; the planes
+  are moved within the staircase so each large piece holds its tets' volume, a plane that
+  parts many pairs of pieces in stretches, one per pair, with a small step between
+  (``crack_offsets``, ``crack_slabs``);
 - the outside is the artist's triangles clipped at the crack faces, keeping their UVs and
   normals (interpolated where a triangle is cut); inner faces get a planar projection along
   their crack as UVs and their own flat normal;
@@ -53,15 +56,16 @@ from __future__ import annotations
 import manifold3d as m3
 import numpy as np
 
-from .crack_offsets import MOVES, moved_crack, piece_target_volumes, tilt_frames, volume_misfit, volume_offsets
+from .crack_offsets import (MOVES, crack_segments, moved_crack, piece_target_volumes, segment_shifts, tilt_frames,
+                            volume_misfit, volume_offsets)
+from .crack_slabs import plane_slab, segment_slabs, sphere_shell
 from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
                           overfull_pieces, overreaching_pieces)
 from .piece_shells import join_stray_shells, without_crumbs
 from .piece_reach import KEPT_SHARE, trim_overreach
-from .render_solid import (_CRACK, _NORMAL, _UV, DUST_VOLUME_FACTOR, HULL_FACE,
-                           SLAB_REACH_FACTOR, SLAB_THICKNESS_FACTOR, SPHERE_SAGITTA_FACTOR, WELD_REACH_FACTOR,
-                           WELD_THICKNESS_FACTOR, CrackSurface, PieceMesh, RenderSolid, tangent_frame, with_crack_index,
-                           without_dust)
+from .render_solid import (_CRACK, _NORMAL, _UV, DUST_VOLUME_FACTOR, HULL_FACE, SPHERE_SAGITTA_FACTOR,
+                           WELD_REACH_FACTOR, WELD_THICKNESS_FACTOR, PieceMesh, RenderSolid, tangent_frame,
+                           with_crack_index, without_dust)
 
 #: The shares of the fitted plane offsets tried in turn until a cut's pieces come nearer their
 #: tets' volumes than the first cut's: a moved plane can hand a small part where cracks meet
@@ -72,126 +76,12 @@ FIT_STEPS = (1.0, 0.5)
 FIT_GAIN = 0.25
 
 
-def _value_noise(u: np.ndarray, v: np.ndarray, seed: int) -> np.ndarray:
-    """Smooth value noise in [-1, 1] of lattice coordinates (u, v), three octaves."""
-    total = np.zeros_like(u)
-    weight_sum = 0.0
-    for octave in range(3):
-        f, w = 2.0**octave, 0.5**octave
-        x, y = u * f, v * f
-        i, j = np.floor(x), np.floor(y)
-        fx, fy = x - i, y - j
-        sx, sy = fx * fx * (3 - 2 * fx), fy * fy * (3 - 2 * fy)
-
-        def lattice(a, b):
-            h = np.sin(a * 127.1 + b * 311.7 + (seed + 17 * octave) * 74.7) * 43758.5453
-            return 2.0 * (h - np.floor(h)) - 1.0
-
-        top = lattice(i, j) * (1 - sx) + lattice(i + 1, j) * sx
-        bottom = lattice(i, j + 1) * (1 - sx) + lattice(i + 1, j + 1) * sx
-        total += w * (top * (1 - sy) + bottom * sy)
-        weight_sum += w
-    return total / weight_sum
-
-
-def _plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, spacing: float, roughness: float,
-                roughness_scale: float, seed: int, index: int,
-                thickness_factor: float = SLAB_THICKNESS_FACTOR,
-                reach_factor: float = SLAB_REACH_FACTOR, apart_from=()) -> m3.Manifold | None:
-    """The thin slab on a plane crack over the part of the plane nearer a separating bond
-    crossing than any other: ``sites`` (N,3) [m] where bonds cross the plane, ``separating``
-    (N,) bool those between different pieces cut by this crack. Each separating site's
-    Voronoi cell (in the plane, bounded to SLAB_REACH_FACTOR spacings about it) joins the
-    outline, so the slab reaches the surface however obliquely the plane meets it, and stops
-    halfway to the nearest crossing inside one piece. Rough when ``roughness`` > 0;
-    ``thickness_factor`` x ``spacing`` thick, reaching ``reach_factor`` spacings; kept off
-    the other slabs of the plane cracks ``apart_from`` (CrackSurfaces) by a strip along each
-    one's line through this plane."""
-    from scipy.spatial import Voronoi, cKDTree
-
-    e1, e2 = tangent_frame(crack.normal)
-    rel = sites - crack.point
-    flat = np.stack([rel @ e1, rel @ e2], axis=1)  # (N,2)
-    if not separating.any():
-        return None
-    reach = reach_factor * spacing
-    box = np.array([[-reach, -reach], [reach, -reach], [reach, reach], [-reach, reach]])
-    # Where a separating crossing is within reach, less where another crossing is nearer.
-    outline = m3.CrossSection(list(flat[separating][:, None, :] + box[None]), m3.FillRule.Positive)
-    if not separating.all():
-        # Only crossings within 2 sqrt(2) reach of a separating one can be the nearest to a
-        # point of its square (the separating one is within sqrt(2) reach of it): the rest
-        # leave the cells over the squares as they are.
-        near = cKDTree(flat[separating]).query(flat, distance_upper_bound=2.9 * reach)[0] <= 2.9 * reach
-        flat, separating = flat[near], separating[near]
-        lo, hi = flat.min(axis=0) - 4 * reach, flat.max(axis=0) + 4 * reach
-        fence = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
-        _, first = np.unique(np.round(flat / (1e-9 * spacing)), axis=0, return_index=True)
-        points = np.concatenate([flat[first], fence])
-        diagram = Voronoi(points)
-        regions = (diagram.regions[diagram.point_region[k]] for k in np.nonzero(~separating[first])[0])
-        # (the cells do not overlap, so either winding fills them)
-        cells = [diagram.vertices[region] for region in regions if len(region) >= 3 and -1 not in region]
-        if cells:
-            outline = outline - m3.CrossSection(cells, m3.FillRule.NonZero)
-    for other in apart_from:
-        outline = outline - _strip_along(crack, other, flat, spacing, thickness_factor, roughness, e1, e2)
-    outline = outline.simplify(0.05 * spacing)
-    if outline.is_empty():
-        return None
-    thickness = thickness_factor * spacing
-    slab = m3.Manifold.extrude(outline, thickness).translate((0.0, 0.0, -0.5 * thickness))
-    if roughness > 0:
-        slab = slab.refine_to_length(roughness_scale / 3.0)
-
-        def displace(points):
-            points = np.array(points, dtype=np.float64)
-            noise = _value_noise(points[:, 0] / roughness_scale, points[:, 1] / roughness_scale, seed * 1009 + index)
-            points[:, 2] += roughness * noise
-            return points
-
-        slab = slab.warp_batch(displace)
-    frame = np.column_stack([e1, e2, crack.normal, crack.point])  # (3,4): slab frame -> body
-    return slab.transform(frame)
-
-
-def _strip_along(crack: CrackSurface, other: CrackSurface, flat: np.ndarray, spacing: float,
-                 thickness_factor: float, roughness: float, e1: np.ndarray, e2: np.ndarray) -> m3.CrossSection:
-    """The strip of ``crack``'s plane (2-D, its tangent frame ``e1``, ``e2``) within which a slab
-    ``thickness_factor`` spacings thick would touch the slab of the plane crack ``other``:
-    along the planes' line, out past the points ``flat`` (N,2) [m]; empty for planes within
-    a degree of parallel (they meet far off)."""
-    a, b = float(e1 @ other.normal), float(e2 @ other.normal)
-    sine = np.hypot(a, b)
-    if sine < np.sin(np.radians(1.0)):
-        return m3.CrossSection()
-    offset = float((other.point - crack.point) @ other.normal)  # the line: a u + b v = offset
-    half = (0.5 * (thickness_factor + SLAB_THICKNESS_FACTOR) * spacing * 2.0 + 2.0 * roughness) / sine
-    centre = np.array([a, b]) * offset / sine**2
-    along = np.array([-b, a]) / sine
-    across = np.array([a, b]) / sine
-    length = float(np.max(np.linalg.norm(flat - centre, axis=1))) + 10.0 * spacing
-    corners = [centre - length * along - half * across, centre + length * along - half * across,
-               centre + length * along + half * across, centre - length * along + half * across]
-    return m3.CrossSection([np.array(corners)], m3.FillRule.NonZero)
-
-
-def _sphere_shell(crack: CrackSurface, spacing: float) -> m3.Manifold:
-    """The thin shell on a ring crack's sphere."""
-    half = 0.5 * SLAB_THICKNESS_FACTOR * spacing
-    sagitta = SPHERE_SAGITTA_FACTOR * spacing
-    segments = int(np.ceil(np.pi / np.arccos(max(1.0 - sagitta / crack.radius, -1.0)))) + 4
-    segments = min(segments, 512)
-    outer = m3.Manifold.sphere(crack.radius + half, segments)
-    inner = m3.Manifold.sphere(max(crack.radius - half, 1e-9), segments)
-    return (outer - inner).translate(tuple(crack.point))
-
-
 def _separating_cracks(model, bonds, labels, cracks):
-    """For each crack: (sites (N,3) [m], cut (N,) bool, inside (N,) int): where bonds cross
-    its plane, which of them it cuts, and for a cut between two tets of one piece that piece
-    (else -1); empty when it separates no two pieces (a ring crack: (None, its cuts between
-    pieces, None))."""
+    """For each crack: (sites (N,3) [m], cut (N,) bool, inside (N,) int, ends (N,2) int):
+    where bonds cross its plane, which of them it cuts, for a cut between two tets of one
+    piece that piece (else -1), and the pieces of the bond's two tets (-1: dropped); empty
+    when it separates no two pieces (a ring crack: (None, its cuts between pieces, None,
+    None))."""
     from ..fracture.crack_types import CrackPlane, RingCrack
 
     x = model.particle_position
@@ -207,19 +97,21 @@ def _separating_cracks(model, bonds, labels, cracks):
             offset = hit - crack.point
             cut = cross & (np.einsum("ij,ij->i", offset, offset) <= crack.extent**2)
             if not np.any(cut & separating):
-                per_crack.append((hit[:0], cut[:0], labels[:0]))  # it separates no two pieces: no slit either
+                # (it separates no two pieces: no slit either)
+                per_crack.append((hit[:0], cut[:0], labels[:0], bonds[:0]))
                 continue
             # Sites: every crossing but those between pieces another crack cut. A cut inside
             # one piece (a merged small piece, a piece joined around) is cut too: that piece
             # then has two shells a slab apart, as a hairline crack would look.
             site = cross & (cut | ~separating)
             inside_one = np.where(cut & ~separating, labels[bonds[:, 0]], -1)
-            per_crack.append((hit[site], cut[site], inside_one[site]))
+            ends = np.stack([labels[bonds[:, 0]], labels[bonds[:, 1]]], axis=1)
+            per_crack.append((hit[site], cut[site], inside_one[site], ends[site]))
         elif isinstance(crack, RingCrack):
             inside_a = np.einsum("ij,ij->i", a - crack.point, a - crack.point) < crack.radius**2
             inside_b = np.einsum("ij,ij->i", b - crack.point, b - crack.point) < crack.radius**2
             cut = (inside_a != inside_b) & separating
-            per_crack.append((None, cut[cut], None))  # (the whole sphere: rings run all round)
+            per_crack.append((None, cut[cut], None, None))  # (the whole sphere: rings run all round)
         else:
             raise TypeError(f"unknown crack type {type(crack).__name__}")
     return per_crack
@@ -248,8 +140,14 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     ``VOLUME_TOLERANCE`` (up to ``fit_rounds`` times), again with the cracks moved (planes
     shifted and tilted, ring cracks' spheres resized) by what brings those pieces' volumes
     nearest their tets' (``crack_offsets``), kept when it is nearer (else with half those
-    moves, see FIT_STEPS). Last, each piece loses the wedge tips its flat faces run past its
-    tets into a neighbour's (``piece_reach.trim_overreach``).
+    moves, see FIT_STEPS). Where that is not enough (a plane between many pairs of pieces),
+    up to ``fit_rounds`` times more, the stretch of a plane between each pair of pieces is
+    shifted on its own (``crack_offsets.CrackSegments``, the fewest stretches that do it),
+    with a wall across each step between two (``crack_slabs.segment_slabs``); such a cut is
+    kept only when no piece fails that did not (a step another crack's slab ends short of
+    joins two pieces: their stretches then stay, and the rest fit again). Not for rough
+    cracks. Last, each piece loses the wedge tips its flat faces run past its tets into a
+    neighbour's (``piece_reach.trim_overreach``).
 
     Returns (pieces, stats): pieces a list of F RenderSolid or None (the caller then gives the
     piece its tets' boundary, exact in volume); stats a dict of counts (slabs, parts,
@@ -258,7 +156,9 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     (``piece_parts.failed_piece_shells``) and the rest None; ``shells_moved``: stray shells
     joined to another piece, see ``piece_shells.join_stray_shells``; ``moved_cracks``: cracks
     the kept cut moved, ``largest_offset`` [particle spacings]: the largest shift of a moved
-    crack (a plane's at its pivot plus its tilt's at its reach), ``fit_cuts``: cuts made for
+    crack (a plane's at its pivot plus its tilt's at its reach), ``moved_segments`` and
+    ``largest_segment_shift`` [particle spacings]: the stretches shifted on their own and the
+    largest such shift, ``fallback_ids`` the failed pieces, ``fit_cuts``: cuts made for
     the fit besides the first; ``trimmed_pieces`` and ``trimmed_volume`` [m^3]: the wedge
     tips cut away).
     """
@@ -269,12 +169,12 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
         labels[np.asarray(tets, dtype=np.int64)] = k
     per_crack = _separating_cracks(model, np.asarray(model.bonds, dtype=np.int64), labels, cracks)
     frames = tilt_frames(cracks, [None if sites is None else sites[cut & (inside < 0)]
-                                  for sites, cut, inside in per_crack], spacing)
+                                  for sites, cut, inside, _ in per_crack], spacing)
     scale = render.volume_scale if render.volume_scale is not None else render.solid.volume() / model.volume
     args = (render, model, fragment_tets, labels, cracks, per_crack, frames, piece_origins, roughness,
             roughness_scale, seed, scale)
-    pieces, stats, index_of = _cut(*args, np.zeros((len(cracks), MOVES)))
-    stats.update(moved_cracks=0, largest_offset=0.0, fit_cuts=0)
+    pieces, stats, index_of, sources = _cut(*args, np.zeros((len(cracks), MOVES)))
+    stats.update(moved_cracks=0, largest_offset=0.0, fit_cuts=0, moved_segments=0, largest_segment_shift=0.0)
     if not fit_rounds:
         return _trimmed(pieces, stats, model, labels, piece_origins)
     targets = piece_target_volumes(scale, model, fragment_tets)
@@ -287,19 +187,46 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
             break
         for step in FIT_STEPS:
             offsets = moved + step * change
-            again, again_stats, _ = _cut(*args, offsets)
+            again, again_stats, _, again_sources = _cut(*args, offsets)
             cuts += 1
             again_solids = [p.solid if p is not None else None for p in again]
             misfit = volume_misfit(again_solids, targets, fragment_tets)
             if misfit < best:
-                pieces, solids, best, moved = again, again_solids, misfit, offsets
+                pieces, solids, best, moved, sources = again, again_solids, misfit, offsets, again_sources
                 reach = np.abs(offsets[:, 0]) + np.linalg.norm(offsets[:, 1:], axis=1)
                 stats = dict(again_stats, moved_cracks=int(np.sum(reach > 0.0)),
                              largest_offset=float(np.max(reach)) / spacing)
                 break
         else:
             break
-    stats["fit_cuts"] = cuts
+    # Then each stretch of a plane between one pair of pieces on its own (crack_offsets.CrackSegments).
+    segments = crack_segments(per_crack, len(fragment_tets))
+    shifts, frozen = np.zeros(segments.count), np.zeros(segments.count, dtype=bool)
+    for _ in range(fit_rounds if segments.count and not roughness else 0):
+        change, predicted = segment_shifts(solids, piece_origins, sources, cracks, segments, targets, fragment_tets,
+                                           spacing, shifts, frozen)
+        if not np.any(change != 0.0) or predicted > (1.0 - FIT_GAIN) * best:
+            break
+        for step in FIT_STEPS:
+            tried = shifts + step * change
+            again, again_stats, _, again_sources = _cut(*args, moved, segments, tried)
+            cuts += 1
+            # A stretch's step another crack's slab ends short of joins two pieces' parts, and
+            # one of them fails: the stretches of the pieces that failed stay, the rest refit.
+            newly = np.setdiff1d(again_stats["fallback_ids"], stats["fallback_ids"])
+            if len(newly):
+                frozen |= np.isin(segments.pieces, newly).any(axis=1)
+                break
+            again_solids = [p.solid if p is not None else None for p in again]
+            misfit = volume_misfit(again_solids, targets, fragment_tets)
+            if misfit < best:
+                pieces, solids, best, shifts, sources = again, again_solids, misfit, tried, again_sources
+                stats = dict(again_stats, moved_cracks=stats["moved_cracks"], largest_offset=stats["largest_offset"])
+                break
+        else:
+            break
+    stats.update(fit_cuts=cuts, moved_segments=int(np.sum(shifts != 0.0)),
+                 largest_segment_shift=float(np.max(np.abs(shifts), initial=0.0)) / spacing)
     return _trimmed(pieces, stats, model, labels, piece_origins)
 
 
@@ -327,34 +254,46 @@ def _trimmed(pieces, stats, model, labels, piece_origins):
 
 
 def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, frames, piece_origins, roughness,
-         roughness_scale, seed, volume_scale, offsets):
+         roughness_scale, seed, volume_scale, offsets, segments=None, shifts=None):
     """One cut of ``cut_render_solid`` with crack i moved by ``offsets[i]`` (MOVES,) [m] (see
     ``crack_offsets.moved_crack``; ``frames`` each crack's TiltFrame or None; the pieces'
-    ``RenderSolid.volume_scale`` is ``volume_scale``). Returns (pieces, stats, index_of):
-    index_of (len(cracks),) each crack's index in the pieces' ``cracks`` (-1: it made no
-    slab)."""
+    ``RenderSolid.volume_scale`` is ``volume_scale``) and each of the ``segments``
+    (``crack_offsets.CrackSegments``) shifted further along its plane's normal by ``shifts``
+    (S,) [m]. Returns (pieces, stats, index_of, sources): index_of (len(cracks),) each crack's
+    (first) index in the pieces' ``cracks`` (-1: it made no slab), sources the crack behind
+    each index of the pieces' ``cracks`` (-1: one the body had)."""
     from ..fracture.crack_types import CrackPlane
 
     spacing = render.spacing
     new_cracks = list(render.cracks)
-    slabs, planes = [], []
+    slabs, planes, sources = [], [], []
     index_of = np.full(len(cracks), -1, dtype=np.int64)
-    for i, (crack, (sites, separating, inside_one)) in enumerate(zip(cracks, per_crack)):
+    for i, (crack, (sites, separating, inside_one, _)) in enumerate(zip(cracks, per_crack)):
         if not len(separating) or not separating.any():
             continue
-        index = len(new_cracks)
+        first = len(new_cracks)
         surface = moved_crack(crack, frames[i], offsets[i])
-        if isinstance(crack, CrackPlane):
-            slab = _plane_slab(surface, sites, separating, spacing, roughness, roughness_scale, seed, index)
+        segment = segments.of_site[i] if segments is not None else None
+        if segment is not None and roughness == 0 and np.any(shifts[segment[segment >= 0]]):
+            parts, wall = segment_slabs(surface, sites, separating, segment, shifts, spacing)
+            if wall is not None:
+                slabs.append(with_crack_index(wall, HULL_FACE))
+        elif isinstance(crack, CrackPlane):
+            parts = [(surface, plane_slab(surface, sites, separating, spacing, roughness, roughness_scale, seed,
+                                           first))]
         else:
-            slab = _sphere_shell(surface, spacing)
-        if slab is None or slab.is_empty():
-            continue
-        new_cracks.append(surface)
-        index_of[i] = index
-        slabs.append(with_crack_index(slab, index))
-        if isinstance(crack, CrackPlane):
-            planes.append((surface, sites, inside_one, index))
+            parts = [(surface, sphere_shell(surface, spacing))]
+        for part, slab in parts:
+            if slab is None or slab.is_empty():
+                continue
+            index = len(new_cracks)
+            new_cracks.append(part)
+            sources.append(i)
+            index_of[i] = first if index_of[i] < 0 else index_of[i]
+            slabs.append(with_crack_index(slab, index))
+        if isinstance(crack, CrackPlane) and index_of[i] >= 0:
+            planes.append((surface, sites, inside_one, index_of[i]))
+    sources = np.concatenate([np.full(len(render.cracks), -1, dtype=np.int64), np.array(sources, dtype=np.int64)])
     stats = dict(slabs=len(slabs), parts=0, unassigned_parts=0, empty_pieces=0, welded_pieces=0, cell_pieces=0)
     if slabs:
         cut = m3.Manifold.batch_boolean([render.solid, *slabs], m3.OpType.Subtract)
@@ -377,6 +316,7 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
     # them by that gap's volume: not a neighbour's material)
     failed |= overfull_pieces(parts, owner, model, labels, spacing) - received
     stats["fallback_pieces"] = len(failed)
+    stats["fallback_ids"] = sorted(failed)
     # Each piece's parts without its crumbs, once: the welds and the pieces below read them.
     kept = {k: without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing) for k in set(owner) if k >= 0}
     split_up = {k for k, mine in kept.items() if k not in failed and len(mine) > 1}
@@ -402,7 +342,7 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
     pieces = [RenderSolid(solids[k], tuple(new_cracks), spacing, volume_scale).moved(origin) if k in solids else None
               for k, origin in enumerate(origins)]
     stats["unassigned_parts"] = int(sum(1 for o in owner if o == -1))
-    return pieces, stats, index_of
+    return pieces, stats, index_of, sources
 
 
 def _weld_bits(solid: m3.Manifold, planes, spheres, split_up: set, spacing: float, roughness: float,
@@ -427,7 +367,7 @@ def _weld_bits(solid: m3.Manifold, planes, spheres, split_up: set, spacing: floa
                 own &= np.abs(sphere.distance(sites)) > np.sqrt(2.0) * WELD_REACH_FACTOR * spacing
             if not own.any():
                 continue
-            weld = _plane_slab(surface, sites[own], np.ones(int(own.sum()), dtype=bool), spacing, roughness,
+            weld = plane_slab(surface, sites[own], np.ones(int(own.sum()), dtype=bool), spacing, roughness,
                                roughness_scale, seed, index, thickness_factor=WELD_THICKNESS_FACTOR,
                                reach_factor=WELD_REACH_FACTOR,
                                apart_from=[other for other, _, _, _ in planes if other is not surface])

@@ -1,0 +1,206 @@
+"""The thin slabs that cut a body's render solid along its cracks.
+
+A plane crack's slab covers the part of its plane nearer a bond the crack cut than any bond
+it did not (``plane_slab``); a ring crack's is a thin spherical shell (``sphere_shell``). A
+plane that parts several pairs of pieces may be cut in stretches, one per pair, each at its
+own shift along the normal, with walls across the steps between them (``segment_slabs``;
+the shifts come from ``crack_offsets``). ``piece_surface`` subtracts them from the solid.
+"""
+
+from __future__ import annotations
+
+import manifold3d as m3
+import numpy as np
+
+from .render_solid import (SLAB_REACH_FACTOR, SLAB_THICKNESS_FACTOR, SPHERE_SAGITTA_FACTOR, CrackSurface,
+                           tangent_frame)
+
+#: Width [particle spacings] of the wall that cuts the step between two stretches of one crack
+#: shifted apart (each pair of pieces' own, crack_offsets.CrackSegments).
+STEP_WALL_FACTOR = 0.02
+
+
+def value_noise(u: np.ndarray, v: np.ndarray, seed: int) -> np.ndarray:
+    """Smooth value noise in [-1, 1] of lattice coordinates (u, v), three octaves."""
+    total = np.zeros_like(u)
+    weight_sum = 0.0
+    for octave in range(3):
+        f, w = 2.0**octave, 0.5**octave
+        x, y = u * f, v * f
+        i, j = np.floor(x), np.floor(y)
+        fx, fy = x - i, y - j
+        sx, sy = fx * fx * (3 - 2 * fx), fy * fy * (3 - 2 * fy)
+
+        def lattice(a, b):
+            h = np.sin(a * 127.1 + b * 311.7 + (seed + 17 * octave) * 74.7) * 43758.5453
+            return 2.0 * (h - np.floor(h)) - 1.0
+
+        top = lattice(i, j) * (1 - sx) + lattice(i + 1, j) * sx
+        bottom = lattice(i, j + 1) * (1 - sx) + lattice(i + 1, j + 1) * sx
+        total += w * (top * (1 - sy) + bottom * sy)
+        weight_sum += w
+    return total / weight_sum
+
+
+def plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, spacing: float, roughness: float,
+                roughness_scale: float, seed: int, index: int,
+                thickness_factor: float = SLAB_THICKNESS_FACTOR,
+                reach_factor: float = SLAB_REACH_FACTOR, apart_from=()) -> m3.Manifold | None:
+    """The thin slab on a plane crack over the part of the plane nearer a separating bond
+    crossing than any other: ``sites`` (N,3) [m] where bonds cross the plane, ``separating``
+    (N,) bool those between different pieces cut by this crack. Each separating site's
+    Voronoi cell (in the plane, bounded to SLAB_REACH_FACTOR spacings about it) joins the
+    outline, so the slab reaches the surface however obliquely the plane meets it, and stops
+    halfway to the nearest crossing inside one piece. Rough when ``roughness`` > 0;
+    ``thickness_factor`` x ``spacing`` thick, reaching ``reach_factor`` spacings; kept off
+    the other slabs of the plane cracks ``apart_from`` (CrackSurfaces) by a strip along each
+    one's line through this plane."""
+    from scipy.spatial import Voronoi, cKDTree
+
+    e1, e2 = tangent_frame(crack.normal)
+    rel = sites - crack.point
+    flat = np.stack([rel @ e1, rel @ e2], axis=1)  # (N,2)
+    if not separating.any():
+        return None
+    reach = reach_factor * spacing
+    box = np.array([[-reach, -reach], [reach, -reach], [reach, reach], [-reach, reach]])
+    # Where a separating crossing is within reach, less where another crossing is nearer.
+    outline = m3.CrossSection(list(flat[separating][:, None, :] + box[None]), m3.FillRule.Positive)
+    if not separating.all():
+        # Only crossings within 2 sqrt(2) reach of a separating one can be the nearest to a
+        # point of its square (the separating one is within sqrt(2) reach of it): the rest
+        # leave the cells over the squares as they are.
+        near = cKDTree(flat[separating]).query(flat, distance_upper_bound=2.9 * reach)[0] <= 2.9 * reach
+        flat, separating = flat[near], separating[near]
+        lo, hi = flat.min(axis=0) - 4 * reach, flat.max(axis=0) + 4 * reach
+        fence = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+        _, first = np.unique(np.round(flat / (1e-9 * spacing)), axis=0, return_index=True)
+        points = np.concatenate([flat[first], fence])
+        diagram = Voronoi(points)
+        regions = (diagram.regions[diagram.point_region[k]] for k in np.nonzero(~separating[first])[0])
+        # (the cells do not overlap, so either winding fills them)
+        cells = [diagram.vertices[region] for region in regions if len(region) >= 3 and -1 not in region]
+        if cells:
+            outline = outline - m3.CrossSection(cells, m3.FillRule.NonZero)
+    for other in apart_from:
+        outline = outline - _strip_along(crack, other, flat, spacing, thickness_factor, roughness, e1, e2)
+    outline = outline.simplify(0.05 * spacing)
+    if outline.is_empty():
+        return None
+    thickness = thickness_factor * spacing
+    slab = m3.Manifold.extrude(outline, thickness).translate((0.0, 0.0, -0.5 * thickness))
+    if roughness > 0:
+        slab = slab.refine_to_length(roughness_scale / 3.0)
+
+        def displace(points):
+            points = np.array(points, dtype=np.float64)
+            noise = value_noise(points[:, 0] / roughness_scale, points[:, 1] / roughness_scale, seed * 1009 + index)
+            points[:, 2] += roughness * noise
+            return points
+
+        slab = slab.warp_batch(displace)
+    frame = np.column_stack([e1, e2, crack.normal, crack.point])  # (3,4): slab frame -> body
+    return slab.transform(frame)
+
+
+def _strip_along(crack: CrackSurface, other: CrackSurface, flat: np.ndarray, spacing: float,
+                 thickness_factor: float, roughness: float, e1: np.ndarray, e2: np.ndarray) -> m3.CrossSection:
+    """The strip of ``crack``'s plane (2-D, its tangent frame ``e1``, ``e2``) within which a slab
+    ``thickness_factor`` spacings thick would touch the slab of the plane crack ``other``:
+    along the planes' line, out past the points ``flat`` (N,2) [m]; empty for planes within
+    a degree of parallel (they meet far off)."""
+    a, b = float(e1 @ other.normal), float(e2 @ other.normal)
+    sine = np.hypot(a, b)
+    if sine < np.sin(np.radians(1.0)):
+        return m3.CrossSection()
+    offset = float((other.point - crack.point) @ other.normal)  # the line: a u + b v = offset
+    half = (0.5 * (thickness_factor + SLAB_THICKNESS_FACTOR) * spacing * 2.0 + 2.0 * roughness) / sine
+    centre = np.array([a, b]) * offset / sine**2
+    along = np.array([-b, a]) / sine
+    across = np.array([a, b]) / sine
+    length = float(np.max(np.linalg.norm(flat - centre, axis=1))) + 10.0 * spacing
+    corners = [centre - length * along - half * across, centre + length * along - half * across,
+               centre + length * along + half * across, centre - length * along + half * across]
+    return m3.CrossSection([np.array(corners)], m3.FillRule.NonZero)
+
+
+def segment_slabs(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, segment: np.ndarray,
+                   shifts: np.ndarray, spacing: float):
+    """A plane crack's slab in stretches, each the part of ``plane_slab``'s outline nearer one
+    pair of pieces' crossings than any other, shifted along the normal by that pair's
+    ``shifts[segment]`` [m] (the crossings cut inside one piece, ``segment`` -1, not shifted),
+    and the walls that cut the steps between neighbouring stretches: without them the
+    material between two stretches' heights would join the pieces on their two sides.
+    Returns ([(CrackSurface, slab) for each stretch], the walls' manifold or None)."""
+    from scipy.spatial import Voronoi, cKDTree
+
+    e1, e2 = tangent_frame(crack.normal)
+    rel = sites - crack.point
+    flat = np.stack([rel @ e1, rel @ e2], axis=1)  # (N,2)
+    reach = SLAB_REACH_FACTOR * spacing
+    near = cKDTree(flat[separating]).query(flat, distance_upper_bound=2.9 * reach)[0] <= 2.9 * reach
+    flat, separating, segment = flat[near], separating[near], segment[near]
+    _, first = np.unique(np.round(flat / (1e-9 * spacing)), axis=0, return_index=True)
+    flat, separating, segment = flat[first], separating[first], segment[first]
+    lo, hi = flat.min(axis=0) - 4 * reach, flat.max(axis=0) + 4 * reach
+    fence = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+    diagram = Voronoi(np.concatenate([flat, fence]))
+    # -2: a crossing this crack does not cut; -1: one cut inside one piece, or a segment not
+    # shifted (each on the plane).
+    height = np.where(segment >= 0, shifts[np.maximum(segment, 0)], 0.0)
+    group = np.where(separating, np.where(height != 0.0, segment, -1), -2)
+    box = np.array([[-reach, -reach], [reach, -reach], [reach, reach], [-reach, reach]])
+    cells = [diagram.vertices[diagram.regions[diagram.point_region[k]]] for k in range(len(flat))]
+    thickness = SLAB_THICKNESS_FACTOR * spacing
+    frame = np.column_stack([e1, e2, crack.normal, crack.point])  # (3,4): slab frame -> body
+    outlines, parts = {}, []
+    for g in np.unique(group[separating]):
+        mine = group == g
+        # Within reach of its crossings and nearer them than any other (the fence keeps every
+        # crossing's cell bounded; the cells do not overlap, so either winding fills them).
+        outline = (m3.CrossSection(list(flat[mine][:, None, :] + box[None]), m3.FillRule.Positive)
+                   ^ m3.CrossSection([cells[k] for k in np.nonzero(mine)[0]], m3.FillRule.NonZero))
+        if outline.is_empty():
+            continue
+        outlines[g] = outline
+        h = float(height[mine][0])
+        slab = m3.Manifold.extrude(outline, thickness).translate((0.0, 0.0, h - 0.5 * thickness))
+        parts.append((CrackSurface(crack.point + h * crack.normal, crack.normal), slab.transform(frame)))
+    # The steps: each Voronoi edge between crossings of two stretches at different heights.
+    half = 0.5 * STEP_WALL_FACTOR * spacing
+    steps = {}
+    for (p, q), ridge in zip(diagram.ridge_points, diagram.ridge_vertices):
+        if p >= len(flat) or q >= len(flat) or -1 in ridge or not (separating[p] and separating[q]):
+            continue
+        if group[p] == group[q] or height[p] == height[q] or group[p] not in outlines or group[q] not in outlines:
+            continue
+        a, b = diagram.vertices[ridge[0]], diagram.vertices[ridge[1]]
+        along = (b - a) / max(float(np.linalg.norm(b - a)), 1e-300)
+        across = np.array([-along[1], along[0]]) * half
+        rectangle = np.array([a - half * along - across, b + half * along - across, b + half * along + across,
+                              a - half * along + across])
+        key = (min(group[p], group[q]), max(group[p], group[q]))
+        steps.setdefault(key, []).append(rectangle)
+    walls = []
+    for (g, k), rectangles in steps.items():
+        # (only where either stretch's outline is: past them no slab cuts, so neither may a wall)
+        region = (outlines[g] + outlines[k]).offset(2.0 * half, m3.JoinType.Miter)
+        outline = m3.CrossSection(rectangles, m3.FillRule.NonZero) ^ region
+        if outline.is_empty():
+            continue
+        bottom, top = sorted(float(height[group == x][0]) for x in (g, k))
+        wall = m3.Manifold.extrude(outline, top - bottom + thickness).translate((0.0, 0.0, bottom - 0.5 * thickness))
+        walls.append(wall.transform(frame))
+    wall = m3.Manifold.batch_boolean(walls, m3.OpType.Add) if len(walls) > 1 else (walls[0] if walls else None)
+    return parts, wall
+
+
+def sphere_shell(crack: CrackSurface, spacing: float) -> m3.Manifold:
+    """The thin shell on a ring crack's sphere."""
+    half = 0.5 * SLAB_THICKNESS_FACTOR * spacing
+    sagitta = SPHERE_SAGITTA_FACTOR * spacing
+    segments = int(np.ceil(np.pi / np.arccos(max(1.0 - sagitta / crack.radius, -1.0)))) + 4
+    segments = min(segments, 512)
+    outer = m3.Manifold.sphere(crack.radius + half, segments)
+    inner = m3.Manifold.sphere(max(crack.radius - half, 1e-9), segments)
+    return (outer - inner).translate(tuple(crack.point))
