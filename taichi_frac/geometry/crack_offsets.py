@@ -159,14 +159,15 @@ def crack_face_moves(solid, origin, index_of: np.ndarray, cracks, frames) -> np.
 
 def volume_offsets(solids, index_of: np.ndarray, cracks, targets: np.ndarray, fragment_tets,
                    spacing: float, moved: np.ndarray | None = None, frames=None,
-                   origins=None, shifts_only: bool = False) -> tuple[np.ndarray, float]:
+                   origins=None, shifts_only: bool = False, frozen=None) -> tuple[np.ndarray, float]:
     """The moves of each crack (see ``moved_crack``) that bring the pieces' volumes nearest
     ``targets`` (F,) [m^3]: least squares over the ``volume_errors``, each plane's shift within
     MAX_OFFSET_FACTOR ``spacing`` at its pivot and its tilt within MAX_TILT_FACTOR at its
     reach, a sphere's radius within MAX_OFFSET_FACTOR. ``solids``: a cut's pieces' manifolds
     (None: no solid) in their frames, whose origins in the body's are ``origins`` (F,3) [m]
     (None: the body's own), made with the cracks already ``moved`` (C, MOVES) [m] (None: none);
-    ``frames``: each crack's TiltFrame or None (no tilt; None: none tilts).
+    ``frames``: each crack's TiltFrame or None (no tilt; None: none tilts); ``frozen`` (C,)
+    bool the cracks that stay (None: none).
 
     The planes' shifts alone are fitted first, and kept when they promise as much as every
     move (tilts and the spheres' radii too) or every piece within VOLUME_TOLERANCE: fewer
@@ -187,14 +188,15 @@ def volume_offsets(solids, index_of: np.ndarray, cracks, targets: np.ndarray, fr
     moved = np.zeros((len(cracks), MOVES)) if moved is None else np.asarray(moved).reshape(len(cracks), MOVES)
     # The free columns: the planes' shifts; then every slab's shift (a sphere: its radius) and
     # the tilts of planes with a frame.
+    movable = (index_of >= 0) & (True if frozen is None else ~np.asarray(frozen, dtype=bool))
     free = np.zeros((len(cracks), MOVES), dtype=bool)
-    free[:, 0] = (index_of >= 0) & np.array([isinstance(c, CrackPlane) for c in cracks], dtype=bool)
+    free[:, 0] = movable & np.array([isinstance(c, CrackPlane) for c in cracks], dtype=bool)
     shifts = _fit(free, pieces, moved / spacing, now, spacing)
     if shifts_only:
         return shifts
-    free[:, 0] = index_of >= 0
+    free[:, 0] = movable
     if frames is not None:
-        free[:, 1:] = np.array([f is not None for f in frames], dtype=bool)[:, None] & (index_of >= 0)[:, None]
+        free[:, 1:] = np.array([f is not None for f in frames], dtype=bool)[:, None] & movable[:, None]
     every = _fit(free, pieces, moved / spacing, now, spacing)
     return shifts if shifts[1] <= max(every[1], VOLUME_TOLERANCE**2) else every
 

@@ -143,11 +143,11 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     moves, see FIT_STEPS). Where that is not enough (a plane between many pairs of pieces),
     up to ``fit_rounds`` times more, the stretch of a plane between each pair of pieces is
     shifted on its own (``crack_offsets.CrackSegments``, the fewest stretches that do it),
-    with a wall across each step between two (``crack_slabs.segment_slabs``); such a cut is
-    kept only when no piece fails that did not (a step another crack's slab ends short of
-    joins two pieces: their stretches then stay, and the rest fit again). Not for rough
-    cracks. Last, each piece loses the wedge tips its flat faces run past its tets into a
-    neighbour's (``piece_reach.trim_overreach``).
+    with a wall across each step between two (``crack_slabs.segment_slabs``; not for rough
+    cracks). A moved cut in which a piece fails that did not is never kept: a crack moved
+    past the end of another's slab joins two pieces there. The cracks (stretches) of the
+    pieces that failed then stay, and the others fit again. Last, each piece loses the wedge
+    tips its flat faces run past its tets into a neighbour's (``piece_reach.trim_overreach``).
 
     Returns (pieces, stats): pieces a list of F RenderSolid or None (the caller then gives the
     piece its tets' boundary, exact in volume); stats a dict of counts (slabs, parts,
@@ -180,15 +180,25 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     targets = piece_target_volumes(scale, model, fragment_tets)
     solids = [p.solid if p is not None else None for p in pieces]
     best, moved, cuts = volume_misfit(solids, targets, fragment_tets), np.zeros((len(cracks), MOVES)), 0
+    # A moved crack can open a gap another crack's slab ends short of (or hand a part where
+    # cracks meet to another piece): a cut in which a piece fails that did not is not kept,
+    # the cracks of the pieces that failed stay, and the others fit again.
+    touching = [set(ends[cut & (inside < 0)].ravel().tolist()) if sites is not None else set()
+                for sites, cut, inside, ends in per_crack]
+    frozen = np.zeros(len(cracks), dtype=bool)
     for _ in range(fit_rounds):
         change, predicted = volume_offsets(solids, index_of, cracks, targets, fragment_tets, spacing, moved, frames,
-                                           piece_origins)
+                                           piece_origins, frozen=frozen)
         if not np.any(change != 0.0) or predicted > (1.0 - FIT_GAIN) * best:
             break
         for step in FIT_STEPS:
             offsets = moved + step * change
             again, again_stats, _, again_sources = _cut(*args, offsets)
             cuts += 1
+            newly = set(np.setdiff1d(again_stats["fallback_ids"], stats["fallback_ids"]).tolist())
+            if newly:
+                frozen |= np.array([bool(pieces_of & newly) for pieces_of in touching], dtype=bool)
+                break
             again_solids = [p.solid if p is not None else None for p in again]
             misfit = volume_misfit(again_solids, targets, fragment_tets)
             if misfit < best:
@@ -211,8 +221,7 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
             tried = shifts + step * change
             again, again_stats, _, again_sources = _cut(*args, moved, segments, tried)
             cuts += 1
-            # A stretch's step another crack's slab ends short of joins two pieces' parts, and
-            # one of them fails: the stretches of the pieces that failed stay, the rest refit.
+            # (as above: the stretches of the pieces that failed stay, the rest fit again)
             newly = np.setdiff1d(again_stats["fallback_ids"], stats["fallback_ids"])
             if len(newly):
                 frozen |= np.isin(segments.pieces, newly).any(axis=1)
