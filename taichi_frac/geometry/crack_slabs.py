@@ -131,7 +131,7 @@ def segment_slabs(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray
     ``shifts[segment]`` [m] (the crossings cut inside one piece, ``segment`` -1, not shifted),
     and the walls that cut the steps between neighbouring stretches: without them the
     material between two stretches' heights would join the pieces on their two sides.
-    Returns ([(CrackSurface, slab) for each stretch], the walls' manifold or None)."""
+    Returns ([(CrackSurface, slab) for each height], the walls' manifold or None)."""
     from scipy.spatial import Voronoi, cKDTree
 
     e1, e2 = tangent_frame(crack.normal)
@@ -145,10 +145,12 @@ def segment_slabs(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray
     lo, hi = flat.min(axis=0) - 4 * reach, flat.max(axis=0) + 4 * reach
     fence = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
     diagram = Voronoi(np.concatenate([flat, fence]))
-    # -2: a crossing this crack does not cut; -1: one cut inside one piece, or a segment not
-    # shifted (each on the plane).
+    # One slab per height: stretches shifted alike (the fit often leaves several at its
+    # bound) share one, so no two slabs meet side by side at one height. -2: a crossing this
+    # crack does not cut; -1: one cut inside one piece, or a segment not shifted.
     height = np.where(segment >= 0, shifts[np.maximum(segment, 0)], 0.0)
-    group = np.where(separating, np.where(height != 0.0, segment, -1), -2)
+    level = np.unique(height, return_inverse=True)[1].reshape(-1)
+    group = np.where(separating, np.where(height != 0.0, level, -1), -2)
     box = np.array([[-reach, -reach], [reach, -reach], [reach, reach], [-reach, reach]])
     cells = [diagram.vertices[diagram.regions[diagram.point_region[k]]] for k in range(len(flat))]
     thickness = SLAB_THICKNESS_FACTOR * spacing
