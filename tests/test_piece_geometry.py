@@ -115,6 +115,24 @@ def test_face_with_corners_of_two_origins_gets_the_crack_it_lies_on():
     np.testing.assert_array_equal(_face_cracks(corners, triangles, cracks, spacing), [0, 0, 1, -1, HULL_FACE])
 
 
+def test_a_sliver_with_no_uv_takes_its_nearest_corner_s():
+    """Hand-made: an outer sliver whose corners the booleans left without UVs (NaN) takes,
+    corner by corner, the UV of the nearest outer corner that has one; an inner face's
+    NaN corners stay (their UVs come from their crack)."""
+    from taichi_frac.geometry.piece_surface import _outer_uvs
+
+    triangles = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]],
+                          [[1.0, 0, 1e-9], [0, 1, 1e-9], [0.5, 0.5, 0]],
+                          [[5.0, 5, 5], [6, 5, 5], [5, 6, 5]]])
+    uvs = np.array([[[0.1, 0.2], [0.3, 0.4], [0.5, 0.6]],
+                    [[np.nan, np.nan], [np.nan, np.nan], [0.9, 0.9]],
+                    [[np.nan, np.nan], [np.nan, np.nan], [np.nan, np.nan]]])
+    out = _outer_uvs(uvs, triangles, np.array([True, True, False]))
+    np.testing.assert_allclose(out[1], [[0.3, 0.4], [0.5, 0.6], [0.9, 0.9]])
+    np.testing.assert_allclose(out[0], uvs[0])
+    assert np.isnan(out[2]).all()
+
+
 def test_one_plane_cuts_the_box_exactly(box):
     model, report, surface = box
     render = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)

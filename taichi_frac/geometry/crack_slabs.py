@@ -15,6 +15,13 @@ import numpy as np
 from .render_solid import (SLAB_REACH_FACTOR, SLAB_THICKNESS_FACTOR, SPHERE_SAGITTA_FACTOR, CrackSurface,
                            tangent_frame)
 
+#: How far [particle spacings] a crack's slab runs past the line halfway to the nearest
+#: crossing it did not cut. Where two or three cracks meet about a small piece, slabs that
+#: stop at that line can leave the piece joined to a neighbour around their ends (3 of the
+#: 13 rings' pieces, 1 of the glass walls'); half a spacing more closes those gaps, at the
+#: price of a hairline slit as deep past a crack's free end.
+SLAB_PAST_FACTOR = 0.5
+
 #: Width [particle spacings] of the wall that cuts the step between two stretches of one crack
 #: shifted apart (each pair of pieces' own, crack_offsets.CrackSegments).
 STEP_WALL_FACTOR = 0.02
@@ -45,7 +52,7 @@ def value_noise(u: np.ndarray, v: np.ndarray, seed: int) -> np.ndarray:
 def plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, spacing: float, roughness: float,
                 roughness_scale: float, seed: int, index: int,
                 thickness_factor: float = SLAB_THICKNESS_FACTOR,
-                reach_factor: float = SLAB_REACH_FACTOR, apart_from=()) -> m3.Manifold | None:
+                reach_factor: float = SLAB_REACH_FACTOR, apart_from=(), past: float = 0.0) -> m3.Manifold | None:
     """The thin slab on a plane crack over the part of the plane nearer a separating bond
     crossing than any other: ``sites`` (N,3) [m] where bonds cross the plane, ``separating``
     (N,) bool those between different pieces cut by this crack. Each separating site's
@@ -54,7 +61,8 @@ def plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, s
     halfway to the nearest crossing inside one piece. Rough when ``roughness`` > 0;
     ``thickness_factor`` x ``spacing`` thick, reaching ``reach_factor`` spacings; kept off
     the other slabs of the plane cracks ``apart_from`` (CrackSurfaces) by a strip along each
-    one's line through this plane."""
+    one's line through this plane; grown by ``past`` spacings beyond that halfway line
+    (``SLAB_PAST_FACTOR`` for a crack's own slab)."""
     from scipy.spatial import Voronoi, cKDTree
 
     e1, e2 = tangent_frame(crack.normal)
@@ -82,6 +90,8 @@ def plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, s
         cells = [diagram.vertices[region] for region in regions if len(region) >= 3 and -1 not in region]
         if cells:
             outline = outline - m3.CrossSection(cells, m3.FillRule.NonZero)
+    if past > 0:
+        outline = outline.offset(past * spacing, m3.JoinType.Miter)
     for other in apart_from:
         outline = outline - _strip_along(crack, other, flat, spacing, thickness_factor, roughness, e1, e2)
     outline = outline.simplify(0.05 * spacing)
@@ -125,12 +135,14 @@ def _strip_along(crack: CrackSurface, other: CrackSurface, flat: np.ndarray, spa
 
 
 def segment_slabs(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, segment: np.ndarray,
-                   shifts: np.ndarray, spacing: float):
+                   shifts: np.ndarray, spacing: float, past: float = SLAB_PAST_FACTOR):
     """A plane crack's slab in stretches, each the part of ``plane_slab``'s outline nearer one
     pair of pieces' crossings than any other, shifted along the normal by that pair's
     ``shifts[segment]`` [m] (the crossings cut inside one piece, ``segment`` -1, not shifted),
     and the walls that cut the steps between neighbouring stretches: without them the
     material between two stretches' heights would join the pieces on their two sides.
+    Their union reaches ``past`` spacings beyond ``plane_slab``'s halfway line, as the
+    whole slab does, each stretch over the part of that rim nearest its crossings.
     Returns ([(CrackSurface, slab) for each height], the walls' manifold or None)."""
     from scipy.spatial import Voronoi, cKDTree
 
@@ -144,35 +156,46 @@ def segment_slabs(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray
     flat, separating, segment = flat[first], separating[first], segment[first]
     lo, hi = flat.min(axis=0) - 4 * reach, flat.max(axis=0) + 4 * reach
     fence = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
-    diagram = Voronoi(np.concatenate([flat, fence]))
     # One slab per height: stretches shifted alike (the fit often leaves several at its
-    # bound) share one, so no two slabs meet side by side at one height. -2: a crossing this
-    # crack does not cut; -1: one cut inside one piece, or a segment not shifted.
-    height = np.where(segment >= 0, shifts[np.maximum(segment, 0)], 0.0)
+    # bound) share one, so no two slabs meet side by side at one height. -1: a crossing cut
+    # inside one piece, or a segment not shifted.
+    height = np.where(segment >= 0, shifts[np.maximum(segment, 0)], 0.0)[separating]
     level = np.unique(height, return_inverse=True)[1].reshape(-1)
-    group = np.where(separating, np.where(height != 0.0, level, -1), -2)
+    group = np.where(height != 0.0, level, -1)
     box = np.array([[-reach, -reach], [reach, -reach], [reach, reach], [-reach, reach]])
+    # The whole outline, as plane_slab's: within reach of a cut crossing, less where one it
+    # did not cut is nearer, grown ``past``; the fence keeps every crossing's cell bounded,
+    # and the cells do not overlap, so either winding fills them.
+    whole = Voronoi(np.concatenate([flat, fence]))
+    regions = (whole.regions[whole.point_region[k]] for k in np.nonzero(~separating)[0])
+    uncut = [whole.vertices[region] for region in regions if len(region) >= 3 and -1 not in region]
+    outline = m3.CrossSection(list(flat[separating][:, None, :] + box[None]), m3.FillRule.Positive)
+    if uncut:
+        outline = outline - m3.CrossSection(uncut, m3.FillRule.NonZero)
+    if past > 0:
+        outline = outline.offset(past * spacing, m3.JoinType.Miter)
+    # Divided among the stretches by the cells of the cut crossings alone (inside the
+    # ungrown outline, the same as among all crossings).
+    flat = flat[separating]
+    diagram = Voronoi(np.concatenate([flat, fence]))
     cells = [diagram.vertices[diagram.regions[diagram.point_region[k]]] for k in range(len(flat))]
     thickness = SLAB_THICKNESS_FACTOR * spacing
     frame = np.column_stack([e1, e2, crack.normal, crack.point])  # (3,4): slab frame -> body
     outlines, parts = {}, []
-    for g in np.unique(group[separating]):
+    for g in np.unique(group):
         mine = group == g
-        # Within reach of its crossings and nearer them than any other (the fence keeps every
-        # crossing's cell bounded; the cells do not overlap, so either winding fills them).
-        outline = (m3.CrossSection(list(flat[mine][:, None, :] + box[None]), m3.FillRule.Positive)
-                   ^ m3.CrossSection([cells[k] for k in np.nonzero(mine)[0]], m3.FillRule.NonZero))
-        if outline.is_empty():
+        part = outline ^ m3.CrossSection([cells[k] for k in np.nonzero(mine)[0]], m3.FillRule.NonZero)
+        if part.is_empty():
             continue
-        outlines[g] = outline
+        outlines[g] = part
         h = float(height[mine][0])
-        slab = m3.Manifold.extrude(outline, thickness).translate((0.0, 0.0, h - 0.5 * thickness))
+        slab = m3.Manifold.extrude(part, thickness).translate((0.0, 0.0, h - 0.5 * thickness))
         parts.append((CrackSurface(crack.point + h * crack.normal, crack.normal), slab.transform(frame)))
     # The steps: each Voronoi edge between crossings of two stretches at different heights.
     half = 0.5 * STEP_WALL_FACTOR * spacing
     steps = {}
     for (p, q), ridge in zip(diagram.ridge_points, diagram.ridge_vertices):
-        if p >= len(flat) or q >= len(flat) or -1 in ridge or not (separating[p] and separating[q]):
+        if p >= len(flat) or q >= len(flat) or -1 in ridge:
             continue
         if group[p] == group[q] or height[p] == height[q] or group[p] not in outlines or group[q] not in outlines:
             continue

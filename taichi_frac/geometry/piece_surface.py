@@ -58,7 +58,7 @@ import numpy as np
 
 from .crack_offsets import (MOVES, crack_segments, moved_crack, piece_target_volumes, segment_shifts, tilt_frames,
                             volume_misfit, volume_offsets)
-from .crack_slabs import plane_slab, segment_slabs, sphere_shell
+from .crack_slabs import SLAB_PAST_FACTOR, plane_slab, segment_slabs, sphere_shell
 from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
                           overfull_pieces, overreaching_pieces)
 from .piece_shells import join_stray_shells, without_crumbs
@@ -289,7 +289,7 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
                 slabs.append(with_crack_index(wall, HULL_FACE))
         elif isinstance(crack, CrackPlane):
             parts = [(surface, plane_slab(surface, sites, separating, spacing, roughness, roughness_scale, seed,
-                                           first))]
+                                           first, past=SLAB_PAST_FACTOR))]
         else:
             parts = [(surface, sphere_shell(surface, spacing))]
         for part, slab in parts:
@@ -402,6 +402,22 @@ def _face_cracks(corner_crack: np.ndarray, triangles: np.ndarray, cracks, spacin
     return crack
 
 
+def _outer_uvs(uvs: np.ndarray, triangles: np.ndarray, outer: np.ndarray) -> np.ndarray:
+    """``uvs`` (F,3,2) with each NaN corner of an ``outer`` face given the UV of the nearest
+    outer corner that has one (``triangles`` (F,3,3) [m] the corners): the booleans
+    interpolate a sliver's properties over its zero area as NaN (slivers of 1e-15 m^2
+    where a slab grazes the surface)."""
+    uvs = uvs.copy()
+    lost = outer[:, None] & np.isnan(uvs).any(axis=2)
+    known = outer[:, None] & ~np.isnan(uvs).any(axis=2)
+    if lost.any() and known.any():
+        from scipy.spatial import cKDTree
+
+        nearest = cKDTree(triangles[known]).query(triangles[lost])[1]
+        uvs[lost] = uvs[known][nearest]
+    return uvs
+
+
 def piece_mesh(render: RenderSolid) -> PieceMesh:
     """The render solid as a triangle mesh with per-corner shading (see PieceMesh)."""
     mesh = render.solid.to_mesh64()
@@ -426,7 +442,7 @@ def piece_mesh(render: RenderSolid) -> PieceMesh:
     normals[inner] = flat[inner][:, None, :]
     length = np.linalg.norm(normals, axis=2, keepdims=True)
     normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300), flat[:, None, :])
-    uvs = corner[:, :, _UV].copy()
+    uvs = _outer_uvs(corner[:, :, _UV], tri, crack == -1)
     uvs[crack == HULL_FACE] = np.nan  # (the cache writer projects them on a box)
     for index in np.unique(crack[crack >= 0]):
         rows = np.nonzero(crack == index)[0]

@@ -33,7 +33,7 @@ WELD_REACH_FACTOR = 1.0
 #: mean V^(1/3), which the many small surface tets pull down: a teapot's inner tets are
 #: 3-4 spacings across, its crossings up to 11 spacings apart). A gap the slab leaves joins
 #: the two pieces' parts into one. Where a crossing inside one piece is nearer, its Voronoi
-#: cell still stops the slab halfway to it.
+#: cell still stops the slab (``crack_slabs.SLAB_PAST_FACTOR`` past) halfway to it.
 SLAB_REACH_FACTOR = 8.0
 
 #: Parts of the cut solid smaller than this [particle spacings cubed] are dropped: chips
