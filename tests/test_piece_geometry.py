@@ -133,6 +133,38 @@ def test_a_sliver_with_no_uv_takes_its_nearest_corner_s():
     assert np.isnan(out[2]).all()
 
 
+def test_a_slab_runs_past_the_halfway_line_whole_or_in_stretches():
+    """Hand-computed: on the plane z = 0, cut crossings along x = 0 (two stretches, y < 0
+    and y > 0) and crossings it did not cut along x = 2 (spacing 1): the slab's edge lies
+    on the halfway line x = 1 moved SLAB_PAST_FACTOR further, for the whole slab and for
+    the union of its stretches alike."""
+    from taichi_frac.geometry.crack_slabs import SLAB_PAST_FACTOR, plane_slab, segment_slabs
+    from taichi_frac.geometry.render_solid import CrackSurface
+
+    crack = CrackSurface(np.zeros(3), np.array([0.0, 0.0, 1.0]))
+    ys = np.arange(-5.0, 6.0)
+    sites = np.concatenate([np.stack([np.zeros_like(ys), ys, np.zeros_like(ys)], axis=1),
+                            np.stack([np.full_like(ys, 2.0), ys, np.zeros_like(ys)], axis=1)])
+    cut = np.arange(len(sites)) < len(ys)
+    edge = 1.0 + SLAB_PAST_FACTOR
+
+    def covers(solid, x):
+        point = x * np.array([1.0, 0.0, 0.0])  # along the body's x
+        probe = m3.Manifold.cube((1e-3, 1e-3, 1e-3), True).translate(tuple(point))
+        return (solid ^ probe).volume() > 0
+
+    whole = plane_slab(crack, sites, cut, 1.0, 0.0, 1.0, 0, 0, past=SLAB_PAST_FACTOR)
+    assert covers(whole, edge - 0.05) and not covers(whole, edge + 0.05)
+    segment = np.where(cut, (sites[:, 1] > 0).astype(np.int64), -1)
+    parts, wall = segment_slabs(crack, sites, cut, segment, np.array([1e-3, 2e-3]), 1.0)
+    union = m3.Manifold.batch_boolean([slab for _, slab in parts], m3.OpType.Add)
+    # (the stretches lie a hair above z = 0: probe at their heights)
+    for x in (edge - 0.05, edge + 0.05):
+        probe = m3.Manifold.cube((1e-3, 1e-3, 1e-2), True).translate((x, 3.0, 0.0))
+        assert ((union ^ probe).volume() > 0) == (x < edge)
+    assert wall is not None and len(parts) == 2
+
+
 def test_one_plane_cuts_the_box_exactly(box):
     model, report, surface = box
     render = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)
