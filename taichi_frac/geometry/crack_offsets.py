@@ -129,17 +129,11 @@ def crack_face_moves(solid, origin, index_of: np.ndarray, cracks, frames) -> np.
     the solid's frame origin in the body's (where ``frames`` are). The faces of a slit inside
     the piece, one of each side, cancel."""
     from ..fracture.crack_types import CrackPlane
-    from .render_solid import _CRACK, solid_arrays
 
-    props, tri = solid_arrays(solid)
-    crack = np.rint(np.nan_to_num(props[tri, _CRACK], nan=-1.0)).astype(np.int64)  # (F,3)
-    on_one = (crack == crack[:, :1]).all(axis=1)
-    corners = props[tri, :3] + np.asarray(origin, dtype=np.float64)
-    area_vector = 0.5 * np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])  # (F,3)
-    centroid = corners.mean(axis=1)
+    crack, area_vector, centroid = _crack_faces(solid, origin)
     moves = np.zeros((len(index_of), MOVES))
     for k, index in enumerate(index_of):
-        rows = on_one & (crack[:, 0] == index)
+        rows = crack == index
         if index < 0 or not rows.any():
             continue
         if isinstance(cracks[k], CrackPlane):
@@ -155,6 +149,20 @@ def crack_face_moves(solid, origin, index_of: np.ndarray, cracks, frames) -> np.
             radial /= np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-300)
             moves[k, 0] = float(np.einsum("ij,ij->", area_vector[rows], radial))
     return moves
+
+
+def _crack_faces(solid, origin) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``solid``'s faces: (crack (F,) the crack index all three corners carry, -1 where they
+    differ; outward area vectors (F,3) [m^2]; centroids (F,3) [m]), in the body's frame
+    (``origin`` (3,) [m] the solid's frame origin there)."""
+    from .render_solid import _CRACK, solid_arrays
+
+    props, tri = solid_arrays(solid)
+    crack = np.rint(np.nan_to_num(props[tri, _CRACK], nan=-1.0)).astype(np.int64)  # (F,3)
+    crack = np.where((crack == crack[:, :1]).all(axis=1), crack[:, 0], -1)
+    corners = props[tri, :3] + np.asarray(origin, dtype=np.float64)
+    area_vector = 0.5 * np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    return crack, area_vector, corners.mean(axis=1)
 
 
 def volume_offsets(solids, index_of: np.ndarray, cracks, targets: np.ndarray, fragment_tets,
@@ -201,6 +209,20 @@ def volume_offsets(solids, index_of: np.ndarray, cracks, targets: np.ndarray, fr
     return shifts if shifts[1] <= max(every[1], VOLUME_TOLERANCE**2) else every
 
 
+def _fit_problem(free: np.ndarray, pieces, already: np.ndarray):
+    """The fit over the moves ``free`` (C, MOVES) bool (``_fit``'s arguments): (rows (P, n)
+    each piece's error change per spacing of each free move, the pieces' errors (P,), the
+    further moves' bounds lo, hi (n,) [spacings]: a shift within MAX_OFFSET_FACTOR, a tilt
+    within MAX_TILT_FACTOR / sqrt 2, less the moves made), or None when no piece has a face
+    on a free crack."""
+    rows = [(moves[free], error) for moves, error in pieces if np.any(moves[free])]
+    if not rows:
+        return None
+    bound = np.where(np.nonzero(free)[1] == 0, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR / np.sqrt(2.0))
+    return (np.array([row for row, _ in rows]), np.array([error for _, error in rows]),
+            -bound - already[free], bound - already[free])
+
+
 def _fit(free: np.ndarray, pieces, already: np.ndarray, now: float, spacing: float) -> tuple[np.ndarray, float]:
     """``volume_offsets``' least squares over the moves ``free`` (C, MOVES) bool: ``pieces``
     each fitted piece's (moves (C, MOVES) per spacing over its target, error), ``already``
@@ -209,17 +231,15 @@ def _fit(free: np.ndarray, pieces, already: np.ndarray, now: float, spacing: flo
     from scipy.optimize import lsq_linear
 
     change = np.zeros(free.shape)
-    rows = [(moves[free], error) for moves, error in pieces if np.any(moves[free])]
-    if not rows:
+    problem = _fit_problem(free, pieces, already)
+    if problem is None:
         return change, now
-    misfits = np.array([error for _, error in rows])
-    rows = np.array([row for row, _ in rows])
+    rows, misfits, lo, hi = problem
     already = already[free]
-    bound = np.where(np.nonzero(free)[1] == 0, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR / np.sqrt(2.0))
     # (the weight is on the total moves)
     a = np.vstack([rows, np.sqrt(OFFSET_WEIGHT) * np.eye(len(already))])
     b = np.concatenate([-misfits, -np.sqrt(OFFSET_WEIGHT) * already])
-    fit = lsq_linear(a, b, bounds=(-bound - already, bound - already))
+    fit = lsq_linear(a, b, bounds=(lo, hi))
     change[free] = fit.x * spacing
     # (the pieces without faces on a free crack keep their errors)
     return change, now - float(np.sum(misfits**2)) + float(np.sum((rows @ fit.x + misfits) ** 2))
@@ -230,6 +250,7 @@ def _fit(free: np.ndarray, pieces, already: np.ndarray, now: float, spacing: flo
 #: The sparse segment fit's price of a piece's relative volume error against a shift of a
 #: segment by one particle spacing.
 ERROR_PRICE = 1e3
+
 
 @dataclass(frozen=True)
 class CrackSegments:
@@ -290,22 +311,16 @@ def segment_face_moves(solid, origin, sources: np.ndarray, cracks, segments: Cra
     that segment's crossings than any other cut crossing of the crack. ``sources`` (K,) the
     crack behind each crack index of the solid's faces (-1: one it inherited); ``origin``
     (3,) [m] the solid's frame origin in the body's."""
-    from .render_solid import _CRACK, solid_arrays
-
-    props, tri = solid_arrays(solid)
-    index = np.rint(np.nan_to_num(props[tri, _CRACK], nan=-1.0)).astype(np.int64)  # (F,3)
-    on_one = (index == index[:, :1]).all(axis=1) & (index[:, 0] >= 0)
-    source = np.full(len(tri), -1, dtype=np.int64)
-    source[on_one] = np.asarray(sources, dtype=np.int64)[index[on_one, 0]]
+    index, area_vector, centroid = _crack_faces(solid, origin)
+    source = np.full(len(index), -1, dtype=np.int64)
+    source[index >= 0] = np.asarray(sources, dtype=np.int64)[index[index >= 0]]
     moves = np.zeros(segments.count)
     for k in np.unique(source[source >= 0]):
         if segments.trees[k] is None:
             continue
         rows = source == k
-        corners = props[tri[rows], :3] + np.asarray(origin, dtype=np.float64)
-        flux = 0.5 * np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]) @ np.asarray(
-            cracks[k].normal, dtype=np.float64)
-        segment = segments.cut_segment[k][segments.trees[k].query(corners.mean(axis=1))[1]]
+        flux = area_vector[rows] @ np.asarray(cracks[k].normal, dtype=np.float64)
+        segment = segments.cut_segment[k][segments.trees[k].query(centroid[rows])[1]]
         mine = segment >= 0
         moves += np.bincount(segment[mine], weights=flux[mine], minlength=segments.count)
     return moves
@@ -314,8 +329,9 @@ def segment_face_moves(solid, origin, sources: np.ndarray, cracks, segments: Cra
 def segment_shifts(solids, origins, sources: np.ndarray, cracks, segments: CrackSegments, targets: np.ndarray,
                    fragment_tets, spacing: float, already: np.ndarray, frozen=None) -> tuple[np.ndarray, float]:
     """The further shifts (S,) [m] of the segments that bring the pieces' volumes nearest
-    ``targets`` (least squares over the ``volume_errors``, as ``volume_offsets``), each
-    segment's whole shift within MAX_OFFSET_FACTOR ``spacing``; ``already`` (S,) [m] the
+    ``targets``: the fit of least total shift (``_sparse_fit``) where it promises about as
+    much as least squares over the ``volume_errors`` (as ``volume_offsets``), else the
+    latter; each segment's whole shift within MAX_OFFSET_FACTOR ``spacing``; ``already`` (S,) [m] the
     shifts the ``solids`` were cut with, ``sources`` their cut's crack behind each crack
     index; ``frozen`` (S,) bool the segments that stay. Returns (change, predicted misfit)."""
     errors = volume_errors(solids, targets, fragment_tets)
@@ -344,14 +360,11 @@ def _sparse_fit(free: np.ndarray, pieces, already: np.ndarray, now: float, spaci
     moves come out exactly 0). None when the program fails."""
     from scipy.optimize import linprog
 
-    rows = [(moves[free], error) for moves, error in pieces if np.any(moves[free])]
-    if not rows:
+    problem = _fit_problem(free, pieces, already)
+    if problem is None:
         return None
-    errors = np.array([error for _, error in rows])
-    a = np.array([row for row, _ in rows])  # (P, n): error change per spacing of each move
-    n, p = a.shape[1], a.shape[0]
-    bound = np.where(np.nonzero(free)[1] == 0, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR / np.sqrt(2.0))
-    lo, hi = -bound - already[free], bound - already[free]
+    a, errors, lo, hi = problem
+    p, n = a.shape
     # Variables: moves up, moves down, errors over, errors under (all >= 0); a (up - down) - (over - under) = -e.
     cost = np.concatenate([np.ones(2 * n), ERROR_PRICE * np.ones(2 * p)])
     equality = np.hstack([a, -a, -np.eye(p), np.eye(p)])

@@ -49,6 +49,46 @@ def value_noise(u: np.ndarray, v: np.ndarray, seed: int) -> np.ndarray:
     return total / weight_sum
 
 
+def _cut_outline(flat: np.ndarray, separating: np.ndarray, spacing: float, reach: float, past: float):
+    """(outline, keep): the part of a crack plane within ``reach`` [m] of a crossing it cut
+    (``flat`` (N,2) [m] the crossings in its plane, ``separating`` (N,) those it cut), less
+    where a crossing it did not cut is nearer, grown ``past`` spacings; keep (M,) the
+    crossings that matter to it, each position once (indices into ``flat``)."""
+    from scipy.spatial import cKDTree
+
+    # Only crossings within 2 sqrt(2) reach of a separating one can be the nearest to a
+    # point of its square (the separating one is within sqrt(2) reach of it): the rest leave
+    # the cells over the squares as they are.
+    near = np.nonzero(cKDTree(flat[separating]).query(flat, distance_upper_bound=2.9 * reach)[0] <= 2.9 * reach)[0]
+    keep = near[np.unique(np.round(flat[near] / (1e-9 * spacing)), axis=0, return_index=True)[1]]
+    box = np.array([[-reach, -reach], [reach, -reach], [reach, reach], [-reach, reach]])
+    outline = m3.CrossSection(list(flat[separating][:, None, :] + box[None]), m3.FillRule.Positive)
+    uncut = np.nonzero(~separating[keep])[0]
+    if len(uncut):
+        cells = _cells(_fenced_voronoi(flat[keep], reach), uncut)
+        if cells:
+            outline = outline - m3.CrossSection(cells, m3.FillRule.NonZero)
+    if past > 0:
+        outline = outline.offset(past * spacing, m3.JoinType.Miter)
+    return outline, keep
+
+
+def _fenced_voronoi(flat: np.ndarray, reach: float):
+    """The Voronoi diagram of the points ``flat`` (N,2) [m] and four far corners that keep
+    every point's cell bounded."""
+    from scipy.spatial import Voronoi
+
+    lo, hi = flat.min(axis=0) - 4 * reach, flat.max(axis=0) + 4 * reach
+    return Voronoi(np.concatenate([flat, [[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]]]))
+
+
+def _cells(diagram, points) -> list:
+    """The cells (each (K,2) [m]) of ``diagram``'s ``points`` (indices), those bounded; they
+    do not overlap, so either winding fills them."""
+    regions = (diagram.regions[diagram.point_region[k]] for k in points)
+    return [diagram.vertices[region] for region in regions if len(region) >= 3 and -1 not in region]
+
+
 def plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, spacing: float, roughness: float,
                 roughness_scale: float, seed: int, index: int,
                 thickness_factor: float = SLAB_THICKNESS_FACTOR,
@@ -63,35 +103,13 @@ def plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, s
     the other slabs of the plane cracks ``apart_from`` (CrackSurfaces) by a strip along each
     one's line through this plane; grown by ``past`` spacings beyond that halfway line
     (``SLAB_PAST_FACTOR`` for a crack's own slab)."""
-    from scipy.spatial import Voronoi, cKDTree
-
     e1, e2 = tangent_frame(crack.normal)
     rel = sites - crack.point
     flat = np.stack([rel @ e1, rel @ e2], axis=1)  # (N,2)
     if not separating.any():
         return None
-    reach = reach_factor * spacing
-    box = np.array([[-reach, -reach], [reach, -reach], [reach, reach], [-reach, reach]])
-    # Where a separating crossing is within reach, less where another crossing is nearer.
-    outline = m3.CrossSection(list(flat[separating][:, None, :] + box[None]), m3.FillRule.Positive)
-    if not separating.all():
-        # Only crossings within 2 sqrt(2) reach of a separating one can be the nearest to a
-        # point of its square (the separating one is within sqrt(2) reach of it): the rest
-        # leave the cells over the squares as they are.
-        near = cKDTree(flat[separating]).query(flat, distance_upper_bound=2.9 * reach)[0] <= 2.9 * reach
-        flat, separating = flat[near], separating[near]
-        lo, hi = flat.min(axis=0) - 4 * reach, flat.max(axis=0) + 4 * reach
-        fence = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
-        _, first = np.unique(np.round(flat / (1e-9 * spacing)), axis=0, return_index=True)
-        points = np.concatenate([flat[first], fence])
-        diagram = Voronoi(points)
-        regions = (diagram.regions[diagram.point_region[k]] for k in np.nonzero(~separating[first])[0])
-        # (the cells do not overlap, so either winding fills them)
-        cells = [diagram.vertices[region] for region in regions if len(region) >= 3 and -1 not in region]
-        if cells:
-            outline = outline - m3.CrossSection(cells, m3.FillRule.NonZero)
-    if past > 0:
-        outline = outline.offset(past * spacing, m3.JoinType.Miter)
+    outline, keep = _cut_outline(flat, separating, spacing, reach_factor * spacing, past)
+    flat = flat[keep]
     for other in apart_from:
         outline = outline - _strip_along(crack, other, flat, spacing, thickness_factor, roughness, e1, e2)
     outline = outline.simplify(0.05 * spacing)
@@ -144,47 +162,28 @@ def segment_slabs(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray
     Their union reaches ``past`` spacings beyond ``plane_slab``'s halfway line, as the
     whole slab does, each stretch over the part of that rim nearest its crossings.
     Returns ([(CrackSurface, slab) for each height], the walls' manifold or None)."""
-    from scipy.spatial import Voronoi, cKDTree
-
     e1, e2 = tangent_frame(crack.normal)
     rel = sites - crack.point
     flat = np.stack([rel @ e1, rel @ e2], axis=1)  # (N,2)
     reach = SLAB_REACH_FACTOR * spacing
-    near = cKDTree(flat[separating]).query(flat, distance_upper_bound=2.9 * reach)[0] <= 2.9 * reach
-    flat, separating, segment = flat[near], separating[near], segment[near]
-    _, first = np.unique(np.round(flat / (1e-9 * spacing)), axis=0, return_index=True)
-    flat, separating, segment = flat[first], separating[first], segment[first]
-    lo, hi = flat.min(axis=0) - 4 * reach, flat.max(axis=0) + 4 * reach
-    fence = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+    outline, keep = _cut_outline(flat, separating, spacing, reach, past)
+    flat, separating, segment = flat[keep], separating[keep], segment[keep]
     # One slab per height: stretches shifted alike (the fit often leaves several at its
     # bound) share one, so no two slabs meet side by side at one height. -1: a crossing cut
     # inside one piece, or a segment not shifted.
     height = np.where(segment >= 0, shifts[np.maximum(segment, 0)], 0.0)[separating]
     level = np.unique(height, return_inverse=True)[1].reshape(-1)
     group = np.where(height != 0.0, level, -1)
-    box = np.array([[-reach, -reach], [reach, -reach], [reach, reach], [-reach, reach]])
-    # The whole outline, as plane_slab's: within reach of a cut crossing, less where one it
-    # did not cut is nearer, grown ``past``; the fence keeps every crossing's cell bounded,
-    # and the cells do not overlap, so either winding fills them.
-    whole = Voronoi(np.concatenate([flat, fence]))
-    regions = (whole.regions[whole.point_region[k]] for k in np.nonzero(~separating)[0])
-    uncut = [whole.vertices[region] for region in regions if len(region) >= 3 and -1 not in region]
-    outline = m3.CrossSection(list(flat[separating][:, None, :] + box[None]), m3.FillRule.Positive)
-    if uncut:
-        outline = outline - m3.CrossSection(uncut, m3.FillRule.NonZero)
-    if past > 0:
-        outline = outline.offset(past * spacing, m3.JoinType.Miter)
     # Divided among the stretches by the cells of the cut crossings alone (inside the
     # ungrown outline, the same as among all crossings).
     flat = flat[separating]
-    diagram = Voronoi(np.concatenate([flat, fence]))
-    cells = [diagram.vertices[diagram.regions[diagram.point_region[k]]] for k in range(len(flat))]
+    diagram = _fenced_voronoi(flat, reach)
     thickness = SLAB_THICKNESS_FACTOR * spacing
     frame = np.column_stack([e1, e2, crack.normal, crack.point])  # (3,4): slab frame -> body
     outlines, parts = {}, []
     for g in np.unique(group):
         mine = group == g
-        part = outline ^ m3.CrossSection([cells[k] for k in np.nonzero(mine)[0]], m3.FillRule.NonZero)
+        part = outline ^ m3.CrossSection(_cells(diagram, np.nonzero(mine)[0]), m3.FillRule.NonZero)
         if part.is_empty():
             continue
         outlines[g] = part

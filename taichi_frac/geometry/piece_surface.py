@@ -53,6 +53,8 @@ by smooth value noise, the same on both faces, so the two sides of a crack still
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import manifold3d as m3
 import numpy as np
 
@@ -179,64 +181,79 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
         return _trimmed(pieces, stats, model, labels, piece_origins)
     targets = piece_target_volumes(scale, model, fragment_tets)
     solids = [p.solid if p is not None else None for p in pieces]
-    best, moved, cuts = volume_misfit(solids, targets, fragment_tets), np.zeros((len(cracks), MOVES)), 0
-    # A moved crack can open a gap another crack's slab ends short of (or hand a part where
-    # cracks meet to another piece): a cut in which a piece fails that did not is not kept,
-    # the cracks of the pieces that failed stay, and the others fit again.
+    kept = _Kept(pieces, solids, stats, sources, volume_misfit(solids, targets, fragment_tets))
+    # The whole cracks first: a crack is frozen when a piece on it fails.
     touching = [set(ends[cut & (inside < 0)].ravel().tolist()) if sites is not None else set()
                 for sites, cut, inside, ends in per_crack]
-    frozen = np.zeros(len(cracks), dtype=bool)
-    for _ in range(fit_rounds):
-        change, predicted = volume_offsets(solids, index_of, cracks, targets, fragment_tets, spacing, moved, frames,
-                                           piece_origins, frozen=frozen)
-        if not np.any(change != 0.0) or predicted > (1.0 - FIT_GAIN) * best:
-            break
-        for step in FIT_STEPS:
-            offsets = moved + step * change
-            again, again_stats, _, again_sources = _cut(*args, offsets)
-            cuts += 1
-            newly = set(np.setdiff1d(again_stats["fallback_ids"], stats["fallback_ids"]).tolist())
-            if newly:
-                frozen |= np.array([bool(pieces_of & newly) for pieces_of in touching], dtype=bool)
-                break
-            again_solids = [p.solid if p is not None else None for p in again]
-            misfit = volume_misfit(again_solids, targets, fragment_tets)
-            if misfit < best:
-                pieces, solids, best, moved, sources = again, again_solids, misfit, offsets, again_sources
-                reach = np.abs(offsets[:, 0]) + np.linalg.norm(offsets[:, 1:], axis=1)
-                stats = dict(again_stats, moved_cracks=int(np.sum(reach > 0.0)),
-                             largest_offset=float(np.max(reach)) / spacing)
-                break
-        else:
-            break
+
+    def on_failed(newly):
+        return np.array([bool(pieces_of & set(newly.tolist())) for pieces_of in touching], dtype=bool)
+
+    kept, moved, cuts = _fit_rounds(
+        fit_rounds, kept, np.zeros((len(cracks), MOVES)), targets, fragment_tets,
+        fit=lambda solids, _, moves, frozen: volume_offsets(solids, index_of, cracks, targets, fragment_tets, spacing,
+                                                            moves, frames, piece_origins, frozen=frozen),
+        cut=lambda moves: _cut(*args, moves),
+        freeze=on_failed)
     # Then each stretch of a plane between one pair of pieces on its own (crack_offsets.CrackSegments).
     segments = crack_segments(per_crack, len(fragment_tets))
-    shifts, frozen = np.zeros(segments.count), np.zeros(segments.count, dtype=bool)
-    for _ in range(fit_rounds if segments.count and not roughness else 0):
-        change, predicted = segment_shifts(solids, piece_origins, sources, cracks, segments, targets, fragment_tets,
-                                           spacing, shifts, frozen)
-        if not np.any(change != 0.0) or predicted > (1.0 - FIT_GAIN) * best:
+    kept, shifts, more = _fit_rounds(
+        fit_rounds if segments.count and not roughness else 0, kept, np.zeros(segments.count), targets,
+        fragment_tets,
+        fit=lambda solids, sources, moves, frozen: segment_shifts(solids, piece_origins, sources, cracks, segments,
+                                                                  targets, fragment_tets, spacing, moves, frozen),
+        cut=lambda moves: _cut(*args, moved, segments, moves),
+        freeze=lambda newly: np.isin(segments.pieces, newly).any(axis=1))
+    reach = np.abs(moved[:, 0]) + np.linalg.norm(moved[:, 1:], axis=1)
+    stats = dict(kept.stats, moved_cracks=int(np.sum(reach > 0.0)),
+                 largest_offset=float(np.max(reach, initial=0.0)) / spacing, fit_cuts=cuts + more,
+                 moved_segments=int(np.sum(shifts != 0.0)),
+                 largest_segment_shift=float(np.max(np.abs(shifts), initial=0.0)) / spacing)
+    return _trimmed(kept.pieces, stats, model, labels, piece_origins)
+
+
+class _Kept(NamedTuple):
+    """A cut the fit keeps: its pieces (RenderSolid or None), their solids, ``_cut``'s stats
+    and sources, and its ``volume_misfit``."""
+
+    pieces: list
+    solids: list
+    stats: dict
+    sources: np.ndarray
+    misfit: float
+
+
+def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, fit, cut, freeze):
+    """Up to ``rounds`` times, the moves ``fit(solids, sources, moves, frozen)`` proposes
+    (further moves, the misfit its linear model predicts), cut (``cut(moves)``: ``_cut``'s
+    result) with all of them or else half (FIT_STEPS), kept when the pieces' volumes come
+    nearer. A move that fails a piece the kept cut did not (one crack passing the end of
+    another's slab joins two pieces there) is not kept: ``freeze(newly)`` (bool, per move
+    row) says which moves then stay, and the rest fit again. Stops when the fit promises
+    less than FIT_GAIN off the misfit. ``kept``: the ``_Kept`` cut made with ``moves``.
+    Returns (kept, moves, cuts made)."""
+    frozen = np.zeros(len(moves), dtype=bool)
+    cuts = 0
+    for _ in range(rounds):
+        change, predicted = fit(kept.solids, kept.sources, moves, frozen)
+        if not np.any(change != 0.0) or predicted > (1.0 - FIT_GAIN) * kept.misfit:
             break
         for step in FIT_STEPS:
-            tried = shifts + step * change
-            again, again_stats, _, again_sources = _cut(*args, moved, segments, tried)
+            tried = moves + step * change
+            pieces, stats, _, sources = cut(tried)
             cuts += 1
-            # (as above: the stretches of the pieces that failed stay, the rest fit again)
-            newly = np.setdiff1d(again_stats["fallback_ids"], stats["fallback_ids"])
+            newly = np.setdiff1d(stats["fallback_ids"], kept.stats["fallback_ids"])
             if len(newly):
-                frozen |= np.isin(segments.pieces, newly).any(axis=1)
+                frozen |= freeze(newly)
                 break
-            again_solids = [p.solid if p is not None else None for p in again]
-            misfit = volume_misfit(again_solids, targets, fragment_tets)
-            if misfit < best:
-                pieces, solids, best, shifts, sources = again, again_solids, misfit, tried, again_sources
-                stats = dict(again_stats, moved_cracks=stats["moved_cracks"], largest_offset=stats["largest_offset"])
+            solids = [p.solid if p is not None else None for p in pieces]
+            misfit = volume_misfit(solids, targets, fragment_tets)
+            if misfit < kept.misfit:
+                kept, moves = _Kept(pieces, solids, stats, sources, misfit), tried
                 break
         else:
             break
-    stats.update(fit_cuts=cuts, moved_segments=int(np.sum(shifts != 0.0)),
-                 largest_segment_shift=float(np.max(np.abs(shifts), initial=0.0)) / spacing)
-    return _trimmed(pieces, stats, model, labels, piece_origins)
+    return kept, moves, cuts
 
 
 def _trimmed(pieces, stats, model, labels, piece_origins):
