@@ -24,6 +24,14 @@ PARTS = {
     "stability": (stability, "the hard cases of the dynamics and the fracture"),
     "pieces": (pieces, "broken pieces' render surfaces: closed, on their cracks, what a split costs"),
 }
+#: Parts that write their own page under ``docs/benchmarks/`` (``taichi-frac bench
+#: <part> --out docs``), which the report links to rather than repeats: two copies of one
+#: measurement made at different commits would disagree.
+OWN_PAGE = ("pieces",)
+
+#: The parts ``taichi-frac bench report`` runs by default.
+REPORT_PARTS = tuple(k for k in PARTS if k not in OWN_PAGE)
+
 #: Parts that need the report's World (and its warm-up).
 NEEDS_WORLD = ("tables", "grouping", "stability", "pieces", "stress_models")
 
@@ -166,7 +174,7 @@ def run_report(quick: bool = False, out_dir: Path | None = None, parts=None, arc
     started = time.strftime("%Y-%m-%d %H:%M %Z")
     load_start = load_average()
     t0 = time.perf_counter()
-    keys = list(parts or PARTS)
+    keys = list(parts or REPORT_PARTS)
     sections = run_parts(ctx, keys)
     readme = (not quick and out_dir == REPO / "docs") if readme is None else readme
     readme_part = (REPO / "out" / "benchmarks_summary.md") if readme else (out_dir / "readme_benchmarks.md")

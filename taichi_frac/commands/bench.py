@@ -71,7 +71,8 @@ def register(subparsers) -> None:
     r.add_argument("--quick", action="store_true", help="fast smoke version, written under out/bench_quick/")
     r.add_argument("--out", type=Path, help="folder for benchmarks.md and benchmarks/*.png (default: docs/, "
                                              "or out/bench_quick/ with --quick)")
-    r.add_argument("--parts", help="comma-separated subset: tables,grouping,sph,stress_models,scaling,stability")
+    r.add_argument("--parts", help="comma-separated subset: tables,grouping,sph,stress_models,scaling,stability "
+                                   "(pieces writes its own page: taichi-frac bench pieces --out docs)")
     r.add_argument("--arch", default="cpu")
     r.set_defaults(func=_run_report)
     from ..bench.report import PARTS
