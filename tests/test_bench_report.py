@@ -123,3 +123,17 @@ def test_stability_rows_and_the_written_report(ctx, tmp_path):
     text = markdown.read_text()
     assert "QUICK SMOKE RUN" in text and "| a body of a single tet" in text
     assert re.search(r"1 of 1 hard cases pass", readme_part.read_text())
+
+
+def test_report_links_the_pages_its_parts_write_themselves(ctx, tmp_path):
+    """A part that writes its own page under docs/benchmarks/ (the piece geometry) is not
+    run again by the report, whose copy would disagree with the page once the page is
+    regenerated alone; the report links to the page instead."""
+    assert "pieces" in report.PARTS and "pieces" not in report.REPORT_PARTS
+    assert set(report.REPORT_PARTS) | set(report.OWN_PAGE) == set(report.PARTS)
+    (tmp_path / "benchmarks").mkdir()
+    (tmp_path / "benchmarks" / "piece-geometry.md").write_text("## Piece geometry\n\nmeasured\n")
+    markdown = tmp_path / "benchmarks.md"
+    report.write(ctx, [], markdown, "# Benchmarks", None)
+    text = markdown.read_text()
+    assert "- [Piece geometry](benchmarks/piece-geometry.md)" in text and "## 1." not in text
