@@ -401,31 +401,36 @@ CONTACT_FRACTURE_RUNS = 2
 
 
 def _rings_ms(ctx: BenchContext, scene, single: bool, surface: bool, fracture: bool, frames) -> tuple:
-    """Mean ms/frame of one 13-ring run (its first frame left out), the contacts of its
-    last substep, its fragments, and its bodies asleep at the end and in all."""
+    """One 13-ring run: its mean ms/frame (the first frame left out); the ms per frame, over
+    all frames, in the dynamics and in the fracture stage (analysis and split); its
+    substeps per frame; the contacts of its last substep, its fragments, and its bodies
+    asleep at the end and in all."""
     from .tables import run_scene
 
     label = [m[0] for m in CONTACT_MODES if m[1] == single and m[2] == surface][0]
-    sim, summary, _ = run_scene(ctx, _with_contact(scene, single, surface), f"13 rings, {label}", fracture=fracture,
-                                frames=frames)
+    sim, summary, counts = run_scene(ctx, _with_contact(scene, single, surface), f"13 rings, {label}",
+                                     fracture=fracture, frames=frames)
     sleeping = sim.world.body_state()["sleeping"]
-    return (float(summary.ms_per_frame["mean_after_first"]), sim.world.stats.contacts, summary.fragments,
-            int(sleeping.sum()), len(sleeping))
+    per_frame = 1000.0 / max(summary.frames, 1)
+    return (float(summary.ms_per_frame["mean_after_first"]), sim.times.dynamics * per_frame,
+            (sim.times.fracture_analysis + sim.times.fragment_split) * per_frame, counts["substeps_per_frame"],
+            sim.world.stats.contacts, summary.fragments, int(sleeping.sum()), len(sleeping))
 
 
 def _rings_fastest(ctx: BenchContext, scenes, fracture: bool, frames, runs: int) -> dict:
     """Each contact mode's 13 rings on each of ``scenes``, ``runs`` times interleaved (every
-    mode and scene once per round): mode label -> one (fastest ms/frame, contacts in the
-    last substep, fragments, bodies asleep at the end, bodies) per scene."""
+    mode and scene once per round): mode label -> one tuple per scene: the fastest run's
+    (ms/frame, dynamics and fracture-stage ms per frame, substeps per frame) and the last
+    run's (contacts in the last substep, fragments, bodies asleep at the end, bodies)."""
     times = {(m[0], k): [] for m in CONTACT_MODES for k in range(len(scenes))}
     last = {}
     for _ in range(runs):
         for k, scene in enumerate(scenes):
             for m in CONTACT_MODES:
-                ms, *counts = _rings_ms(ctx, scene, m[1], m[2], fracture, frames)
-                times[m[0], k].append(ms)
-                last[m[0], k] = tuple(counts)
-    return {m[0]: [(min(times[m[0], k]), *last[m[0], k]) for k in range(len(scenes))] for m in CONTACT_MODES}
+                run = _rings_ms(ctx, scene, m[1], m[2], fracture, frames)
+                times[m[0], k].append(run[:4])
+                last[m[0], k] = run[4:]
+    return {m[0]: [(*min(times[m[0], k]), *last[m[0], k]) for k in range(len(scenes))] for m in CONTACT_MODES}
 
 
 def contact_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) -> str:
@@ -473,7 +478,7 @@ def contact_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) -> 
     ms = {k: off[k][0][0] for k in labels}
     rows.append([f"13 rings, fracture off, ms/frame, fastest of {CONTACT_RING_RUNS} interleaved runs (ratio to "
                  "sphere contacts)"] + [f"{ms[k]:.2f} ({ms[k] / ms[labels[1]]:.2f}x)" for k in labels])
-    rows.append(["13 rings, fracture off, contacts in the last substep"] + [f"{off[k][0][1]:,}" for k in labels])
+    rows.append(["13 rings, fracture off, contacts in the last substep"] + [f"{off[k][0][4]:,}" for k in labels])
     scenes = seed_scenes or [scene]
     on = _rings_fastest(ctx, scenes, True, frames, CONTACT_FRACTURE_RUNS)
     ms = {k: float(np.mean([r[0] for r in on[k]])) for k in labels}
@@ -481,10 +486,15 @@ def contact_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) -> 
     rows.append([f"13 rings, fracture on, ms/frame, mean over {sets} of each set's fastest of "
                  f"{CONTACT_FRACTURE_RUNS} interleaved runs (ratio of means to sphere contacts)"]
                 + [f"{ms[k]:.1f} ({ms[k] / ms[labels[1]]:.2f}x)" for k in labels])
+    rows.append([f"13 rings, fracture on, mean over {sets}: ms per frame in the dynamics / in the fracture "
+                 "stage (analysis and split), over all frames / substeps per frame (0 in a frame when every body "
+                 "sleeps)"]
+                + [" / ".join(f"{np.mean([r[c] for r in on[k]]):.{d}f}" for c, d in ((1, 1), (2, 1), (3, 2)))
+                   for k in labels])
     rows.append(["13 rings, fracture on, per seed set: ms/frame / fragments"]
-                + [", ".join(f"{r[0]:.1f} / {r[2]}" for r in on[k]) for k in labels])
+                + [", ".join(f"{r[0]:.1f} / {r[5]}" for r in on[k]) for k in labels])
     rows.append([f"13 rings, fracture on, mean over {sets}: contacts in the last substep / fragments"]
-                + [f"{np.mean([r[1] for r in on[k]]):,.0f} / {np.mean([r[2] for r in on[k]]):.1f}" for k in labels])
+                + [f"{np.mean([r[4] for r in on[k]]):,.0f} / {np.mean([r[5] for r in on[k]]):.1f}" for k in labels])
     rows.append(["13 rings, fracture on, per seed set: bodies asleep at the end / bodies"]
-                + [", ".join(f"{r[3]} / {r[4]}" for r in on[k]) for k in labels])
+                + [", ".join(f"{r[6]} / {r[7]}" for r in on[k]) for k in labels])
     return md_table(["measure", *labels], rows)
