@@ -67,7 +67,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("bench", help="benchmark report and timed measurements (report, dynamics, ...)",
                               description=__doc__.split("\n\n")[0].replace("``", "'"))
     targets = p.add_subparsers(dest="target", metavar="TARGET")
-    r = targets.add_parser("report", help="run every part; write docs/benchmarks.md, its plots and out/benchmarks_summary.md")
+    r = targets.add_parser("report", help="run every part but those with their own page (pieces); write "
+                                          "docs/benchmarks.md, its plots and out/benchmarks_summary.md")
     r.add_argument("--quick", action="store_true", help="fast smoke version, written under out/bench_quick/")
     r.add_argument("--out", type=Path, help="folder for benchmarks.md and benchmarks/*.png (default: docs/, "
                                              "or out/bench_quick/ with --quick)")
