@@ -209,11 +209,11 @@ def segment_slabs(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray
     for (g, k), rectangles in steps.items():
         # (only where either stretch's outline is: past them no slab cuts, so neither may a wall)
         region = (outlines[g] + outlines[k]).offset(2.0 * half, m3.JoinType.Miter)
-        outline = m3.CrossSection(rectangles, m3.FillRule.NonZero) ^ region
-        if outline.is_empty():
+        footprint = m3.CrossSection(rectangles, m3.FillRule.NonZero) ^ region
+        if footprint.is_empty():
             continue
         bottom, top = sorted(float(height[group == x][0]) for x in (g, k))
-        wall = m3.Manifold.extrude(outline, top - bottom + thickness).translate((0.0, 0.0, bottom - 0.5 * thickness))
+        wall = m3.Manifold.extrude(footprint, top - bottom + thickness).translate((0.0, 0.0, bottom - 0.5 * thickness))
         walls.append(wall.transform(frame))
     wall = m3.Manifold.batch_boolean(walls, m3.OpType.Add) if len(walls) > 1 else (walls[0] if walls else None)
     return parts, wall

@@ -315,7 +315,8 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
             index = len(new_cracks)
             new_cracks.append(part)
             sources.append(i)
-            index_of[i] = first if index_of[i] < 0 else index_of[i]
+            if index_of[i] < 0:
+                index_of[i] = index
             slabs.append(with_crack_index(slab, index))
         if isinstance(crack, CrackPlane) and index_of[i] >= 0:
             planes.append((surface, sites, inside_one, index_of[i]))
