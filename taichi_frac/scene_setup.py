@@ -20,6 +20,7 @@ import time
 from dataclasses import dataclass
 
 from . import interrupts
+from .geometry.validate import REPAIR_HINT, MeshError
 
 __all__ = ["PreparedObject", "dynamics_options", "furnish_world", "prepare_objects", "world_capacity"]
 
@@ -43,7 +44,11 @@ def prepare_objects(scene, *, fracture: bool = True, prepare=None) -> tuple[list
     prepared = []
     for obj in scene.objects:
         interrupts.check()
-        model, report = obj.prepare() if prepare is None else prepare(obj)
+        try:
+            model, report = obj.prepare() if prepare is None else prepare(obj)
+        except MeshError as exc:
+            raise MeshError(f"object {obj.name!r}: " + str(exc).replace(REPAIR_HINT, _scene_repair_hint(obj.name))) \
+                from None
         breakable = bool(obj.breakable and fracture)
         if breakable:
             # The SPH neighbour lists are part of a breakable body's static model (built by
@@ -58,6 +63,12 @@ def prepare_objects(scene, *, fracture: bool = True, prepare=None) -> tuple[list
                 elastic_body_of(model, obj.material)
         prepared.append(PreparedObject(obj, model, report, breakable))
     return prepared, time.perf_counter() - t0
+
+
+def _scene_repair_hint(name: str) -> str:
+    """How to ask for a mesh repair in a scene (the scene's words for ``validate.REPAIR_HINT``)."""
+    return (f"set repair = true on object {name!r} (or --set {name}.repair=true) to try an automatic fix, "
+            "or fix it in a modelling tool")
 
 
 def world_capacity(scene, prepared: list[PreparedObject], *, single_scale: bool | None = None):

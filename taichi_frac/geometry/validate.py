@@ -12,6 +12,8 @@ import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
 import trimesh
 
+#: The fix a MeshError offers, worded for ``prepare_body`` and ``taichi-frac info``; a scene
+#: swaps it for its own (``scene_setup.prepare_objects``).
 REPAIR_HINT = "pass repair=True (CLI: --repair) to try an automatic fix, or fix it in a modelling tool"
 
 
