@@ -209,7 +209,7 @@ def test_rings_stacked_flat_rest_on_their_tubes():
     above the one below (COM heights 25, 75 and 125 mm, exact for the mesh: its vertices
     at the top and bottom of the tube lie on the true surface), within 0.5 mm per ring,
     and fall asleep without drifting: the contact between two bodies' patches is their
-    hulls' distance (``surface.hull_pair``). On their spheres each ring stands about 5 mm
+    hulls' distance (``hulls.hull_pair``). On their spheres each ring stands about 5 mm
     higher than the one below."""
     world = fresh_world(surface_contact=True)
     rings = stack_rings(world, ring_model(), 3)

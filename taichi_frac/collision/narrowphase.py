@@ -19,7 +19,7 @@ never carry an impulse.
 import taichi as ti
 
 from ..kinematics.bounds import fastest_point_speed, is_idle, pair_motion
-from . import surface
+from . import hulls, surface
 from .grid import CELLS_PER_SPHERE
 
 vec3 = ti.math.vec3
@@ -180,7 +180,7 @@ def _carries_with(particles: ti.template(), query, o):
 def _hull_warm(particles: ti.template(), query, key):
     """The normal (vec3 unit, partner body's frame) and simplex (ivec3) the hull search of
     particle ``query`` with particle ``key`` found last substep, contact or not (zero and
-    -1 when there was none): where this substep's search starts (``surface.hull_pair``'s
+    -1 when there was none): where this substep's search starts (``hulls.hull_pair``'s
     ``warm`` and ``simplex``)."""
     previous = particles.parity[None]
     direction = vec3(0.0)
@@ -313,8 +313,8 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
     within the margin plus the pair's closing (squared: no square root for the ~90 % of
     candidates it rejects) and then the speculative reach of the two points. When either
     sphere has a contact patch, the contact's normal, depth and point are the patches'
-    (``surface.pair`` where one has facets, ``surface.hull_pair``'s hull distance where
-    both have and the pair closes slower than ``surface.HULL_APPROACH``) and the
+    (``surface.pair`` where one has facets, ``hulls.hull_pair``'s hull distance where
+    both have and the pair closes slower than ``hulls.HULL_APPROACH``) and the
     speculative reach is that of their contact spots."""
     sphere = particles.grid_sphere[k]
     rj = sphere[3]
@@ -345,15 +345,15 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
         scale = ti.min(ri, rj)
         if ti.static(patches):
             patched = surface.by_patches(particles, i, j)
-            hulls = surface.by_hulls(particles, i, j) and closing <= ti.static(surface.HULL_APPROACH) * mean_r
-            if patched or hulls:
+            on_hulls = hulls.by_hulls(particles, i, j) and closing <= ti.static(hulls.HULL_APPROACH) * mean_r
+            if patched or on_hulls:
                 n_patch = n
                 gap_patch = gap
                 spot_a = x_a
                 spot_o = x_o
-                if hulls:
+                if on_hulls:
                     warm, simplex = _hull_warm(particles, i, j)
-                    n_patch, gap_patch, spot_a, spot_o, simplex = surface.hull_pair(
+                    n_patch, gap_patch, spot_a, spot_o, simplex = hulls.hull_pair(
                         bodies, particles, a, i, o, j, n, margin * mean_r + closing, rot @ warm, simplex)
                     _keep_hull(particles, i, j, rot.transpose() @ n_patch, simplex)
                 else:

@@ -190,7 +190,7 @@ class Particles:
         cache_stamp (2, P) the store that wrote the particle's entries (only the last
         store, ``cache_epoch``, is valid; add_body sets -1 on a reused slot). Writer:
         solver.store_impulses; read by the narrowphase when the same pair is made again.
-        Hull searches (``surface.hull_pair``), in the same two halves: hull_count (2, P)
+        Hull searches (``hulls.hull_pair``), in the same two halves: hull_count (2, P)
         searches kept for particle P as the querying side; hull_key (2, P, HULL_SLOTS) the
         partner particle; hull_direction (vec3 unit, partner body frame) the normal found,
         contact or not, where the same pair's search starts next substep; hull_simplex
