@@ -282,6 +282,13 @@ class FractureOptions:
             the whole planes cannot do it, up to as many rounds more shift the stretch of a
             plane between each pair of pieces on its own (at most half a spacing more; not
             for rough cracks).
+        crack_fit_min_tets: the smallest piece (in tets) whose volume those stretches are
+            fitted to. The default, 100, holds the larger pieces within 2 % of their tets'
+            volume; lower it (to about 30) for close-ups where mid-sized pieces show, at
+            several times the cache writing's cost per split
+            (docs/guide/fragment-geometry.md). The whole planes are always fitted to pieces
+            of 100 tets or more: a few small pieces where cracks meet must not pull a plane
+            that many larger pieces lie on.
     """
 
     crack_count: int = 1
@@ -299,6 +306,7 @@ class FractureOptions:
     crack_roughness: float = 0.0
     crack_roughness_scale: float | None = None
     crack_fit_rounds: int = 3
+    crack_fit_min_tets: int = 100
     stress_model: str = "halfspace"
 
     def __post_init__(self):
@@ -322,6 +330,7 @@ class FractureOptions:
         if self.crack_roughness_scale is not None:
             check_range("fracture", "crack_roughness_scale", self.crack_roughness_scale, 0.0, None, low_open=True)
         check_range("fracture", "crack_fit_rounds", self.crack_fit_rounds, 0, 10)
+        check_range("fracture", "crack_fit_min_tets", self.crack_fit_min_tets, 1, 1_000_000)
         if self.stress_model not in STRESS_MODELS:
             raise OptionError(f"fracture.stress_model = {self.stress_model!r}: use one of " + ", ".join(STRESS_MODELS))
 

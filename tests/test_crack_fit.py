@@ -273,3 +273,38 @@ def test_fitted_plane_gives_the_pieces_their_tets_volume(box):
         np.testing.assert_allclose(surface.normal, crack.normal)
         shift = surface.point + pieces[0].model.com_in_source - crack.point  # (the piece's frame -> the body's)
         assert abs(shift @ crack.normal) <= MAX_OFFSET_FACTOR * model.spacing + 1e-12
+
+
+def test_smaller_pieces_are_fitted_when_asked_but_never_at_a_larger_one_s_cost():
+    """Hand-computed: the plane z = 0.5 parts two columns above (A, 100 tets, on target; B,
+    50 tets, 4 % over its tets' volume) from one block below, each column's stretch its own
+    segment. Shifting B's segment up by d takes 0.5 d from B and gives it to the block.
+    B is under FITTED_PIECE_TETS, so by default nothing moves. Fitted down to 30 tets (the
+    option crack_fit_min_tets), B's error counts at SMALL_PIECE_WEIGHT: against a block 20
+    times B's volume (whose share of 0.5 d is small) the segment takes B exactly to its
+    target, d = 0.04 x target / 0.5; against a block only twice B's volume, what the block
+    would lose outweighs it and nothing moves."""
+    from taichi_frac.geometry.crack_offsets import SMALL_PIECE_WEIGHT, crack_segments, segment_shifts
+
+    crack = [CrackPlane(point=np.array([0.5, 0.5, 0.5]), normal=np.array([0.0, 0.0, 1.0]), extent=1.0,
+                        peak_stress=1.0)]
+    grid = np.linspace(0.05, 0.95, 10)
+    sites = np.array([[x, y, 0.5] for x in grid for y in grid])
+    ends = np.stack([(sites[:, 0] > 0.5).astype(np.int64), np.full(len(sites), 2)], axis=1)
+    segments = crack_segments([(sites, np.ones(len(sites), dtype=bool), np.full(len(sites), -1), ends)], 3)
+    assert segments.pieces.tolist() == [[0, 2], [1, 2]]
+    tets = [np.arange(100), np.arange(50), np.arange(1000)]
+    target_b = 0.25 / 1.04
+    assert SMALL_PIECE_WEIGHT * 0.5 / target_b > 0.5 / 10.0 and SMALL_PIECE_WEIGHT * 0.5 / target_b < 0.5 / 0.5
+    for bottom, moved in ((-9.5, True), (0.0, False)):
+        solids = [_box_with_crack_faces((0.0, 0.0, 0.5), (0.5, 1.0, 1.0), {(2, 0): 0}),
+                  _box_with_crack_faces((0.5, 0.0, 0.5), (1.0, 1.0, 1.0), {(2, 0): 0}),
+                  _box_with_crack_faces((0.0, 0.0, bottom), (1.0, 1.0, 0.5), {(2, 1): 0})]
+        targets = np.array([0.25, target_b, 0.5 - bottom])
+        args = (solids, np.zeros((3, 3)), np.array([0]), crack, segments, targets, tets, 0.2, np.zeros(2))
+        assert not np.any(segment_shifts(*args)[0])  # (B is not read)
+        change, _ = segment_shifts(*args, min_tets=30)
+        if moved:
+            np.testing.assert_allclose(change, [0.0, 0.04 * target_b / 0.5], atol=1e-9)
+        else:
+            assert not np.any(change), change

@@ -175,3 +175,21 @@ def test_the_whole_stress_field_is_computed_only_for_the_cache(world, tmp_path, 
     assert runs["cache"][0] == runs["none"][0] >= 3
     np.testing.assert_array_equal(runs["cache"][1], runs["none"][1])
     assert runs["cache"][2] >= 1 and runs["none"][2] == 0
+
+
+def test_the_crack_fit_options_reach_the_cut(world, tmp_path, monkeypatch):
+    """The scene's crack-fit settings are the ones each split's render cut is made with."""
+    import taichi_frac.geometry.piece_surface as piece_surface
+
+    seen = []
+    real = piece_surface.cut_render_solid
+
+    def recording(*args, **kwargs):
+        seen.append((kwargs["fit_rounds"], kwargs["fit_min_tets"]))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(piece_surface, "cut_render_solid", recording)
+    scene = load_scene(SCENES / "single_ring.toml", ["ring.fracture.crack_count=3", "ring.fracture.crack_fit_rounds=2",
+                                                     "ring.fracture.crack_fit_min_tets=30"])
+    Simulation(scene, output=tmp_path / "ring.usdc", frames=30, world=world).run()
+    assert seen and set(seen) == {(2, 30)}

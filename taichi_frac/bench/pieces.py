@@ -43,11 +43,18 @@ def _scene_cases(quick: bool):
         unmoved = [f"{o.name}.fracture.crack_fit_rounds=0" for o in scene.breakable_objects]
         cases.append((label, scene, frames))
         cases.append((f"{label}, {UNMOVED}", load_scene(path, overrides + unmoved), frames))
+        if len(scene.breakable_objects) > 1:  # (the scenes of many pieces of a few tens of tets)
+            smaller = [f"{o.name}.fracture.crack_fit_min_tets={SMALL_FIT_TETS}" for o in scene.breakable_objects]
+            cases.append((f"{label}, {SMALL_FIT}", load_scene(path, overrides + smaller), frames))
     return cases
 
 
 #: The label suffix of the cases whose crack planes the volume fit leaves where they are.
 UNMOVED = "cracks unmoved"
+
+#: ``crack_fit_min_tets`` of the cases that fit the crack stretches to smaller pieces too.
+SMALL_FIT_TETS = 30
+SMALL_FIT = f"stretches fitted to pieces of {SMALL_FIT_TETS}+ tets"
 
 
 def tet_height(model) -> float:
@@ -78,6 +85,7 @@ def measure_pieces(records) -> dict:
             rows.append((rec.model.tet_count, piece_quality(piece_mesh(rec.render), rec.model)))
     quality = [q for _, q in rows]
     large = [q for n, q in rows if n >= LARGE_PIECE_TETS]
+    mid = np.array([q["volume_error"] for n, q in rows if SMALL_FIT_TETS <= n < LARGE_PIECE_TETS])
     volume = np.array([q["volume_error"] for q in quality]) if quality else np.zeros(1)
     large_volume = np.array([q["volume_error"] for q in large]) if large else np.full(1, np.nan)
     roots = {id(rec.root): rec.root for rec in records}
@@ -94,6 +102,8 @@ def measure_pieces(records) -> dict:
         large=len(large), large_volume=float(np.nanmax(np.abs(large_volume))),
         median_volume=float(np.median(np.abs(volume))),
         volume_over=int(np.sum(np.abs(volume) > VOLUME_BOUND)) if quality else 0,
+        mid=len(mid), mid_over=int(np.sum(np.abs(mid) > VOLUME_BOUND)),
+        mid_median=float(np.median(np.abs(mid))) if len(mid) else float("nan"),
         far=sum(q["distance_to_tets_spacings"] > 1.0 for q in quality),
         distance=_spread([q["distance_to_tets_spacings"] for q in quality]),
         large_volume_spread=_spread(100 * np.abs(large_volume)) if large else "-",
@@ -164,7 +174,8 @@ def run(ctx: BenchContext) -> Section:
     from ..geometry.piece_parts import (FOREIGN_DEPTH_FACTOR, GAINED_VOLUME_FACTOR, GAINED_VOLUME_SHARE,
                                         LOST_VOLUME_SHARE, OVERREACH_FACTOR)
     from ..geometry.piece_reach import BALL_BOUND, REACH_FACTOR
-    from ..geometry.crack_offsets import FITTED_PIECE_TETS, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR, VOLUME_TOLERANCE
+    from ..geometry.crack_offsets import (FITTED_PIECE_TETS, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR,
+                                          SMALL_PIECE_WEIGHT, VOLUME_TOLERANCE)
     from ..options import FractureOptions
     from .tables import run_scene
 
@@ -200,7 +211,8 @@ def run(ctx: BenchContext) -> Section:
                      f"{m['before_nonmanifold']} in {m['before_pieces_nonmanifold']}",
                      f"{m['nonmanifold']} / {m['open']} / {m['misoriented']}", f"{m['closed']} of {m['rendered']}",
                      m["multi_shell"], f"{m['crack_rms']:.1e}", f"{m['large_volume_spread']} ({m['large']})",
-                     f"{100 * m['median_volume']:.1f} %", m["volume_over"], m["distance"], m["far"],
+                     f"{100 * m['median_volume']:.1f} %", m["volume_over"],
+                     f"{100 * m['mid_median']:.1f} % / {m['mid_over']} of {m['mid']}", m["distance"], m["far"],
                      f"{m['tet_height']:.2f}"]
                     for label, m in rows]
     markdown = "\n".join([
@@ -234,7 +246,10 @@ def run(ctx: BenchContext) -> Section:
         "of a crack plane between each pair of pieces is shifted on its own (by at most "
         f"{MAX_OFFSET_FACTOR:g} spacings more, the fewest stretches that do it, a wall cut across each step "
         f"between two), up to {FractureOptions().crack_fit_rounds} rounds more; the rows '{UNMOVED}' are the "
-        "same runs with the cracks where the analysis put them.",
+        "same runs with the cracks where the analysis put them; the rows "
+        f"'{SMALL_FIT}' fit the stretches to the pieces of {SMALL_FIT_TETS} tets or more too "
+        f"(`crack_fit_min_tets` {SMALL_FIT_TETS}), a smaller piece's error counted at {SMALL_PIECE_WEIGHT:g} of a "
+        "larger one's.",
         "",
         md_table(["case", "pieces", "on their tets' boundary (cut failed)",
                   "tet faces: non-manifold edges (in pieces)",
@@ -242,6 +257,8 @@ def run(ctx: BenchContext) -> Section:
                   "crack faces' RMS off their cracks [spacings]",
                   f"volume error [%], pieces >= {LARGE_PIECE_TETS} tets: median / 95th pct / max (count)",
                   "median volume error, all", f"pieces off by more than {100 * VOLUME_BOUND:.0f} %",
+                  f"pieces of {SMALL_FIT_TETS}-{LARGE_PIECE_TETS - 1} tets: median volume error / off by more than "
+                  f"{100 * VOLUME_BOUND:.0f} %",
                   "render-to-tets distance per piece [spacings]: median / 95th pct / max",
                   "pieces farther than 1 spacing",
                   "a tet's height, mean [spacings]"],

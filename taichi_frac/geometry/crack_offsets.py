@@ -42,6 +42,12 @@ MOVES = 3
 #: the large pieces around it.
 FITTED_PIECE_TETS = 100
 
+#: Where smaller pieces are fitted too (``cut_render_solid``'s ``fit_min_tets``), a piece of
+#: fewer than FITTED_PIECE_TETS tets counts this much of a larger one's relative volume error:
+#: the larger pieces keep their bound first (counted alike, a stretch shifted for a 30-tet
+#: piece left a 1,000-tet pane piece 4.6 % off its tets' volume).
+SMALL_PIECE_WEIGHT = 0.1
+
 #: No second cut when every fitted piece is already within this share of its tets' volume.
 VOLUME_TOLERANCE = 0.01
 
@@ -58,16 +64,24 @@ def piece_target_volumes(scale: float, model, fragment_tets) -> np.ndarray:
     return np.array([scale * model.tet_volume[np.asarray(t, dtype=np.int64)].sum() for t in fragment_tets])
 
 
-def volume_errors(solids, targets: np.ndarray, fragment_tets) -> np.ndarray:
+def volume_errors(solids, targets: np.ndarray, fragment_tets, min_tets: int = FITTED_PIECE_TETS) -> np.ndarray:
     """(F,) the relative volume error of each piece the fit reads (a solid and at least
-    FITTED_PIECE_TETS tets; NaN for the others). ``solids``: manifolds or None."""
-    return np.array([s.volume() / v - 1.0 if s is not None and len(t) >= FITTED_PIECE_TETS and v > 0 else np.nan
+    ``min_tets`` tets; NaN for the others). ``solids``: manifolds or None."""
+    return np.array([s.volume() / v - 1.0 if s is not None and len(t) >= min_tets and v > 0 else np.nan
                      for s, v, t in zip(solids, targets, fragment_tets)])
 
 
-def volume_misfit(solids, targets: np.ndarray, fragment_tets) -> float:
-    """The fit's measure: the sum of the squared ``volume_errors``."""
-    return float(np.nansum(volume_errors(solids, targets, fragment_tets) ** 2))
+def volume_misfit(solids, targets: np.ndarray, fragment_tets, min_tets: int = FITTED_PIECE_TETS) -> float:
+    """The fit's measure: the sum of the squared ``volume_errors``, each weighted by
+    ``error_weights``."""
+    return float(np.nansum((error_weights(fragment_tets) * volume_errors(solids, targets, fragment_tets,
+                                                                          min_tets)) ** 2))
+
+
+def error_weights(fragment_tets) -> np.ndarray:
+    """(F,) each piece's weight on its relative volume error: 1, or SMALL_PIECE_WEIGHT under
+    FITTED_PIECE_TETS tets."""
+    return np.array([1.0 if len(t) >= FITTED_PIECE_TETS else SMALL_PIECE_WEIGHT for t in fragment_tets])
 
 
 @dataclass(frozen=True)
@@ -167,7 +181,8 @@ def _crack_faces(solid, origin) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def volume_offsets(solids, index_of: np.ndarray, cracks, targets: np.ndarray, fragment_tets,
                    spacing: float, moved: np.ndarray | None = None, frames=None,
-                   origins=None, shifts_only: bool = False, frozen=None) -> tuple[np.ndarray, float]:
+                   origins=None, shifts_only: bool = False, frozen=None,
+                   min_tets: int = FITTED_PIECE_TETS) -> tuple[np.ndarray, float]:
     """The moves of each crack (see ``moved_crack``) that bring the pieces' volumes nearest
     ``targets`` (F,) [m^3]: least squares over the ``volume_errors``, each plane's shift within
     MAX_OFFSET_FACTOR ``spacing`` at its pivot and its tilt within MAX_TILT_FACTOR at its
@@ -175,7 +190,8 @@ def volume_offsets(solids, index_of: np.ndarray, cracks, targets: np.ndarray, fr
     (None: no solid) in their frames, whose origins in the body's are ``origins`` (F,3) [m]
     (None: the body's own), made with the cracks already ``moved`` (C, MOVES) [m] (None: none);
     ``frames``: each crack's TiltFrame or None (no tilt; None: none tilts); ``frozen`` (C,)
-    bool the cracks that stay (None: none).
+    bool the cracks that stay (None: none); ``min_tets``: the least tets of a piece the fit
+    reads.
 
     The planes' shifts alone are fitted first, and kept when they promise as much as every
     move (tilts and the spheres' radii too) or every piece within VOLUME_TOLERANCE: fewer
@@ -185,7 +201,7 @@ def volume_offsets(solids, index_of: np.ndarray, cracks, targets: np.ndarray, fr
     expects after it. Cracks without a slab stay."""
     from ..fracture.crack_types import CrackPlane
 
-    errors = volume_errors(solids, targets, fragment_tets)
+    errors = volume_errors(solids, targets, fragment_tets, min_tets)
     now = float(np.nansum(errors**2))
     if not np.nanmax(np.abs(errors), initial=0.0) > VOLUME_TOLERANCE:
         return np.zeros((len(cracks), MOVES)), now
@@ -327,20 +343,25 @@ def segment_face_moves(solid, origin, sources: np.ndarray, cracks, segments: Cra
 
 
 def segment_shifts(solids, origins, sources: np.ndarray, cracks, segments: CrackSegments, targets: np.ndarray,
-                   fragment_tets, spacing: float, already: np.ndarray, frozen=None) -> tuple[np.ndarray, float]:
+                   fragment_tets, spacing: float, already: np.ndarray, frozen=None,
+                   min_tets: int = FITTED_PIECE_TETS) -> tuple[np.ndarray, float]:
     """The further shifts (S,) [m] of the segments that bring the pieces' volumes nearest
     ``targets``: the fit of least total shift (``_sparse_fit``) where it promises about as
     much as least squares over the ``volume_errors`` (as ``volume_offsets``), else the
     latter; each segment's whole shift within MAX_OFFSET_FACTOR ``spacing``; ``already`` (S,) [m] the
     shifts the ``solids`` were cut with, ``sources`` their cut's crack behind each crack
-    index; ``frozen`` (S,) bool the segments that stay. Returns (change, predicted misfit)."""
-    errors = volume_errors(solids, targets, fragment_tets)
-    now = float(np.nansum(errors**2))
+    index; ``frozen`` (S,) bool the segments that stay; ``min_tets``: the least tets of a
+    piece the fit reads. Returns (change, predicted misfit)."""
+    errors = volume_errors(solids, targets, fragment_tets, min_tets)
+    weights = error_weights(fragment_tets)
+    now = float(np.nansum((weights * errors) ** 2))
     if not segments.count or not np.nanmax(np.abs(errors), initial=0.0) > VOLUME_TOLERANCE:
         return np.zeros(segments.count), now
     origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
-    pieces = [(segment_face_moves(solid, origin, sources, cracks, segments)[:, None] * spacing / target, error)
-              for solid, origin, target, error in zip(solids, origins, targets, errors) if not np.isnan(error)]
+    # (each piece's row and error weighted: the fits below then weigh its error so)
+    pieces = [(w * segment_face_moves(solid, origin, sources, cracks, segments)[:, None] * spacing / target, w * error)
+              for solid, origin, target, error, w in zip(solids, origins, targets, errors, weights)
+              if not np.isnan(error)]
     free = np.ones((segments.count, 1), dtype=bool) if frozen is None else ~np.asarray(frozen, dtype=bool)[:, None]
     already = np.asarray(already, dtype=np.float64)[:, None] / spacing
     change, predicted = _fit(free, pieces, already, now, spacing)

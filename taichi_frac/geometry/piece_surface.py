@@ -58,8 +58,8 @@ from typing import NamedTuple
 import manifold3d as m3
 import numpy as np
 
-from .crack_offsets import (MOVES, crack_segments, moved_crack, piece_target_volumes, segment_shifts, tilt_frames,
-                            volume_misfit, volume_offsets)
+from .crack_offsets import (FITTED_PIECE_TETS, MOVES, crack_segments, moved_crack, piece_target_volumes,
+                            segment_shifts, tilt_frames, volume_misfit, volume_offsets)
 from .crack_slabs import SLAB_PAST_FACTOR, plane_slab, segment_slabs, sphere_shell
 from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
                           overfull_pieces, overreaching_pieces)
@@ -121,7 +121,7 @@ def _separating_cracks(model, bonds, labels, cracks):
 
 def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_origins, *,
                      roughness: float = 0.0, roughness_scale: float | None = None, seed: int = 0,
-                     fit_rounds: int = 3):
+                     fit_rounds: int = 3, fit_min_tets: int = FITTED_PIECE_TETS):
     """Cut a body's render solid along the cracks that broke it.
 
     Args:
@@ -136,6 +136,10 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
             wavelength (None: 4 particle spacings); seed: the noise's seed.
         fit_rounds: how many times the cracks are moved to fit the pieces' volumes (below);
             0: cut on the cracks as the analysis placed them.
+        fit_min_tets: the least tets of a piece whose volume the stretches are fitted to
+            (the whole cracks are fitted to pieces of at least the larger of this and
+            ``FITTED_PIECE_TETS``: a few pieces where cracks meet must not pull a plane that
+            many larger pieces lie on).
 
     The cut is made on the cracks as the analysis placed them, then, while a piece of
     ``FITTED_PIECE_TETS`` tets or more is off its tets' volume by more than
@@ -181,7 +185,8 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
         return _trimmed(pieces, stats, model, labels, piece_origins)
     targets = piece_target_volumes(scale, model, fragment_tets)
     solids = [p.solid if p is not None else None for p in pieces]
-    kept = _Kept(pieces, solids, stats, sources, volume_misfit(solids, targets, fragment_tets))
+    plane_min_tets = max(int(fit_min_tets), FITTED_PIECE_TETS)
+    kept = _Kept(pieces, solids, stats, sources, volume_misfit(solids, targets, fragment_tets, plane_min_tets))
     # The whole cracks first: a crack is frozen when a piece on it fails.
     touching = [set(ends[cut & (inside < 0)].ravel().tolist()) if sites is not None else set()
                 for sites, cut, inside, ends in per_crack]
@@ -190,18 +195,21 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
         return np.array([bool(pieces_of & set(newly.tolist())) for pieces_of in touching], dtype=bool)
 
     kept, moved, cuts = _fit_rounds(
-        fit_rounds, kept, np.zeros((len(cracks), MOVES)), targets, fragment_tets,
+        fit_rounds, kept, np.zeros((len(cracks), MOVES)), targets, fragment_tets, plane_min_tets,
         fit=lambda solids, _, moves, frozen: volume_offsets(solids, index_of, cracks, targets, fragment_tets, spacing,
-                                                            moves, frames, piece_origins, frozen=frozen),
+                                                            moves, frames, piece_origins, frozen=frozen,
+                                                            min_tets=plane_min_tets),
         cut=lambda moves: _cut(*args, moves),
         freeze=on_failed)
     # Then each stretch of a plane between one pair of pieces on its own (crack_offsets.CrackSegments).
     segments = crack_segments(per_crack, len(fragment_tets))
+    kept = kept._replace(misfit=volume_misfit(kept.solids, targets, fragment_tets, fit_min_tets))
     kept, shifts, more = _fit_rounds(
         fit_rounds if segments.count and not roughness else 0, kept, np.zeros(segments.count), targets,
-        fragment_tets,
+        fragment_tets, fit_min_tets,
         fit=lambda solids, sources, moves, frozen: segment_shifts(solids, piece_origins, sources, cracks, segments,
-                                                                  targets, fragment_tets, spacing, moves, frozen),
+                                                                  targets, fragment_tets, spacing, moves, frozen,
+                                                                  fit_min_tets),
         cut=lambda moves: _cut(*args, moved, segments, moves),
         freeze=lambda newly: np.isin(segments.pieces, newly).any(axis=1))
     reach = np.abs(moved[:, 0]) + np.linalg.norm(moved[:, 1:], axis=1)
@@ -223,13 +231,14 @@ class _Kept(NamedTuple):
     misfit: float
 
 
-def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, fit, cut, freeze):
+def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, min_tets: int, fit, cut, freeze):
     """Up to ``rounds`` times, the moves ``fit(solids, sources, moves, frozen)`` proposes
     (further moves, the misfit its linear model predicts), cut (``cut(moves)``: ``_cut``'s
     result) with all of them or else half (FIT_STEPS), kept when the pieces' volumes come
-    nearer. A move that fails a piece the kept cut did not (one crack passing the end of
-    another's slab joins two pieces there) is not kept: ``freeze(newly)`` (bool, per move
-    row) says which moves then stay, and the rest fit again. Stops when the fit promises
+    nearer (``volume_misfit`` over the pieces of ``min_tets`` tets or more). A move that
+    fails a piece the kept cut did not (one crack passing the end of another's slab joins
+    two pieces there) is not kept: ``freeze(newly)`` (bool, per move row) says which moves
+    then stay, and the rest fit again. Stops when the fit promises
     less than FIT_GAIN off the misfit. ``kept``: the ``_Kept`` cut made with ``moves``.
     Returns (kept, moves, cuts made)."""
     frozen = np.zeros(len(moves), dtype=bool)
@@ -247,7 +256,7 @@ def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, fi
                 frozen |= freeze(newly)
                 break
             solids = [p.solid if p is not None else None for p in pieces]
-            misfit = volume_misfit(solids, targets, fragment_tets)
+            misfit = volume_misfit(solids, targets, fragment_tets, min_tets)
             if misfit < kept.misfit:
                 kept, moves = _Kept(pieces, solids, stats, sources, misfit), tried
                 break

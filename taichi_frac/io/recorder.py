@@ -114,7 +114,7 @@ class CacheRecorder:
                 rec.render, rec.model, split.fragment_tets, analysis.cracks,
                 [p.model.com_in_source for p in fracture.pieces], roughness=rec.fracture.crack_roughness,
                 roughness_scale=rec.fracture.crack_roughness_scale, seed=rec.fracture.seed,
-                fit_rounds=rec.fracture.crack_fit_rounds)
+                fit_rounds=rec.fracture.crack_fit_rounds, fit_min_tets=rec.fracture.crack_fit_min_tets)
             self.render_cuts.append((time.perf_counter() - t_cut, counts))
         self.writer.end_fragment(rec.cache_id, frame)
         for piece, child, child_rec, render in zip(fracture.pieces, fracture.children, fracture.children_records,
