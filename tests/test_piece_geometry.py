@@ -325,6 +325,32 @@ def test_stray_shells_join_the_main_shell_they_touch():
     assert len(joined[1].decompose()) == 1 and joined[1].volume() == pytest.approx(65.0, abs=1e-9)
 
 
+def test_the_faces_touching_a_shell_are_those_a_plain_loop_finds():
+    """``piece_shells._touching`` against every face centre measured to every triangle whose
+    grown box holds it, one by one: random small triangles, some a hair off the centres, and
+    one triangle as large as the whole set (the k-d tree's reach is each box's own)."""
+    from trimesh.triangles import closest_point
+
+    from taichi_frac.geometry.piece_shells import _touching
+
+    rng = np.random.default_rng(3)
+    mesh = trimesh.creation.icosphere(subdivisions=3)
+    gap = 0.01
+    near = mesh.triangles[::7] + rng.normal(scale=0.006, size=(1, 3)) * mesh.face_normals[::7, None, :]
+    small = rng.uniform(-1.2, 1.2, (200, 1, 3)) + rng.uniform(-0.05, 0.05, (200, 3, 3))
+    large = np.array([[[-3.0, -3.0, 0.0], [3.0, -3.0, 0.0], [0.0, 3.0, 0.0]]])
+    triangles = np.concatenate([near, small, large])
+    expected = []
+    for k, centre in enumerate(mesh.triangles_center):
+        holding = np.all((triangles.min(axis=1) - gap <= centre) & (centre <= triangles.max(axis=1) + gap), axis=1)
+        if holding.any():
+            nearest = closest_point(triangles[holding], np.repeat(centre[None], holding.sum(), axis=0))
+            if np.min(np.linalg.norm(nearest - centre, axis=1)) <= gap:
+                expected.append(k)
+    found = _touching(mesh, triangles, gap)
+    assert len(expected) > 40 and found.tolist() == expected  # (the plane z = 0 cuts the sphere's equator too)
+
+
 def test_a_piece_reaching_far_past_its_tets_gets_its_tets_boundary(box):
     """A part that holds the whole box given to the piece of the tets at x < -0.05 reaches
     half a box past them: that piece and the one whose tets it covers fall back; the parts

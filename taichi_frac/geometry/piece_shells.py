@@ -104,16 +104,32 @@ def _trimesh(solid: m3.Manifold):
 
 def _touching(mesh, triangles: np.ndarray, gap: float) -> np.ndarray:
     """Indices of ``mesh``'s faces whose centres lie within ``gap`` [m] of the surface of
-    ``triangles`` (F,3,3) [m]: each centre measured to the triangles whose boxes it is in."""
+    ``triangles`` (F,3,3) [m]: each centre measured to the triangles whose boxes (grown by
+    ``gap``) it is in. The candidates come from a k-d tree of the centres, each box's cube
+    about its middle (every pair tested at once took 0.7 s for a shell of 4,000 faces
+    against a main shell of 4,500)."""
+    from scipy.spatial import cKDTree
     from trimesh.triangles import closest_point
 
+    none = np.zeros(0, dtype=np.int64)
     centres = mesh.triangles_center
     low, high = triangles.min(axis=1) - gap, triangles.max(axis=1) + gap
     near = np.all((low <= mesh.bounds[1]) & (high >= mesh.bounds[0]), axis=1)
     triangles, low, high = triangles[near], low[near], high[near]
-    point, triangle = np.nonzero(np.all((centres[:, None] >= low[None]) & (centres[:, None] <= high[None]), axis=2))
+    if not len(triangles):
+        return none
+    # (a hair wider than each box's half side: the exact test below decides)
+    reach = 0.5 * (high - low).max(axis=1) * (1.0 + 1e-9) + 1e-12
+    lists = cKDTree(centres).query_ball_point(0.5 * (low + high), r=reach, p=np.inf)
+    counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
+    if not counts.sum():
+        return none
+    point = np.concatenate([np.asarray(found, dtype=np.int64) for found in lists if found])
+    triangle = np.repeat(np.arange(len(triangles)), counts)
+    inside = np.all((centres[point] >= low[triangle]) & (centres[point] <= high[triangle]), axis=1)
+    point, triangle = point[inside], triangle[inside]
     if not len(point):
-        return np.zeros(0, dtype=np.int64)
+        return none
     distance = np.linalg.norm(closest_point(triangles[triangle], centres[point]) - centres[point], axis=1)
     return np.unique(point[distance <= gap])
 
