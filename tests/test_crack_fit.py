@@ -280,7 +280,7 @@ def test_smaller_pieces_are_fitted_when_asked_but_never_at_a_larger_one_s_cost()
     50 tets, 4 % over its tets' volume) from one block below, each column's stretch its own
     segment. Shifting B's segment up by d takes 0.5 d from B and gives it to the block.
     B is under FITTED_PIECE_TETS, so by default nothing moves. Fitted down to 30 tets (the
-    option crack_fit_min_tets), B's error counts at SMALL_PIECE_WEIGHT: against a block 20
+    option crack_fit_min_tets), B's error counts at SMALL_PIECE_WEIGHT: against a block 40
     times B's volume (whose share of 0.5 d is small) the segment takes B exactly to its
     target, d = 0.04 x target / 0.5; against a block only twice B's volume, what the block
     would lose outweighs it and nothing moves."""
