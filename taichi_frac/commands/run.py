@@ -98,6 +98,11 @@ def print_summary(summary, file=None) -> None:
         ("  contact response + integration", f"{dyn.get('response', 0):.3f} s"),
         ("  fracture analysis", f"{stage['fracture_analysis']:.3f} s"),
         ("  fragment split", f"{stage['fragment_split']:.3f} s"),
+    ]
+    if stage.get("render_surfaces", 0.0) > 0.0:  # (a cache was written and a body broke)
+        rows.append(("    of which render surfaces", f"{stage['render_surfaces']:.3f} s (the pieces' surfaces cut "
+                                                    "along the cracks)"))
+    rows += [
         ("  output", f"{stage['output']:.3f} s"),
     ]
     if s.output:
