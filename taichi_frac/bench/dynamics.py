@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -401,11 +402,33 @@ CONTACT_SEED_SHIFTS = (0, 13, 26, 39, 52, 65, 78, 91)
 CONTACT_FRACTURE_RUNS = 2
 
 
-def _rings_ms(ctx: BenchContext, scene, single: bool, surface: bool, fracture: bool, frames) -> tuple:
+class RingRun(NamedTuple):
     """One 13-ring run: its mean ms/frame (the first frame left out); the ms per frame, over
     all frames, in the dynamics and in the fracture stage (analysis and split); its
     substeps per frame; the contacts of its last substep, its fragments, and its bodies
     asleep at the end and in all."""
+
+    ms: float
+    dynamics_ms: float
+    fracture_ms: float
+    substeps: float
+    contacts: int
+    fragments: int
+    asleep: int
+    bodies: int
+
+
+class RingRuns(NamedTuple):
+    """A contact mode's runs of one scene (``_rings_fastest``): ``fastest``, the fastest run
+    (its counts are every run's: the fracture is reproducible, its time not), and
+    ``ms``, every run's ms/frame in round order."""
+
+    fastest: RingRun
+    ms: list
+
+
+def _rings_ms(ctx: BenchContext, scene, single: bool, surface: bool, fracture: bool, frames) -> RingRun:
+    """One 13-ring run in one contact mode (``RingRun``)."""
     from .tables import run_scene
 
     label = [m[0] for m in CONTACT_MODES if m[1] == single and m[2] == surface][0]
@@ -413,27 +436,22 @@ def _rings_ms(ctx: BenchContext, scene, single: bool, surface: bool, fracture: b
                                      fracture=fracture, frames=frames)
     sleeping = sim.world.body_state()["sleeping"]
     per_frame = 1000.0 / max(summary.frames, 1)
-    return (float(summary.ms_per_frame["mean_after_first"]), sim.times.dynamics * per_frame,
-            (sim.times.fracture_analysis + sim.times.fragment_split) * per_frame, counts["substeps_per_frame"],
-            sim.world.stats.contacts, summary.fragments, int(sleeping.sum()), len(sleeping))
+    return RingRun(float(summary.ms_per_frame["mean_after_first"]), sim.times.dynamics * per_frame,
+                   (sim.times.fracture_analysis + sim.times.fragment_split) * per_frame,
+                   counts["substeps_per_frame"], sim.world.stats.contacts, summary.fragments, int(sleeping.sum()),
+                   len(sleeping))
 
 
 def _rings_fastest(ctx: BenchContext, scenes, fracture: bool, frames, runs: int) -> dict:
     """Each contact mode's 13 rings on each of ``scenes``, ``runs`` times interleaved (every
-    mode and scene once per round): mode label -> one tuple per scene: the fastest run's
-    (ms/frame, dynamics and fracture-stage ms per frame, substeps per frame) and the last
-    run's (contacts in the last substep, fragments, bodies asleep at the end, bodies), then
-    the list of every run's ms/frame, in round order."""
-    times = {(m[0], k): [] for m in CONTACT_MODES for k in range(len(scenes))}
-    last = {}
+    mode and scene once per round): mode label -> one ``RingRuns`` per scene."""
+    done = {(m[0], k): [] for m in CONTACT_MODES for k in range(len(scenes))}
     for _ in range(runs):
         for k, scene in enumerate(scenes):
             for m in CONTACT_MODES:
-                run = _rings_ms(ctx, scene, m[1], m[2], fracture, frames)
-                times[m[0], k].append(run[:4])
-                last[m[0], k] = run[4:]
-    return {m[0]: [(*min(times[m[0], k]), *last[m[0], k], [t[0] for t in times[m[0], k]]) for k in range(len(scenes))]
-            for m in CONTACT_MODES}
+                done[m[0], k].append(_rings_ms(ctx, scene, m[1], m[2], fracture, frames))
+    return {m[0]: [RingRuns(min(done[m[0], k], key=lambda run: run.ms), [run.ms for run in done[m[0], k]])
+                   for k in range(len(scenes))] for m in CONTACT_MODES}
 
 
 def contact_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) -> str:
@@ -478,16 +496,18 @@ def contact_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) -> 
                  + " / ".join(f"{t:g}" for t in HEAP_TIMES) + " s, of all"]
                 + [" / ".join(str(v) for v in heaps[k][:-1]) + f" of {heaps[k][-1]}" for k in labels])
     off = _rings_fastest(ctx, [scene], False, frames, CONTACT_RING_RUNS)
-    rounds = {k: np.asarray(off[k][0][8]) for k in labels}
+    rounds = {k: np.asarray(off[k][0].ms) for k in labels}
     ratios = {k: rounds[k] / rounds[labels[1]] for k in labels}
     rows.append([f"13 rings, fracture off, ms/frame, median of {CONTACT_RING_RUNS} rounds of every mode once "
                  "(ratio to sphere contacts: median of the rounds' ratios, least-most)"]
                 + [f"{np.median(rounds[k]):.2f} ({np.median(ratios[k]):.2f}x, {ratios[k].min():.2f}-"
                    f"{ratios[k].max():.2f})" for k in labels])
-    rows.append(["13 rings, fracture off, contacts in the last substep"] + [f"{off[k][0][4]:,}" for k in labels])
+    rows.append(["13 rings, fracture off, contacts in the last substep"]
+                + [f"{off[k][0].fastest.contacts:,}" for k in labels])
     scenes = seed_scenes or [scene]
     on = _rings_fastest(ctx, scenes, True, frames, CONTACT_FRACTURE_RUNS)
-    ms = {k: float(np.mean([r[0] for r in on[k]])) for k in labels}
+    fastest = {k: [runs.fastest for runs in on[k]] for k in labels}
+    ms = {k: float(np.mean([r.ms for r in fastest[k]])) for k in labels}
     sets = f"{len(scenes)} seed sets" if len(scenes) > 1 else "the scene's seeds"
     rows.append([f"13 rings, fracture on, ms/frame, mean over {sets} of each set's fastest of "
                  f"{CONTACT_FRACTURE_RUNS} interleaved runs (ratio of means to sphere contacts)"]
@@ -495,12 +515,14 @@ def contact_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) -> 
     rows.append([f"13 rings, fracture on, mean over {sets}: ms per frame in the dynamics / in the fracture "
                  "stage (analysis and split), over all frames / substeps per frame (0 in a frame when every body "
                  "sleeps)"]
-                + [" / ".join(f"{np.mean([r[c] for r in on[k]]):.{d}f}" for c, d in ((1, 1), (2, 1), (3, 2)))
+                + [" / ".join(f"{np.mean([getattr(r, name) for r in fastest[k]]):.{digits}f}"
+                              for name, digits in (("dynamics_ms", 1), ("fracture_ms", 1), ("substeps", 2)))
                    for k in labels])
     rows.append(["13 rings, fracture on, per seed set: ms/frame / fragments"]
-                + [", ".join(f"{r[0]:.1f} / {r[5]}" for r in on[k]) for k in labels])
+                + [", ".join(f"{r.ms:.1f} / {r.fragments}" for r in fastest[k]) for k in labels])
     rows.append([f"13 rings, fracture on, mean over {sets}: contacts in the last substep / fragments"]
-                + [f"{np.mean([r[4] for r in on[k]]):,.0f} / {np.mean([r[5] for r in on[k]]):.1f}" for k in labels])
+                + [f"{np.mean([r.contacts for r in fastest[k]]):,.0f} / "
+                   f"{np.mean([r.fragments for r in fastest[k]]):.1f}" for k in labels])
     rows.append(["13 rings, fracture on, per seed set: bodies asleep at the end / bodies"]
-                + [", ".join(f"{r[6]} / {r[7]}" for r in on[k]) for k in labels])
+                + [", ".join(f"{r.asleep} / {r.bodies}" for r in fastest[k]) for k in labels])
     return md_table(["measure", *labels], rows)
