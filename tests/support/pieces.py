@@ -1,6 +1,6 @@
 """The box the piece-geometry tests cut (a 0.2 x 0.1 x 0.06 m block with UVs linear in
-position, so a clipped triangle's UVs have a closed form), prepared once a session, and the
-split-and-cut and closedness helpers they share."""
+position, so a clipped triangle's UVs have a closed form), meshed once per test process, and
+the split-and-cut and closedness helpers they share."""
 
 import functools
 
@@ -25,7 +25,7 @@ def uv_of(points):
 
 @functools.lru_cache(maxsize=1)
 def box_body():
-    """(BodyModel, PrepareReport, trimesh surface) of the box (meshed once a session)."""
+    """(BodyModel, PrepareReport, trimesh surface) of the box (meshed once per test process)."""
     surface = trimesh.creation.box(extents=SIZE)
     surface.visual = trimesh.visual.TextureVisuals(uv=uv_of(surface.vertices))
     model, report = prepare_body(surface, particles=PARTICLES)
