@@ -164,7 +164,9 @@ def test_a_tight_heap_of_ring_pieces_sleeps_on_contacts_kept_past_their_spheres(
     pieces touch while their spheres' gap hovers at the contact margin; the contact is
     kept while it carried load (``narrowphase._carries_with``). Made and lost as the
     pair's motion bound varied, the pieces dropped a substep and were caught again, and
-    only 17 of the 24 slept."""
+    only 17 of the 24 slept. These two seeds show it best: over seeds 0-11 the kept
+    contacts raise the pieces asleep at 3 s from 117 to 128 of 144, and the heaps that
+    sleep whole from 8 to 9 of 12."""
     asleep = 0
     for seed in range(2):
         world = fresh_world(surface_contact=True)
@@ -241,13 +243,17 @@ def _hull_gap(points_a, points_b, guess, directions):
 
 def test_contacts_between_resting_rings_are_their_patches_hull_distance():
     """Four tori dropped tilted and offset onto one another, two substeps a frame: every
-    contact between two patches with facets reports the distance of the patches' convex
-    hulls, against a brute-force search over 4000 directions refined about the best
-    (an independent reference). Median error under 0.05 mm, nine in ten under 0.1 mm,
-    none over 0.5 mm (measured 0.000, 0.002 and 0.13 mm, the search resumed from the
-    last substep's simplex; restarted from the last normal with four steps, 0.04, 0.37
-    and 1.4; with one, 0.51 mm in the median and 2.5 at the 90th percentile: resting
-    pieces were pushed apart where they did not touch)."""
+    contact between two patches with facets whose bodies are at rest reports the distance
+    of the patches' convex hulls, against a brute-force search over 4000 directions refined
+    about the best (an independent reference). At rest: the bodies' relative velocity at
+    the contact point moves it less than 0.01 mm in the substep. Contacts are made at the
+    start of a substep and read here at its end, so a moving pair's reference is taken at
+    other poses (sliding and rebounding pairs read up to 10 mm off), and whether the test
+    passed turned on where in the drop the checked frames fell. Median error under
+    0.05 mm, nine in ten under 0.1 mm, none over 0.5 mm (over this layout turned about the
+    vertical by eight angles, at most 0.0003, 0.003 and 0.12 mm; with the search capped at
+    one step, 1.0 mm in the median and 6.4 mm at worst: resting pieces were pushed apart
+    where they did not touch)."""
     world = fresh_world(surface_contact=True)
     world.add_ground(0.0, restitution=0.0)
     ring = ring_model()
@@ -256,9 +262,10 @@ def test_contacts_between_resting_rings_are_their_patches_hull_distance():
         world.add_body(ring, position, euler_deg_to_quaternion(euler_deg), restitution=0.0)
     directions = np.random.default_rng(0).normal(size=(4000, 3))
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    substep = 0.01  # [s]
     errors = []
     for frame in range(60):
-        world.advance(0.02, 2)
+        world.advance(2 * substep, 2)
         if frame < 20 or frame % 5:
             continue
         p, b, c = world.particles, world.bodies, world.contacts
@@ -269,14 +276,19 @@ def test_contacts_between_resting_rings_are_their_patches_hull_distance():
         faceted = np.linalg.norm(p.patch_facet.to_numpy()[:, 0], axis=1) > 0.5
         points, body = p.surface_point.to_numpy(), p.body.to_numpy()
         position, turn = b.position.to_numpy(), b.rotation.to_numpy()
+        linear, angular, at = b.linear_velocity.to_numpy(), b.angular_velocity.to_numpy(), c.point.to_numpy()[:n]
 
         def patch(s):
             return position[body[s]] + points[start[s]:start[s] + count[s]] @ turn[body[s]].T
 
+        def velocity(s, x):
+            return linear[body[s]] + np.cross(angular[body[s]], x - position[body[s]])
+
         for k in range(n):
             i, j = query[k], key[k]
             if other[k] >= 0 and faceted[i] and faceted[j]:
-                errors.append(_hull_gap(patch(i), patch(j), normal[k], directions) - separation[k])
+                if np.linalg.norm(velocity(i, at[k]) - velocity(j, at[k])) * substep < 1e-5:
+                    errors.append(_hull_gap(patch(i), patch(j), normal[k], directions) - separation[k])
     errors = np.array(errors)
     assert len(errors) > 500
     assert np.median(errors) < 0.05e-3 and np.percentile(errors, 90) < 0.1e-3 and errors.max() < 0.5e-3
