@@ -18,10 +18,10 @@ vec3 = ti.math.vec3
 #: search resumes from the pair's simplex of the last substep and stops once converged
 #: (``HULL_TOLERANCE``): 1.3 steps a search on average in the unbroken 13 rings, where
 #: restarting each substep from the last normal took all of four. Tilted rings resting on
-#: each other read their hulls' distance to 0.002 mm at the 90th percentile, 0.13 mm at
-#: worst; a cap of four steps left one search in thirty off by over 0.6 mm (a resumed
-#: simplex far from the new closest features), restarting from the last normal 0.37 mm at
-#: the 90th percentile.
+#: each other read their hulls' distance to 0.003 mm at the 90th percentile and 0.12 mm at
+#: worst (``test_contact_surface``'s four tori, dropped eight ways); capped at four steps,
+#: 0.48 mm at worst over three of those drops (a resumed simplex far from the new closest
+#: features).
 HULL_ITERATIONS = 6
 
 #: The search runs on the hulls moved apart along the first direction by their overlap
