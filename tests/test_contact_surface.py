@@ -248,8 +248,8 @@ def test_contacts_between_resting_rings_are_their_patches_hull_distance():
     about the best (an independent reference). At rest: the bodies' relative velocity at
     the contact point moves it less than 0.01 mm in the substep. Contacts are made at the
     start of a substep and read here at its end, so a moving pair's reference is taken at
-    other poses (sliding and rebounding pairs read up to 10 mm off), and whether the test
-    passed turned on where in the drop the checked frames fell. Median error under
+    other poses (sliding and rebounding pairs read up to 10 mm off), and an unfiltered check
+    passes or fails by where in the drop its frames fall. Median error under
     0.05 mm, nine in ten under 0.1 mm, none over 0.5 mm (over this layout turned about the
     vertical by eight angles, at most 0.0003, 0.003 and 0.12 mm; with the search capped at
     one step, 1.0 mm in the median and 6.4 mm at worst: resting pieces were pushed apart
