@@ -203,7 +203,8 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
         freeze=on_failed)
     # Then each stretch of a plane between one pair of pieces on its own (crack_offsets.CrackSegments).
     segments = crack_segments(per_crack, len(fragment_tets))
-    kept = kept._replace(misfit=volume_misfit(kept.solids, targets, fragment_tets, fit_min_tets))
+    if fit_min_tets != plane_min_tets:  # (the stretches read smaller pieces than the planes did)
+        kept = kept._replace(misfit=volume_misfit(kept.solids, targets, fragment_tets, fit_min_tets))
     kept, shifts, more = _fit_rounds(
         fit_rounds if segments.count and not roughness else 0, kept, np.zeros(segments.count), targets,
         fragment_tets, fit_min_tets,
