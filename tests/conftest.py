@@ -27,3 +27,12 @@ def scene_world():
 
     return World(WorldCapacity(max_bodies=4096, max_boundary_particles=200_000, max_contacts=400_000,
                                max_static_boxes=8))
+
+
+@pytest.fixture(scope="module")
+def box():
+    """The textured box body of the piece-geometry and crack-fit tests
+    (``support.pieces.box_body``): (BodyModel, PrepareReport, trimesh surface)."""
+    from support.pieces import box_body
+
+    return box_body()

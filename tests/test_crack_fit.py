@@ -13,12 +13,7 @@ from taichi_frac.geometry.piece_surface import piece_mesh
 from taichi_frac.geometry.render_solid import render_solid_from_surface
 from taichi_frac.options import FractureOptions
 
-from support.pieces import SIZE, assert_closed, box_body, split_and_cut
-
-
-@pytest.fixture(scope="module")
-def box():
-    return box_body()
+from support.pieces import SIZE, assert_closed, split_and_cut
 
 
 def test_volume_offsets_move_a_plane_to_the_tets_volume():

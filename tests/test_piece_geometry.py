@@ -22,15 +22,10 @@ from taichi_frac.geometry.prepare import prepare_body
 from taichi_frac.options import FractureOptions, material_preset
 from taichi_frac.scenes import BUILTIN_SCENE_DIR as SCENES
 
-from support.pieces import PARTICLES, SIZE, assert_closed, box_body, split_and_cut, uv_of
+from support.pieces import PARTICLES, SIZE, assert_closed, split_and_cut, uv_of
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_MESHES = REPO.parent / "shared" / "meshes"
-
-
-@pytest.fixture(scope="module")
-def box():
-    return box_body()
 
 
 def test_edge_counts_and_inside_catch_broken_meshes():
