@@ -18,6 +18,7 @@ from taichi_frac.geometry.contact_patches import contact_patches, contact_patche
 from taichi_frac.model import build_body_model, patches_of
 from taichi_frac.scenes import BUILTIN_SCENE_DIR, euler_deg_to_quaternion, load_scene
 from taichi_frac.simulation import Simulation
+from taichi_frac.bench.tables import other_seeds
 from taichi_frac.bench.bodies import (box_model, drop_heap, heap_asleep, ring_chips, ring_model, settle_and_hold,
                                       single_tet_model, stack_cubes, stack_rings)
 from support.dynamics import fresh_world, rotation
@@ -418,8 +419,7 @@ def test_pieces_wedged_between_pieces_come_to_rest(scene_world):
     of a face reaching past its patch (not bounded by ``surface.PLANE_REACH``) was jolted
     from substep to substep, and 51 of 128 pieces were still awake at the end."""
     path = BUILTIN_SCENE_DIR / "thirteen_rings.toml"
-    shifted = [f"{o.name}.fracture.seed={o.fracture.seed + 91}" for o in load_scene(path).breakable_objects]
-    scene = load_scene(path, shifted + ["simulation.surface_contact=true"])
+    scene = load_scene(path, other_seeds(load_scene(path), 91) + ["simulation.surface_contact=true"])
     sim = Simulation(scene, output=False, world=scene_world)
     sim.run()
     sleeping = sim.world.body_state()["sleeping"]
