@@ -16,6 +16,8 @@ import re
 import signal
 import subprocess
 import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -332,6 +334,22 @@ def test_a_second_run_on_one_output_refuses_unless_overwrite(tmp_path, capsys):
     assert stale.holder() == stale.owner
     stale.release()
     assert not stale.lock_path.exists()
+    # So is one whose killed process is a zombie nobody reaped (as in containers whose init
+    # never reaps): it answers signal 0 but will never write again.
+    zombie = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        zombie.kill()
+        stat = Path(f"/proc/{zombie.pid}/stat")
+        deadline = time.monotonic() + 10
+        while stat.exists() and stat.read_text().rpartition(")")[2].split()[0] != "Z":
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        held = OutputLock(tmp_path / "d.usdc")
+        held.lock_path.write_text(f"{zombie.pid} {held.owner.split(' ', 1)[1]}\n")
+        held.acquire()
+        assert held.holder() == held.owner
+    finally:
+        zombie.wait()
 
 
 # 7. Ctrl-C during start-up --------------------------------------------------------------------

@@ -74,7 +74,13 @@ def _process_alive(pid: int) -> bool:
         return False
     except PermissionError:  # someone else's process: alive
         return True
-    return True
+    # A killed run whose parent died too can linger as a zombie until init reaps it (some
+    # containers' init never does); it answers signal 0 but will never write again.
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return True  # no /proc (macOS): signal 0 is all there is
+    return stat.rpartition(")")[2].split()[:1] not in (["Z"], ["X"])
 
 
 class OutputLock:
