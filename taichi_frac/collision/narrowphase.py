@@ -64,7 +64,7 @@ class Contacts:
     the impulse cache and the impact records visit them (sorted by querying particle).
     Written by solver.solve_contacts: sweep_order (i32), ``order`` with the contacts
     between bodies first, then those with static colliders.
-    Written by reduction.reduce_static_contacts: reduce_mark (i32, scratch: whether the
+    Written by reduction.reduce_contacts: reduce_mark (i32, scratch: whether the
     contact is kept, then its slot after the compaction).
     Scalars: count (may exceed capacity: the excess is ``overflow``), overflow (summed over
     an advance, reset by the World), peak (largest count since the World reset it),

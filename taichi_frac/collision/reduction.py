@@ -1,28 +1,33 @@
 """Contact reduction: a body resting on the ground through its true surface touches it at
 every patch along its contact area (a ring's flat bottom, a cube's face: tens of contacts;
-a small piece at up to four points a patch), where its boundary spheres touched at a few.
-The serial solver pays for each in every sweep, and a rigid body needs no more than its
-contact area's outline to stand on.
+a small piece at up to four points a patch), where its boundary spheres touched at a few;
+two bodies resting on each other touch at every pair of patches that meet (two rings
+crossing: forty and more). The serial solver pays for each in every sweep, and a rigid
+body needs no more than its contact area's outline to stand on.
 
-So a body's patch contacts with one static collider are reduced to representatives, the way a physics engine reduces a
-face-face manifold (Bullet's ``btPersistentManifold::sortCachedPoints``, PhysX's patch
-reduction): the deepest contact, and the contact farthest out along each of
-``DIRECTIONS`` directions across the contact normal among the contacts that touch (gap
-within ``TOUCHING_BAND`` of their sphere's radius of the deepest gap), and
-among those near (within the contact margin, as the narrowphase makes a resting body's
-contacts). Against a plane a body's gap is an
+So a body's patch contacts with one static collider, or with one other body, are reduced
+to representatives, the way a physics engine reduces a face-face manifold (Bullet's
+``btPersistentManifold::sortCachedPoints``, PhysX's patch reduction): the deepest contact,
+and the contact farthest out along each of ``DIRECTIONS`` directions across the deepest
+contact's normal among the contacts that touch (gap within ``TOUCHING_BAND`` of their
+sphere's radius of the deepest gap), and among those near (within the contact margin, as
+the narrowphase makes a resting body's contacts). Against a plane a body's gap is an
 affine function of the point (for the small rotation of one substep), so the
-representatives holding their gaps hold every point inside their outline. Contacts
-farther from the collider (speculative contacts of a tilting body's far side, made
-because they approach) are kept as they are: they stop the parts that will touch next.
-A landing body (a contact approaching faster than the restitution threshold) keeps all
-its contacts: they share the impact's impulse, and where it acts decides how the body
-turns.
+representatives holding their gaps hold every point inside their outline; between two
+curved bodies it is so only across a contact area small against their curvature, which
+the touching band keeps to. Contacts farther away (speculative contacts of a tilting
+body's far side, made because they approach) are kept as they are: they stop the parts
+that will touch next. A landing body (a contact approaching faster than the restitution
+threshold, relative to the other body's point there) keeps all its contacts with that
+collider or body: they share the impact's impulse, and where it acts decides how the body
+turns. (Between bodies the reduction is most of what keeps the pile of 13 rings on its
+surfaces within reach of its spheres' time: ``taichi-frac bench dynamics --contact-only``.)
 
 The choice depends on the contacts' geometry and their (particle, key) order alone, not
 on the order the parallel narrowphase appended them, so runs stay reproducible; a body
 resting still keeps the same representatives from substep to substep, so their impulses
-warm-start.
+warm-start. A pair of bodies' contacts all lie in one body's run of the order: the
+narrowphase makes a pair's contacts from one side only.
 """
 
 import math
@@ -48,12 +53,17 @@ UNSEEN, KEEP, DROP = 0, 1, 2
 
 @ti.func
 def _reducible(particles: ti.template(), contacts: ti.template(), c):
-    """Whether contact ``c`` is a patch contact with a static collider."""
-    return contacts.body_b[c] < 0 and particles.point_count[contacts.query[c]] > 0
+    """Whether contact ``c`` is a patch contact: with a static collider, or between two
+    bodies' patches (its key is the other body's sphere)."""
+    reducible = particles.point_count[contacts.query[c]] > 0
+    if contacts.body_b[c] >= 0:
+        reducible = reducible and particles.point_count[contacts.key[c]] > 0
+    return reducible
 
 
 @ti.func
 def _same_collider(contacts: ti.template(), c, d):
+    """Whether contacts ``c`` and ``d`` are with the same static collider or body."""
     return contacts.body_b[c] == contacts.body_b[d] and contacts.static_index[c] == contacts.static_index[d]
 
 
@@ -71,10 +81,10 @@ def _layer(contacts: ti.template(), c, low, margin):
 def _reduce_group(bodies: ti.template(), particles: ti.template(), contacts: ti.template(), end, first, margin,
                   bounce_speed):
     """Mark the contacts of ``order[first:end]`` (one body's, sorted by particle) with the
-    static collider of contact ``order[first]``: KEEP the deepest, the outermost in each
+    static collider or body of contact ``order[first]``: KEEP the deepest, the outermost in each
     direction of each layer (``_layer``: touching, near) and those beyond the margin, DROP
     the rest; KEEP all while the body lands (a contact approaches faster than
-    ``bounce_speed`` [m/s], the restitution threshold). A layer's outline is its own: the
+    ``bounce_speed`` [m/s], the restitution threshold, relative to the other body). A layer's outline is its own: the
     touching contacts' outline holds the body up, the near ones' (a ring's next row of
     vertices, further out and a few millimetres up) would not."""
     lead = contacts.order[first]
@@ -88,6 +98,9 @@ def _reduce_group(bodies: ti.template(), particles: ti.template(), contacts: ti.
             if contacts.separation[c] < contacts.separation[deepest]:
                 deepest = c
             v = bodies.linear_velocity[a] + bodies.angular_velocity[a].cross(contacts.point[c] - bodies.position[a])
+            o = contacts.body_b[c]
+            if o >= 0:
+                v -= bodies.linear_velocity[o] + bodies.angular_velocity[o].cross(contacts.point[c] - bodies.position[o])
             if -v.dot(contacts.normal[c]) > bounce_speed:
                 landing = True
     low = contacts.separation[deepest]
@@ -119,9 +132,8 @@ def _reduce_group(bodies: ti.template(), particles: ti.template(), contacts: ti.
 
 
 @ti.func
-def reduce_static_contacts(bodies: ti.template(), particles: ti.template(), contacts: ti.template(), margin,
-                           bounce_speed):
-    """Serial: reduce each body's patch contacts with each static collider (module
+def reduce_contacts(bodies: ti.template(), particles: ti.template(), contacts: ti.template(), margin, bounce_speed):
+    """Serial: reduce each body's patch contacts with each static collider and each body (module
     docstring) and compact the kept contacts to the front of the buffer, in their slot
     order. Reads ``contacts.order`` (sorted by particle, so one body's contacts are
     consecutive in it) and leaves it so for the kept contacts. Skipped when the

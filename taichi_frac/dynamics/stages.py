@@ -45,8 +45,7 @@ def collide(f: ti.template(), margin: ti.f32, dt: ti.f32, sleep_time: ti.f32, pa
                                   wake_speed, dt, f.params.restitution_threshold[None])
     narrowphase.order_contacts(f.particles, f.contacts)
     if ti.static(patches):
-        reduction.reduce_static_contacts(f.bodies, f.particles, f.contacts, margin,
-                                         f.params.restitution_threshold[None])
+        reduction.reduce_contacts(f.bodies, f.particles, f.contacts, margin, f.params.restitution_threshold[None])
 
 
 @ti.kernel
