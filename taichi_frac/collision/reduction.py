@@ -20,8 +20,7 @@ body's far side, made because they approach) are kept as they are: they stop the
 that will touch next. A landing body (a contact approaching faster than the restitution
 threshold, relative to the other body's point there) keeps all its contacts with that
 collider or body: they share the impact's impulse, and where it acts decides how the body
-turns. (Between bodies the reduction is most of what keeps the pile of 13 rings on its
-surfaces within reach of its spheres' time: ``taichi-frac bench dynamics --contact-only``.)
+turns. A ring resting flat on another keeps 16 of its 228 contacts with it.
 
 The choice depends on the contacts' geometry and their (particle, key) order alone, not
 on the order the parallel narrowphase appended them, so runs stay reproducible; a body
@@ -81,12 +80,12 @@ def _layer(contacts: ti.template(), c, low, margin):
 def _reduce_group(bodies: ti.template(), particles: ti.template(), contacts: ti.template(), end, first, margin,
                   bounce_speed):
     """Mark the contacts of ``order[first:end]`` (one body's, sorted by particle) with the
-    static collider or body of contact ``order[first]``: KEEP the deepest, the outermost in each
-    direction of each layer (``_layer``: touching, near) and those beyond the margin, DROP
-    the rest; KEEP all while the body lands (a contact approaches faster than
-    ``bounce_speed`` [m/s], the restitution threshold, relative to the other body). A layer's outline is its own: the
-    touching contacts' outline holds the body up, the near ones' (a ring's next row of
-    vertices, further out and a few millimetres up) would not."""
+    static collider or body of contact ``order[first]``: KEEP the deepest, the outermost in
+    each direction of each layer (``_layer``: touching, near) and those beyond the margin,
+    DROP the rest; KEEP all while the body lands (a contact approaches faster than
+    ``bounce_speed`` [m/s], the restitution threshold, relative to the other body). A
+    layer's outline is its own: the touching contacts' outline holds the body up, the near
+    ones' (a ring's next row of vertices, further out and a few millimetres up) would not."""
     lead = contacts.order[first]
     a = contacts.body_a[lead]
     # Deepest (the first in order on a tie).
@@ -97,10 +96,11 @@ def _reduce_group(bodies: ti.template(), particles: ti.template(), contacts: ti.
         if _reducible(particles, contacts, c) and _same_collider(contacts, c, lead):
             if contacts.separation[c] < contacts.separation[deepest]:
                 deepest = c
-            v = bodies.linear_velocity[a] + bodies.angular_velocity[a].cross(contacts.point[c] - bodies.position[a])
+            p = contacts.point[c]
+            v = bodies.linear_velocity[a] + bodies.angular_velocity[a].cross(p - bodies.position[a])
             o = contacts.body_b[c]
             if o >= 0:
-                v -= bodies.linear_velocity[o] + bodies.angular_velocity[o].cross(contacts.point[c] - bodies.position[o])
+                v -= bodies.linear_velocity[o] + bodies.angular_velocity[o].cross(p - bodies.position[o])
             if -v.dot(contacts.normal[c]) > bounce_speed:
                 landing = True
     low = contacts.separation[deepest]
@@ -133,10 +133,10 @@ def _reduce_group(bodies: ti.template(), particles: ti.template(), contacts: ti.
 
 @ti.func
 def reduce_contacts(bodies: ti.template(), particles: ti.template(), contacts: ti.template(), margin, bounce_speed):
-    """Serial: reduce each body's patch contacts with each static collider and each body (module
-    docstring) and compact the kept contacts to the front of the buffer, in their slot
-    order. Reads ``contacts.order`` (sorted by particle, so one body's contacts are
-    consecutive in it) and leaves it so for the kept contacts. Skipped when the
+    """Serial: reduce each body's patch contacts with each static collider and each other
+    body (module docstring) and compact the kept contacts to the front of the buffer, in
+    their slot order. Reads ``contacts.order`` (sorted by particle, so one body's contacts
+    are consecutive in it) and leaves it so for the kept contacts. Skipped when the
     buffer overflowed (the overflow is reported; its contacts are not all here).
     ``margin``: the contact margin (fraction of a sphere's radius); ``bounce_speed``
     [m/s]: the restitution threshold (a landing keeps all its contacts)."""
