@@ -1,0 +1,92 @@
+"""Surface contacts against the boundary grouping n (``particles.boundary_group_size``):
+with surface contacts the spheres only find which patches may touch, so coarser spheres
+(fewer of them, larger patches) cost less while the rest heights, which the patches set,
+stay. What the coarser spheres do change is where a landing's impulse acts
+(``collision.surface.SPOT_BAND`` is a fraction of the sphere radius, tuned at n = 4) and
+how a body of few tets is covered. Part of the contact page (``dynamics.contact_section``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .common import BenchContext, md_table
+
+#: The groupings compared, each with surface contacts, against sphere contacts at n = 4.
+GROUPINGS = (4, 8, 12)
+
+#: Rounds of the unbroken 13 rings: each runs sphere contacts (n = 4) and every grouping
+#: once, back to back; each grouping's ratio is the median of the rounds' ratios.
+GROUPING_RING_RUNS = 7
+
+#: Crack-seed shifts of the 13 rings with fracture (a subset of the contact table's), each
+#: run once per mode, interleaved; the modes are compared on their mean.
+GROUPING_SEED_SHIFTS = (0, 13, 26, 39)
+
+
+def _grouped(scene, group: int, surface: bool):
+    """``scene`` with every object grouped by ``group`` and the contact mode ``surface``."""
+    objects = [dataclasses.replace(o, particles=dataclasses.replace(o.particles, boundary_group_size=group))
+               for o in scene.objects]
+    return dataclasses.replace(scene, objects=objects, simulation=dataclasses.replace(
+        scene.simulation, single_scale=False, surface_contact=surface))
+
+
+def _ring_ms(ctx: BenchContext, scene, fracture: bool, frames) -> tuple[float, int, int]:
+    """One 13-ring run: mean ms/frame (first frame left out), collision spheres at the start,
+    fragments."""
+    from .tables import run_scene
+
+    _, summary, counts = run_scene(ctx, scene, "13 rings, grouping", fracture=fracture, frames=frames)
+    return float(summary.ms_per_frame["mean_after_first"]), int(counts["collision"]), int(summary.fragments)
+
+
+def grouping_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) -> str:
+    """The table of surface contacts at each of ``GROUPINGS`` (markdown): the 13 rings'
+    time without and with fracture against sphere contacts at n = 4, in one run, and the
+    ring drop and the coarse cube stack against their references."""
+    from .dynamics import _cube_on_cube, _ring_drop
+
+    reference = _ring_drop(ctx, single=True, surface=False)
+    drops = {n: _ring_drop(ctx, single=False, surface=True, group=n) for n in GROUPINGS}
+    cubes = {n: _cube_on_cube(ctx, False, True, 60, group=n) for n in GROUPINGS}
+    variants = {"sphere": _grouped(scene, 4, False)} | {n: _grouped(scene, n, True) for n in GROUPINGS}
+    off = {k: [] for k in variants}
+    spheres = {}
+    for _ in range(GROUPING_RING_RUNS):
+        for k, sc in variants.items():
+            ms, spheres[k], _ = _ring_ms(ctx, sc, False, frames)
+            off[k].append(ms)
+    base = np.asarray(off["sphere"])
+    scenes = seed_scenes or [scene]
+    on = {k: [] for k in variants}
+    for sc in scenes:
+        for k in variants:
+            group, surface = (4, False) if k == "sphere" else (k, True)
+            on[k].append(_ring_ms(ctx, _grouped(sc, group, surface), True, frames))
+    on_ms = {k: float(np.mean([r[0] for r in on[k]])) for k in variants}
+    rows = []
+    for n in GROUPINGS:
+        ratios = np.asarray(off[n]) / base
+        d = drops[n]
+        rows.append([
+            n, f"{spheres[n]:,}",
+            f"{np.median(off[n]):.2f} ({np.median(ratios):.2f}x, {ratios.min():.2f}-{ratios.max():.2f})",
+            f"{on_ms[n]:.1f} ({on_ms[n] / on_ms['sphere']:.2f}x) / {np.mean([r[2] for r in on[n]]):.0f}",
+            f"{1e3 * (d['rest'] - 0.025):+.2f}",
+            f"{100 * (d['rebound'] / max(reference['rebound'], 1e-12) - 1):+.1f} %",
+            f"{100 * (d['impulse'] / max(reference['impulse'], 1e-12) - 1):+.1f} %",
+            f"{1e3 * cubes[n]:+.2f}",
+        ])
+    sets = f"{len(scenes)} seed sets" if len(scenes) > 1 else "the scene's seeds"
+    header = ["n (surface contacts)", "13 rings: collision spheres",
+              f"13 rings, fracture off: ms/frame, median of {GROUPING_RING_RUNS} rounds (ratio to sphere contacts "
+              f"at n = 4, {np.median(base):.2f} ms: median of the rounds' ratios, least-most)",
+              f"13 rings, fracture on: ms/frame, mean over {sets} (ratio to sphere contacts at n = 4, "
+              f"{on_ms['sphere']:.1f} ms, {np.mean([r[2] for r in on['sphere']]):.0f} fragments) / fragments",
+              "torus at rest, COM z − exact 25.0 mm [mm]", "ring drop: rebound vs single-scale",
+              "ring drop: first-impact impulse vs single-scale",
+              "0.1 m cube on a cube (60 tets each), COM z above the lower − exact 100.0 mm [mm]"]
+    return md_table(header, rows)
