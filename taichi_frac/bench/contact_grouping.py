@@ -27,11 +27,13 @@ GROUPING_SEED_SHIFTS = (0, 13, 26, 39)
 
 
 def _grouped(scene, group: int, surface: bool):
-    """``scene`` with every object grouped by ``group`` and the contact mode ``surface``."""
+    """``scene`` with every object grouped by ``group`` and the contact mode ``surface``
+    (two-scale)."""
+    from .dynamics import _with_contact
+
     objects = [dataclasses.replace(o, particles=dataclasses.replace(o.particles, boundary_group_size=group))
                for o in scene.objects]
-    return dataclasses.replace(scene, objects=objects, simulation=dataclasses.replace(
-        scene.simulation, single_scale=False, surface_contact=surface))
+    return _with_contact(dataclasses.replace(scene, objects=objects), False, surface)
 
 
 def _ring_ms(ctx: BenchContext, scene, fracture: bool, frames) -> tuple[float, int, int]:
