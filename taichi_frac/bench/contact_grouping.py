@@ -1,9 +1,10 @@
 """Surface contacts against the boundary grouping n (``particles.boundary_group_size``):
 with surface contacts the spheres only find which patches may touch, so coarser spheres
 (fewer of them, larger patches) cost less while the rest heights, which the patches set,
-stay. What the coarser spheres do change is where a landing's impulse acts
-(``collision.surface.SPOT_BAND`` is a fraction of the sphere radius, tuned at n = 4) and
-how a body of few tets is covered. Part of the contact page (``dynamics.contact_section``).
+stay, and so does a landing's impulse (it acts at the patch's lowest point,
+``collision.surface.SPOT_BAND``). What the coarser spheres do change is how a body of few
+tets is covered, and the rolling resistance (a fraction of the sphere radius). Part of the
+contact page (``dynamics.contact_section``).
 """
 
 from __future__ import annotations
@@ -49,11 +50,12 @@ def grouping_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) ->
     """The table of surface contacts at each of ``GROUPINGS`` (markdown): the 13 rings'
     time without and with fracture against sphere contacts at n = 4, in one run, and the
     ring drop and the coarse cube stack against their references."""
-    from .dynamics import _cube_on_cube, _ring_drop
+    from .dynamics import LANDING_TILTS, _cube_on_cube, _landing, _ring_drop, landing_row
 
     reference = _ring_drop(ctx, single=True, surface=False)
     drops = {n: _ring_drop(ctx, single=False, surface=True, group=n) for n in GROUPINGS}
     cubes = {n: _cube_on_cube(ctx, False, True, 60, group=n) for n in GROUPINGS}
+    landings = {n: _landing(ctx, False, True, group=n) for n in GROUPINGS}
     variants = {"sphere": _grouped(scene, 4, False)} | {n: _grouped(scene, n, True) for n in GROUPINGS}
     off = {k: [] for k in variants}
     spheres = {}
@@ -80,6 +82,7 @@ def grouping_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) ->
             f"{1e3 * (d['rest'] - 0.025):+.2f}",
             f"{100 * (d['rebound'] / max(reference['rebound'], 1e-12) - 1):+.1f} %",
             f"{100 * (d['impulse'] / max(reference['impulse'], 1e-12) - 1):+.1f} %",
+            landing_row(landings[n]),
             f"{1e3 * cubes[n]:+.2f}",
         ])
     sets = f"{len(scenes)} seed sets" if len(scenes) > 1 else "the scene's seeds"
@@ -90,5 +93,7 @@ def grouping_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) ->
               f"{on_ms['sphere']:.1f} ms, {np.mean([r[2] for r in on['sphere']]):.0f} fragments) / fragments",
               "torus at rest, COM z − exact 25.0 mm [mm]", "ring drop: rebound vs single-scale",
               "ring drop: first-impact impulse vs single-scale",
+              "torus landing without friction, tilted " + " / ".join(str(t) for t in LANDING_TILTS)
+              + "°: first impact's normal impulse − closed form [%]",
               "0.1 m cube on a cube (60 tets each), COM z above the lower − exact 100.0 mm [mm]"]
     return md_table(header, rows)

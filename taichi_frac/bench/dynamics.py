@@ -282,6 +282,43 @@ def _ring_drop(ctx: BenchContext, single: bool, surface: bool, group: int = 4) -
     return dict(rest=drop.rest_height, rebound=drop.rebound, impulse=drop.first_impulse, depth=drop.surface_depth)
 
 
+#: Tilts [degrees] of the frictionless landing (``_landing``): ones at which one vertex of
+#: the 40 x 12-section torus is clearly the lowest.
+LANDING_TILTS = (10, 20, 25, 30)
+
+
+def _landing(ctx: BenchContext, single: bool, surface: bool, group: int = 4) -> list[float]:
+    """The torus of the dynamics tests (``bodies.ring_model``) landing without friction at
+    each of ``LANDING_TILTS`` (``bodies.tilted_landing``, e = 0.5, from 0.1 m): the first
+    impact's normal impulse relative to the closed form, less 1."""
+    import math
+
+    from ..dynamics import DynamicsOptions
+    from ..model import build_body_model
+    from . import bodies
+
+    ring = bodies.ring_model()
+    model = build_body_model(ring.vertices, ring.tets, bodies.DENSITY, boundary_group_size=1 if single else group)
+    errors = []
+    for degrees in LANDING_TILTS:
+        world = ctx.world()
+        world.clear()
+        world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
+        impulse, exact, _ = bodies.tilted_landing(world, model, math.radians(degrees))
+        errors.append(impulse / exact - 1.0)
+    return errors
+
+
+def landing_row(errors) -> str:
+    """``_landing``'s errors as a table cell [%]."""
+    return " / ".join(f"{100 * e:+.1f}" for e in errors)
+
+
+LANDING_LABEL = ("torus (40 x 12 sections, the tests') landing on its lowest vertex without friction, tilted "
+                 + " / ".join(str(t) for t in LANDING_TILTS) + "°, e = 0.5, from 0.1 m: first impact's normal "
+                 "impulse − the closed form (1 + e) v / (1/m + (r × n)·I⁻¹(r × n)) [%]")
+
+
 def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) -> dict:
     """A 0.1 m porcelain cube let down flat (or on an edge, turned 45 degrees) 1 mm above
     the ground, restitution 0: its centre-of-mass height after 1 s (0.3 s on the edge,
@@ -476,6 +513,7 @@ def contact_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) -> 
     import math
 
     drops = {m[0]: _ring_drop(ctx, m[1], m[2]) for m in CONTACT_MODES}
+    landings = {m[0]: _landing(ctx, m[1], m[2]) for m in CONTACT_MODES}
     flat = {m[0]: _cube_rest(ctx, m[1], m[2], on_edge=False) for m in CONTACT_MODES}
     edge = {m[0]: _cube_rest(ctx, m[1], m[2], on_edge=True) for m in CONTACT_MODES}
     stacks = {m[0]: _ring_stack(ctx, m[1], m[2]) for m in CONTACT_MODES}
@@ -501,6 +539,7 @@ def contact_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) -> 
         ["ring drop: first-impact impulse [N s], vs single-scale"]
         + [f"{drops[k]['impulse']:.3f} ({100 * (drops[k]['impulse'] / max(ref['impulse'], 1e-12) - 1):+.1f} %)"
            for k in labels],
+        [LANDING_LABEL] + [landing_row(landings[k]) for k in labels],
         ["deepest point of the true surface below the ground, ring / cube flat / cube edge [mm]"]
         + [f"{1e3 * drops[k]['depth']:.2f} / {1e3 * flat[k]['depth']:.2f} / {1e3 * edge[k]['depth']:.2f}"
            for k in labels],

@@ -60,13 +60,16 @@ SUPPORT_BAND = 0.1
 PLANE_REACH = 0.5
 
 #: A patch that touches a static collider at one point (``against``'s ``single``: a landing,
-#: or a body of many spheres) touches at the mean of its points within this fraction of
-#: the sphere's radius of its lowest: a spot a little inside its lowest point, as a contact
-#: area's middle is. It sets where a landing's impulse acts, and so how a tilted body
-#: landing on one side turns: with it the report's ring drop matches the single-scale
-#: reference's rebound and first impulse (``taichi-frac bench dynamics --contact-only``);
-#: bands of 0.125-0.15 do, 0.1 and 0.175 or more turn the ring too much or too little.
-SPOT_BAND = 0.14
+#: or a body of many spheres) touches at the mean of its points level with its lowest to
+#: within this fraction of the sphere's radius: its lowest vertex, or the middle of a face
+#: or edge lying level. That is where a rigid body struck at one point is struck: a tilted
+#: ring landing without friction then takes the closed-form impulse to 0.2-0.4 % at every
+#: tilt and every grouping n (``bench.bodies.tilted_landing``; the contact page). A spot
+#: at the middle of the points within 0.14 of a radius (a contact area's middle) lay up to
+#: 5 mm nearer the ring's centre: the impulse came out up to 8 % over, and 12 % with
+#: spheres of 12 surface particles (the band grows with the radius). Single-scale's
+#: spheres, centred on tets' centroids inside the surface, are off by 6-7 % either way.
+SPOT_BAND = 0.001
 
 #: Contacts a patch makes at most with one static collider: its manifold, spread over the
 #: points within ``SUPPORT_BAND`` of its deepest (``manifold``). One contact at the
@@ -298,7 +301,8 @@ def against(bodies: ti.template(), particles: ti.template(), a, i, n, level, sin
     normal ``n`` (out of the collider, into a) is ``level`` [m]: (gap [m] of the deepest
     point, and ``manifold``'s count, points (world [m]), levels along n and ids; the
     single point's id is ``SPOT_ID``). ``single``:
-    one point instead, the middle of its ``SPOT_BAND`` (``contact_spot``), for an impact
+    one point instead, the middle of its points level with its lowest (``SPOT_BAND``,
+    ``contact_spot``), for an impact
     (the patch approaches faster than the restitution threshold) and for a body of more
     than ``MANIFOLD_MAX_SPHERES`` spheres (whose contacts ``reduction`` then thins out).
     Spread over four contacts, an impact's restitution was shared unevenly: the ring
