@@ -8,7 +8,9 @@ Layers:
 - physics particles: one per tet, at its centroid (stress analysis, fracture);
 - surface particles: the physics particles whose tet has a boundary face;
 - boundary particles: about ``boundary_group_size`` adjacent surface particles merged into
-  one coarser sphere (collision detection and response).
+  one coarser sphere (collision detection and response); with surface contacts a large
+  body may take a coarser n (``coarse_group_size``), since its spheres only find which
+  patches may touch.
 """
 
 from __future__ import annotations
@@ -69,6 +71,11 @@ class BodyModel:
         source_tet: (T,) index of each tet in the root solid's tet mesh (identity for a
             root body): lets a fragment tell crack faces from original surface.
         boundary_group_size: the n used to build the boundary layer.
+        coarse_group_size: the n a body (or piece) of at least ``COARSE_MIN_SPHERES`` x n
+            surface particles is grouped by instead (bodies that collide through their true
+            surface, ``DynamicsOptions.surface_contact``: their spheres only find which
+            patches may touch); smaller ones keep the finer n they were asked for. 0: none.
+            Its pieces inherit it.
         particle_spacing: [m] mean V^(1/3) of the root solid's tets: the discretisation's
             particle spacing, which sets the SPH smoothing length (fracture). A fragment
             inherits its root's, so a particle keeps its neighbours when its body breaks.
@@ -111,6 +118,7 @@ class BodyModel:
     source_tet: np.ndarray
     boundary_group_size: int
     boundary_contact_position: np.ndarray | None = None
+    coarse_group_size: int = 0
     particle_spacing: float | None = None
     root: BodyModel | None = None
     # (not an argument: a model made from another by dataclasses.replace starts empty)
@@ -183,8 +191,11 @@ def build_body_model(
     boundary_group_size: int = 4,
     keep_leftovers: bool = True,
     source_tet: np.ndarray | None = None,
+    coarse_group_size: int = 0,
 ) -> BodyModel:
     """Build the two-scale particle model of a tet set given in its source frame.
+    ``coarse_group_size``: see :class:`BodyModel` (the body is grouped by it when it has
+    enough surface particles, else by ``boundary_group_size``).
 
     ``vertices`` (V,3) [m] and ``tets`` (T,4) may contain unused vertices and negatively
     oriented tets; both are cleaned. The result is recentred on the exact centre of mass.
@@ -199,10 +210,30 @@ def build_body_model(
     vol = signed_volumes(vertices, tets)
     if np.any(vol <= 0):
         raise ValueError(f"{int(np.sum(vol <= 0))} degenerate (zero-volume) tets")
-    return _assemble(vertices, tets, vol, tet_neighbors(tets), np.array([0, len(tets)]),
-                     np.array([0, len(vertices)]), density, boundary_group_size, keep_leftovers,
+    neighbor = tet_neighbors(tets)
+    piece_n = group_sizes([np.any(neighbor < 0, axis=1).sum()], boundary_group_size, coarse_group_size)
+    return _assemble(vertices, tets, vol, neighbor, np.array([0, len(tets)]),
+                     np.array([0, len(vertices)]), density, piece_n, keep_leftovers,
                      np.arange(len(tets)) if source_tet is None else np.asarray(source_tet),
-                     spacing=float(np.mean(np.cbrt(vol))), root=None, props=[None])[0]
+                     spacing=float(np.mean(np.cbrt(vol))), root=None, props=[None],
+                     coarse_group_size=coarse_group_size)[0]
+
+
+#: A body grouped by its ``coarse_group_size`` keeps at least this many spheres: one of
+#: fewer surface particles keeps the finer n. A few large spheres over a small block fold
+#: their patches round its edges and corners, where the patches lose the facets pair
+#: contacts are measured along (a 60-tet cube slid off another at n = 12).
+COARSE_MIN_SPHERES = 32
+
+
+def group_sizes(surface_counts: np.ndarray, fine: int, coarse: int) -> np.ndarray:
+    """The boundary grouping n of bodies of ``surface_counts`` (P,) surface particles:
+    ``coarse`` for those with at least ``COARSE_MIN_SPHERES`` x ``coarse``, ``fine`` for the
+    rest (and for all when ``coarse`` is 0 or ``fine`` is 1, single-scale). (P,) int64."""
+    counts = np.asarray(surface_counts, dtype=np.int64)
+    if coarse <= 0 or fine <= 1:
+        return np.full(len(counts), fine, dtype=np.int64)
+    return np.where(counts >= COARSE_MIN_SPHERES * coarse, coarse, fine).astype(np.int64)
 
 
 def build_fragment_model(
@@ -211,11 +242,12 @@ def build_fragment_model(
     *,
     boundary_group_size: int = 4,
     keep_leftovers: bool = True,
+    coarse_group_size: int | None = None,
 ) -> BodyModel:
     """The model of the piece of ``parent`` made of its tets ``tets`` (ascending indices):
     ``build_fragment_models`` for one piece."""
     return build_fragment_models(parent, [tets], boundary_group_size=boundary_group_size,
-                                 keep_leftovers=keep_leftovers)[0]
+                                 keep_leftovers=keep_leftovers, coarse_group_size=coarse_group_size)[0]
 
 
 def build_fragment_models(
@@ -224,6 +256,7 @@ def build_fragment_models(
     *,
     boundary_group_size: int = 4,
     keep_leftovers: bool = True,
+    coarse_group_size: int | None = None,
 ) -> list[BodyModel]:
     """The models of the pieces of ``parent`` made of its tets ``pieces`` (a sequence of
     disjoint, ascending index arrays), each in the parent's body frame as source frame:
@@ -237,7 +270,9 @@ def build_fragment_models(
     same sphere, and the same collision centre unless a crack face lies within reach of
     its inward ray), and only the surface particles along the cracks are grouped afresh.
     So a piece collides where its parent did the instant it is born, and the build costs
-    in proportion to the crack, not to the piece's surface.
+    in proportion to the crack, not to the piece's surface. ``coarse_group_size`` (default
+    the parent's) chooses each piece's n from its own surface (``group_sizes``); a piece
+    grouped by another n than its parent's is grouped afresh.
 
     The pieces of one split are built together: each step is one numpy pass over the
     rows of all of them (a piece's rows are contiguous, in the order its own build would
@@ -287,8 +322,12 @@ def build_fragment_models(
     neighbor = np.where(same, index[across], -1)
     crack_face = (parent_neighbor >= 0) & ~same  # (T,4) faces the cut opened
 
+    coarse = parent.coarse_group_size if coarse_group_size is None else coarse_group_size
+    surface_counts = np.bincount(piece_of_tet, weights=np.any(neighbor < 0, axis=1), minlength=piece_count)
+    piece_n = group_sizes(surface_counts, boundary_group_size, coarse)
     inherited = None
-    if boundary_group_size == parent.boundary_group_size and boundary_group_size > 1:
+    same_n = piece_n == parent.boundary_group_size
+    if parent.boundary_group_size > 1 and np.any(same_n):
         off, members = parent.boundary_member_offsets, parent.boundary_members
         sizes = np.diff(off)
         owner = np.repeat(np.arange(len(sizes)), sizes)
@@ -296,16 +335,18 @@ def build_fragment_models(
         member_piece = label[members]
         group_piece = member_piece[off[:-1]]
         # spoilt: a member outside the pieces, on a crack, or in another piece than the first
-        bad = (mapped < 0) | crack_face[np.maximum(mapped, 0)].any(axis=1) | (member_piece != group_piece[owner])
+        # (or in a piece grouped by another n than the parent's)
+        bad = (mapped < 0) | crack_face[np.maximum(mapped, 0)].any(axis=1) | (member_piece != group_piece[owner]) \
+            | ~same_n[np.maximum(member_piece, 0)]
         spoilt = np.bincount(owner, weights=bad, minlength=len(sizes)) > 0
         keep = np.nonzero(~spoilt)[0]
         inherited = (mapped[~spoilt[owner]], sizes[keep], group_piece[keep], parent.collision_position[keep],
                      crack_face)
     return _assemble(parent.vertices[vertex_key - vertex_piece * v_parent], tets, parent.tet_volume[all_tets],
-                     neighbor, tet_start, vertex_start, parent.density, boundary_group_size, keep_leftovers,
+                     neighbor, tet_start, vertex_start, parent.density, piece_n, keep_leftovers,
                      parent.source_tet[all_tets], spacing=parent.spacing,
                      root=parent.root if parent.root is not None else parent, inherited=inherited,
-                     props=[_mass_by_subtraction(parent, p) for p in pieces])
+                     props=[_mass_by_subtraction(parent, p) for p in pieces], coarse_group_size=coarse)
 
 
 def _mass_by_subtraction(parent: BodyModel, tets: np.ndarray) -> MassProperties | None:
@@ -351,13 +392,36 @@ def _starts(piece_of_row: np.ndarray, piece_count: int) -> np.ndarray:
     return np.searchsorted(piece_of_row, np.arange(piece_count + 1), side="left")
 
 
-def _assemble(vertices, tets, vol, neighbor, tet_start, vertex_start, density, boundary_group_size, keep_leftovers,
-              source_tet, *, spacing, root, props, inherited=None) -> list[BodyModel]:
+def _group_by_size(centroids, rest, face_tet, faces, piece_of_tet, piece_n, keep_leftovers):
+    """``group_surface_particles`` over the surface particles ``rest`` of pieces grouped by
+    different n: one walk per n over its pieces' particles, the results in piece order
+    (each piece's groups as its own walk makes them). Returns (members, sizes, dropped)."""
+    values = np.unique(piece_n)
+    if len(values) == 1:
+        return group_surface_particles(centroids, rest, face_tet, faces, int(values[0]), keep_leftovers)
+    parts = []
+    for n in values:
+        rows_n = piece_n[piece_of_tet[rest]] == n
+        faces_n = piece_n[piece_of_tet[face_tet]] == n
+        parts.append(group_surface_particles(centroids, rest[rows_n], face_tet[faces_n], faces[faces_n], int(n),
+                                             keep_leftovers))
+    members = np.concatenate([p[0] for p in parts])
+    sizes = np.concatenate([p[1] for p in parts])
+    first = members[np.cumsum(sizes) - sizes]
+    order = np.argsort(piece_of_tet[first], kind="stable")
+    members = members[_ranges((np.cumsum(sizes) - sizes)[order], sizes[order])]
+    dropped = np.sort(np.concatenate([p[2] for p in parts]))
+    return members, sizes[order], dropped
+
+
+def _assemble(vertices, tets, vol, neighbor, tet_start, vertex_start, density, piece_n, keep_leftovers,
+              source_tet, *, spacing, root, props, inherited=None, coarse_group_size=0) -> list[BodyModel]:
     """The models of P pieces given as one batch: the rows of piece k are ``tet_start[k]``
     to ``tet_start[k+1]`` of ``tets`` (T,4) (clean, positively oriented, indexing
     ``vertices`` (V,3) [m, source frame], whose piece k rows are ``vertex_start[k]`` to
     ``vertex_start[k+1]``), ``vol`` (T,) [m^3] and face neighbours ``neighbor`` (T,4)
-    (rows of the batch, within the piece; -1 on its boundary). ``props``: each piece's
+    (rows of the batch, within the piece; -1 on its boundary). ``piece_n`` (P,): each
+    piece's boundary grouping n (``group_sizes``). ``props``: each piece's
     mass properties (source frame), or None to integrate them. ``inherited``: (the kept
     parent groups' members (rows, group after group), their sizes (K,), pieces (K,) and
     collision centres (K,3) [m, source frame], crack faces (T,4) bool) from
@@ -392,8 +456,8 @@ def _assemble(vertices, tets, vol, neighbor, tet_start, vertex_start, density, b
     covered[kept_members] = True
     rest = surface[~covered[surface]]
     on_rest = ~covered[face_tet]
-    fresh_members, fresh_sizes, dropped = group_surface_particles(centroids, rest, face_tet[on_rest],
-                                                                  faces[on_rest], boundary_group_size, keep_leftovers)
+    fresh_members, fresh_sizes, dropped = _group_by_size(centroids, rest, face_tet[on_rest], faces[on_rest],
+                                                         piece_of_tet, np.asarray(piece_n), keep_leftovers)
     fresh_piece = piece_of_tet[fresh_members[np.cumsum(fresh_sizes) - fresh_sizes]]
     # Each piece's groups: its kept ones (in the parent's order), then its fresh ones.
     kept = len(kept_sizes)
@@ -471,7 +535,8 @@ def _assemble(vertices, tets, vol, neighbor, tet_start, vertex_start, density, b
             inertia=props[k].inertia,
             com_in_source=com[k],
             source_tet=np.asarray(source_tet[t0:t1]).astype(np.int32),
-            boundary_group_size=int(boundary_group_size),
+            boundary_group_size=int(piece_n[k]),
+            coarse_group_size=int(coarse_group_size),
             boundary_contact_position=contact_pos[g0:g1],
             particle_spacing=float(spacing),
             root=root,

@@ -208,6 +208,12 @@ class ParticleOptions:
         boundary_group_size: n, the number of adjacent surface particles merged into one
             boundary particle (paper: 4). 1 means single-scale (every surface particle
             collides on its own).
+        surface_group_size: the n of a body that collides through its true surface
+            (``simulation.surface_contact``) and has at least 32 x n surface particles
+            (its pieces choose theirs the same way when it breaks): there the spheres
+            only find which surface patches may touch, so fewer, larger spheres cost less
+            while rest heights and landings stay exact (docs/guide/contact.md). Smaller
+            bodies and pieces keep boundary_group_size. 0: boundary_group_size for all.
         keep_leftovers: surface particles that cannot be grouped become their own boundary
             particle (True) or are dropped (False).
         min_dihedral_deg: quality bound passed to the mesher [degrees].
@@ -215,12 +221,14 @@ class ParticleOptions:
 
     target_particles: int = 5000
     boundary_group_size: int = 4
+    surface_group_size: int = 12
     keep_leftovers: bool = True
     min_dihedral_deg: float = 10.0
 
     def __post_init__(self):
         check_range("particles", "target_particles", self.target_particles, 1, 5_000_000)
         check_range("particles", "boundary_group_size", self.boundary_group_size, 1, 64)
+        check_range("particles", "surface_group_size", self.surface_group_size, 0, 64)
         check_range("particles", "min_dihedral_deg", self.min_dihedral_deg, 0.0, 30.0)
 
 

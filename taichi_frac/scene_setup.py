@@ -38,14 +38,16 @@ class PreparedObject:
 
 def prepare_objects(scene, *, fracture: bool = True, prepare=None) -> tuple[list[PreparedObject], float]:
     """Every object of ``scene`` prepared, in order, and the seconds it took. ``prepare``:
-    callable(SceneObject) -> (BodyModel, PrepareReport) used instead of ``obj.prepare()``
-    (a sweep worker's memo). Ctrl-C is honoured between objects."""
+    callable(SceneObject, *, surface_contact) -> (BodyModel, PrepareReport) used instead of
+    ``obj.prepare()`` (a sweep worker's memo). Ctrl-C is honoured between objects."""
     t0 = time.perf_counter()
     prepared = []
     for obj in scene.objects:
         interrupts.check()
         try:
-            model, report = obj.prepare() if prepare is None else prepare(obj)
+            surface = scene.simulation.surface_contact
+            model, report = (obj.prepare(surface_contact=surface) if prepare is None
+                             else prepare(obj, surface_contact=surface))
         except MeshError as exc:
             raise MeshError(f"object {obj.name!r}: " + str(exc).replace(REPAIR_HINT, _scene_repair_hint(obj.name))) \
                 from None

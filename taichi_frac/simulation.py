@@ -99,8 +99,8 @@ class Simulation:
         overwrite: write the output even while another run holds its lock file.
 
     The output path is checked and locked (``io.output``) before any object is meshed.
-        prepare: callable(SceneObject) -> (BodyModel, PrepareReport) used instead of
-            ``obj.prepare()``: a memo kept by a process that runs many variants of one scene
+        prepare: callable(SceneObject, *, surface_contact) -> (BodyModel, PrepareReport)
+            used instead of ``obj.prepare()``: a memo kept by a process that runs many variants of one scene
             (a sweep's worker), so those that change no geometry reuse the model and its SPH
             neighbour lists. The model must not be changed by the caller between runs.
 

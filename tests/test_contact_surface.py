@@ -100,6 +100,30 @@ def test_a_tilted_ring_lands_with_the_closed_form_impulse(group):
         assert speed == pytest.approx(math.sqrt(2 * 9.81 * 0.1), rel=0.02)
 
 
+def test_a_scene_with_surface_contacts_groups_large_bodies_coarsely():
+    """A scene object is grouped by ``particles.surface_group_size`` when the scene collides
+    through true surfaces and it has enough surface particles (``model.group_sizes``), by
+    ``boundary_group_size`` otherwise, or when the coarse n is switched off."""
+    import dataclasses
+
+    from taichi_frac.scene_setup import prepare_objects
+
+    base = load_scene(BUILTIN_SCENE_DIR / "single_ring.toml")
+
+    def n_of(surface, coarse=12):
+        objects = [dataclasses.replace(o, particles=dataclasses.replace(o.particles, surface_group_size=coarse))
+                   for o in base.objects]
+        scene = dataclasses.replace(base, objects=objects,
+                                    simulation=dataclasses.replace(base.simulation, surface_contact=surface))
+        model = prepare_objects(scene, fracture=False)[0][0].model
+        return model.boundary_group_size, model.coarse_group_size, model.surface_particle_count
+
+    n, coarse, surface = n_of(True)
+    assert surface >= 32 * 12 and (n, coarse) == (12, 12)
+    assert n_of(False)[:2] == (4, 0)
+    assert n_of(True, coarse=0)[:2] == (4, 0)
+
+
 @functools.lru_cache(maxsize=None)
 def _slab():
     """A 0.6 x 0.6 x 0.1 m tet-meshed slab."""
@@ -462,9 +486,12 @@ def test_pieces_wedged_between_pieces_come_to_rest(scene_world):
     chips between larger pieces): within the scene's 3 s every piece comes to rest and
     sleeps, as on its spheres; at most 5 % may still be settling. A chip held by the plane
     of a face reaching past its patch (not bounded by ``surface.PLANE_REACH``) was jolted
-    from substep to substep, and 51 of 128 pieces were still awake at the end."""
+    from substep to substep, and 51 of 128 pieces were still awake at the end. Every body
+    is grouped by n = 4 (``surface_group_size`` 0), with which this pile wedges its chips."""
     path = BUILTIN_SCENE_DIR / "thirteen_rings.toml"
-    scene = load_scene(path, other_seeds(load_scene(path), 91) + ["simulation.surface_contact=true"])
+    base = load_scene(path)
+    scene = load_scene(path, other_seeds(base, 91) + ["simulation.surface_contact=true"]
+                       + [f"{o.name}.particles.surface_group_size=0" for o in base.objects])
     sim = Simulation(scene, output=False, world=scene_world)
     sim.run()
     sleeping = sim.world.body_state()["sleeping"]

@@ -172,16 +172,21 @@ def test_fragment_model_restricted_from_parent_matches_a_fresh_build(ring_split)
     assert kept_total > 0.3 * sum(f.model.boundary_particle_count for f in frags)  # 294 of 589 here
 
 
-def test_pieces_built_together_are_the_pieces_built_alone():
+@pytest.mark.parametrize("coarse", [0, 12])
+def test_pieces_built_together_are_the_pieces_built_alone(coarse):
     """build_fragment_models builds a split's pieces in one batch. Each model is, array for
     array and to the bit, the one built of that piece alone (a batch of one), also for
     the pieces of a piece: the batch leaks nothing between pieces (their vertices,
-    boundary groups, inward rays, normals)."""
+    boundary groups, inward rays, normals). Also when the pieces are grouped by
+    different n (``coarse_group_size``: the big piece by 12, the chips by 4)."""
     import dataclasses
 
-    from taichi_frac.model import BodyModel, build_fragment_model, build_fragment_models
+    from taichi_frac.model import BodyModel, build_body_model, build_fragment_model, build_fragment_models
 
     model = ring_model()
+    if coarse:
+        model = build_body_model(model.vertices, model.tets, model.density, coarse_group_size=coarse)
+        assert model.boundary_group_size == coarse
     opts = FractureOptions(crack_count=5, crack_length=0.3, seed=0, min_fragment_particles=1)
     analysis = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, MATERIAL, opts)
     pieces = split_body(model, analysis, opts).fragment_tets
@@ -189,11 +194,14 @@ def test_pieces_built_together_are_the_pieces_built_alone():
     assert len(pieces) >= 6 and sizes[0] < 30 and sizes[-1] > 1000  # chips and a big piece
     parents = [model]
     big = build_fragment_model(model, pieces[int(np.argmax([len(p) for p in pieces]))], boundary_group_size=4)
+    assert big.coarse_group_size == coarse
     second = split_body(big, [CrackPlane(point=big.particle_position[k], normal=np.eye(3)[k % 3], extent=0.05,
                                          peak_stress=2e6) for k in (0, big.tet_count // 2)], opts).fragment_tets
     assert len(second) >= 2
     for parent, parts in ((model, pieces), (big, second)):
         together = build_fragment_models(parent, parts, boundary_group_size=4)
+        if coarse:
+            assert {m.boundary_group_size for m in together} == {4, coarse}
         for tets, batched in zip(parts, together):
             alone = build_fragment_model(parent, tets, boundary_group_size=4)
             for f in dataclasses.fields(BodyModel):
@@ -205,6 +213,38 @@ def test_pieces_built_together_are_the_pieces_built_alone():
                     assert a is b or a == b, f.name
     with pytest.raises(ValueError, match="overlap"):
         build_fragment_models(model, [np.arange(10), np.arange(5, 20)])
+
+
+def test_pieces_are_grouped_by_their_own_size():
+    """With ``coarse_group_size``, each piece of a split is grouped by the coarse n when it
+    has at least COARSE_MIN_SPHERES x n surface particles (counted here from its own tets'
+    open faces) and by the fine n otherwise; no group is larger than its n, and a piece
+    grouped like its parent keeps the parent's groups away from the cracks."""
+    from taichi_frac.model import COARSE_MIN_SPHERES, build_body_model, build_fragment_models
+
+    ring = ring_model()
+    parent = build_body_model(ring.vertices, ring.tets, ring.density, coarse_group_size=12)
+    opts = FractureOptions(crack_count=5, crack_length=0.3, seed=0, min_fragment_particles=1)
+    analysis = analyze_impact(parent, RING_CONTACT, RING_NORMAL, RING_FORCE, MATERIAL, opts)
+    pieces = split_body(parent, analysis, opts).fragment_tets
+    parent_groups = {tuple(parent.boundary_members[a:b]) for a, b in
+                     zip(parent.boundary_member_offsets[:-1], parent.boundary_member_offsets[1:])}
+    seen = set()
+    for tets, m in zip(pieces, build_fragment_models(parent, pieces, boundary_group_size=4)):
+        surface = int(np.any(m.tet_neighbor < 0, axis=1).sum())
+        n = 12 if surface >= COARSE_MIN_SPHERES * 12 else 4
+        seen.add(n)
+        assert m.boundary_group_size == n and m.coarse_group_size == 12
+        sizes = np.diff(m.boundary_member_offsets)
+        assert sizes.max() <= n
+        groups = [tuple(tets[m.boundary_members[a:b]]) for a, b in
+                  zip(m.boundary_member_offsets[:-1], m.boundary_member_offsets[1:])]
+        kept = sum(g in parent_groups for g in groups)
+        if n == 12:
+            assert sizes.mean() > 9 and kept > 0.3 * len(groups)
+        else:
+            assert kept == 0
+    assert seen == {4, 12}
 
 
 @pytest.mark.parametrize("policy", ["merge", "debris", "drop"])

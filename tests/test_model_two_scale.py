@@ -270,3 +270,15 @@ def test_collision_centres_kernel_matches_numpy(ring):
     for piece in build_fragment_models(ring, pieces, boundary_group_size=4):
         np.testing.assert_allclose(piece.collision_position, numpy_collision_centres(*arguments(piece)), rtol=0,
                                    atol=1e-12)
+
+
+def test_group_sizes_coarsen_only_bodies_with_enough_surface():
+    """``model.group_sizes``: the coarse n from COARSE_MIN_SPHERES x n surface particles on
+    (hand-computed for 32 x 12 = 384), the fine n below it, for single-scale and when no
+    coarse n is given."""
+    from taichi_frac.model import COARSE_MIN_SPHERES, group_sizes
+
+    assert COARSE_MIN_SPHERES == 32
+    np.testing.assert_array_equal(group_sizes([0, 383, 384, 5000], 4, 12), [4, 4, 12, 12])
+    np.testing.assert_array_equal(group_sizes([383, 384], 4, 0), [4, 4])
+    np.testing.assert_array_equal(group_sizes([5000], 1, 12), [1])

@@ -15,8 +15,11 @@ import numpy as np
 
 from .common import BenchContext, md_table
 
-#: The groupings compared, each with surface contacts, against sphere contacts at n = 4.
-GROUPINGS = (4, 8, 12)
+#: The groupings compared, each with surface contacts, against sphere contacts at n = 4:
+#: every body grouped by n (``surface_group_size`` 0), and ``DEFAULT`` (n = 4, and
+#: ``ParticleOptions().surface_group_size`` for bodies large enough, ``model.group_sizes``).
+DEFAULT = "default"
+GROUPINGS = (4, 8, 12, DEFAULT)
 
 #: Rounds of the unbroken 13 rings: each runs sphere contacts (n = 4) and every grouping
 #: once, back to back; each grouping's ratio is the median of the rounds' ratios.
@@ -27,12 +30,30 @@ GROUPING_RING_RUNS = 7
 GROUPING_SEED_SHIFTS = (0, 13, 26, 39)
 
 
-def _grouped(scene, group: int, surface: bool):
-    """``scene`` with every object grouped by ``group`` and the contact mode ``surface``
-    (two-scale)."""
+def _grouping(n) -> tuple[int, int | None]:
+    """A ``GROUPINGS`` entry as (boundary_group_size, surface_group_size; None: default)."""
+    return (4, None) if n == DEFAULT else (n, 0)
+
+
+def _label(n) -> str:
+    """A ``GROUPINGS`` entry as the table names it."""
+    if n != DEFAULT:
+        return str(n)
+    from ..model import COARSE_MIN_SPHERES
+    from ..options import ParticleOptions
+
+    coarse = ParticleOptions().surface_group_size
+    return f"4, and {coarse} for bodies of {COARSE_MIN_SPHERES * coarse}+ surface particles (the default)"
+
+
+def _grouped(scene, n, surface: bool):
+    """``scene`` with every object grouped by the ``GROUPINGS`` entry ``n`` and the contact
+    mode ``surface`` (two-scale)."""
     from .dynamics import _with_contact
 
-    objects = [dataclasses.replace(o, particles=dataclasses.replace(o.particles, boundary_group_size=group))
+    group, coarse = _grouping(n)
+    extra = {} if coarse is None else {"surface_group_size": coarse}
+    objects = [dataclasses.replace(o, particles=dataclasses.replace(o.particles, boundary_group_size=group, **extra))
                for o in scene.objects]
     return _with_contact(dataclasses.replace(scene, objects=objects), False, surface)
 
@@ -53,9 +74,9 @@ def grouping_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) ->
     from .dynamics import LANDING_TILTS, _cube_on_cube, _landing, _ring_drop, landing_row
 
     reference = _ring_drop(ctx, single=True, surface=False)
-    drops = {n: _ring_drop(ctx, single=False, surface=True, group=n) for n in GROUPINGS}
-    cubes = {n: _cube_on_cube(ctx, False, True, 60, group=n) for n in GROUPINGS}
-    landings = {n: _landing(ctx, False, True, group=n) for n in GROUPINGS}
+    drops = {n: _ring_drop(ctx, False, True, *_grouping(n)) for n in GROUPINGS}
+    cubes = {n: _cube_on_cube(ctx, False, True, 60, *_grouping(n)) for n in GROUPINGS}
+    landings = {n: _landing(ctx, False, True, *_grouping(n)) for n in GROUPINGS}
     variants = {"sphere": _grouped(scene, 4, False)} | {n: _grouped(scene, n, True) for n in GROUPINGS}
     off = {k: [] for k in variants}
     spheres = {}
@@ -68,15 +89,15 @@ def grouping_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) ->
     on = {k: [] for k in variants}
     for sc in scenes:
         for k in variants:
-            group, surface = (4, False) if k == "sphere" else (k, True)
-            on[k].append(_ring_ms(ctx, _grouped(sc, group, surface), True, frames))
+            on[k].append(_ring_ms(ctx, _grouped(sc, 4, False) if k == "sphere" else _grouped(sc, k, True), True,
+                                  frames))
     on_ms = {k: float(np.mean([r[0] for r in on[k]])) for k in variants}
     rows = []
     for n in GROUPINGS:
         ratios = np.asarray(off[n]) / base
         d = drops[n]
         rows.append([
-            n, f"{spheres[n]:,}",
+            _label(n), f"{spheres[n]:,}",
             f"{np.median(off[n]):.2f} ({np.median(ratios):.2f}x, {ratios.min():.2f}-{ratios.max():.2f})",
             f"{on_ms[n]:.1f} ({on_ms[n] / on_ms['sphere']:.2f}x) / {np.mean([r[2] for r in on[n]]):.0f}",
             f"{1e3 * (d['rest'] - 0.025):+.2f}",

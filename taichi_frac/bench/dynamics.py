@@ -271,13 +271,28 @@ def _with_contact(scene, single: bool, surface: bool):
         scene.simulation, single_scale=single, surface_contact=surface))
 
 
-def _ring_drop(ctx: BenchContext, single: bool, surface: bool, group: int = 4) -> dict:
+def _model(vertices, tets, single: bool, surface: bool, group: int = 4, coarse: int | None = None,
+           density: float = 2400.0):
+    """The BodyModel a contact mode collides with: single-scale n = 1; two-scale n =
+    ``group``, and with surface contacts the coarse n of large bodies (``coarse``, default
+    ``ParticleOptions().surface_group_size``, as a scene builds it; 0: ``group`` for all)."""
+    from ..model import build_body_model
+    from ..options import ParticleOptions
+
+    if coarse is None:
+        coarse = ParticleOptions().surface_group_size
+    return build_body_model(vertices, tets, density, boundary_group_size=1 if single else group,
+                            coarse_group_size=coarse if surface else 0)
+
+
+def _ring_drop(ctx: BenchContext, single: bool, surface: bool, group: int = 4, coarse: int | None = None) -> dict:
     """The report's single-ring drop (``grouping.measure_drop`` on ``grouping.drop_scene``):
     rest height, rebound, first-impact impulse and the deepest point of the true surface
-    below the ground. ``group``: the boundary grouping n of two-scale."""
+    below the ground. ``group``, ``coarse``: the boundary grouping n of two-scale and the
+    coarse n of surface contacts (``_model``)."""
     from . import grouping
 
-    scene = _with_contact(grouping.drop_scene(1 if single else group), single, surface)
+    scene = _with_contact(grouping.drop_scene(1 if single else group, coarse=coarse), single, surface)
     drop = grouping.measure_drop(ctx, scene)
     return dict(rest=drop.rest_height, rebound=drop.rebound, impulse=drop.first_impulse, depth=drop.surface_depth)
 
@@ -287,18 +302,17 @@ def _ring_drop(ctx: BenchContext, single: bool, surface: bool, group: int = 4) -
 LANDING_TILTS = (10, 20, 25, 30)
 
 
-def _landing(ctx: BenchContext, single: bool, surface: bool, group: int = 4) -> list[float]:
+def _landing(ctx: BenchContext, single: bool, surface: bool, group: int = 4, coarse: int | None = None) -> list[float]:
     """The torus of the dynamics tests (``bodies.ring_model``) landing without friction at
     each of ``LANDING_TILTS`` (``bodies.tilted_landing``, e = 0.5, from 0.1 m): the first
     impact's normal impulse relative to the closed form, less 1."""
     import math
 
     from ..dynamics import DynamicsOptions
-    from ..model import build_body_model
     from . import bodies
 
     ring = bodies.ring_model()
-    model = build_body_model(ring.vertices, ring.tets, bodies.DENSITY, boundary_group_size=1 if single else group)
+    model = _model(ring.vertices, ring.tets, single, surface, group, coarse, bodies.DENSITY)
     errors = []
     for degrees in LANDING_TILTS:
         world = ctx.world()
@@ -329,11 +343,10 @@ def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) ->
 
     from ..dynamics import DynamicsOptions
     from ..geometry.tetra import tetrahedralize
-    from ..model import build_body_model
     from . import grouping
 
     mesh = tetrahedralize(trimesh.creation.box((0.1, 0.1, 0.1)), target_tets=5000)
-    model = build_body_model(mesh.vertices, mesh.tets, 2400.0, boundary_group_size=1 if single else 4)
+    model = _model(mesh.vertices, mesh.tets, single, surface)
     world = ctx.world()
     world.clear()
     world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
@@ -360,20 +373,20 @@ def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) ->
 CUBE_STACK_TETS = (5000, 60)
 
 
-def _cube_on_cube(ctx: BenchContext, single: bool, surface: bool, tets: int, group: int = 4) -> float:
+def _cube_on_cube(ctx: BenchContext, single: bool, surface: bool, tets: int, group: int = 4,
+                  coarse: int | None = None) -> float:
     """A 0.1 m porcelain cube of about ``tets`` tets let down 1 mm above another resting
     on the ground, offset 10 / 5 mm, restitution 0: the upper one's centre-of-mass height
-    above the lower one's after 1 s, less the exact 0.1 m [m]. ``group``: the boundary
-    grouping n of two-scale."""
+    above the lower one's after 1 s, less the exact 0.1 m [m]. ``group``, ``coarse``: as
+    ``_model``."""
     import trimesh
 
     from ..dynamics import DynamicsOptions
     from ..geometry.tetra import tetrahedralize
-    from ..model import build_body_model
     from .bodies import stack_cubes
 
     mesh = tetrahedralize(trimesh.creation.box((0.1, 0.1, 0.1)), target_tets=tets)
-    model = build_body_model(mesh.vertices, mesh.tets, 2400.0, boundary_group_size=1 if single else group)
+    model = _model(mesh.vertices, mesh.tets, single, surface, group, coarse)
     world = ctx.world()
     world.clear()
     world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
@@ -401,7 +414,8 @@ def _ring_stack(ctx: BenchContext, single: bool, surface: bool) -> dict:
     world = ctx.world()
     world.clear()
     world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
-    rings = stack_rings(world, ring_model(), STACK_RINGS)
+    ring = ring_model()
+    rings = stack_rings(world, _model(ring.vertices, ring.tets, single, surface, density=ring.density), STACK_RINGS)
     settled, state = settle_and_hold(world, rings, 50, 50)
     return dict(top=float(state["position"][-1][2]) - (0.025 + 0.05 * (STACK_RINGS - 1)),
                 drift=float(np.max(np.linalg.norm(state["position"] - settled, axis=1))),

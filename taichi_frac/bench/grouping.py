@@ -28,8 +28,9 @@ DROP_HEIGHT = 0.3  # m
 TILT = 0.1  # rad about x: lands almost flat, on one side first
 
 
-def drop_scene(group_size: int, particles: int = 5000, seconds: float = 3.0):
-    """The single-ring drop, built with the scene API."""
+def drop_scene(group_size: int, particles: int = 5000, seconds: float = 3.0, coarse: int | None = None):
+    """The single-ring drop, built with the scene API. ``coarse``: the ring's
+    ``surface_group_size`` (None: the default; read only with surface contacts)."""
     from ..options import ParticleOptions
     from ..scenes import Collider, Scene, SceneObject, SimulationOptions
 
@@ -37,7 +38,8 @@ def drop_scene(group_size: int, particles: int = 5000, seconds: float = 3.0):
         name="ring", primitive=f"torus:major=0.1,minor={MINOR_RADIUS}", material="porcelain", breakable=False,
         position=(0.0, 0.0, DROP_HEIGHT), orientation=(math.cos(TILT / 2), math.sin(TILT / 2), 0.0, 0.0),
         friction=0.5, restitution=0.5,
-        particles=ParticleOptions(target_particles=particles, boundary_group_size=group_size),
+        particles=ParticleOptions(target_particles=particles, boundary_group_size=group_size,
+                                  **({} if coarse is None else {"surface_group_size": coarse})),
     )
     return Scene(name=f"ring_drop_n{group_size}", objects=[ring],
                  colliders=[Collider.ground(0.0, friction=0.5, restitution=0.5)],

@@ -281,6 +281,7 @@ def prepare_body(
     time_limit: float | None = DEFAULT_PREPARE_SECONDS,
     simplify: bool = True,
     smoothing_length_factor: float | None = None,
+    surface_contact: bool = False,
 ) -> tuple[BodyModel, PrepareReport]:
     """Build the two-scale model of one solid.
 
@@ -303,6 +304,8 @@ def prepare_body(
             model's SPH neighbour lists within h = factor x particle spacing are built now
             and held by the model (``BodyModel.neighbor_lists``; 9 ms for a 5,550-particle
             ring). None: none are built.
+        surface_contact: the body will collide through its true surface: it is grouped by
+            ``particles.surface_group_size`` when large enough (``model.group_sizes``).
 
     Returns (BodyModel in its body frame, PrepareReport).
     """
@@ -363,7 +366,8 @@ def prepare_body(
     try:
         model = build_body_model(tm.vertices, tm.tets, material.density,
                                  boundary_group_size=particles.boundary_group_size,
-                                 keep_leftovers=particles.keep_leftovers)
+                                 keep_leftovers=particles.keep_leftovers,
+                                 coarse_group_size=particles.surface_group_size if surface_contact else 0)
     except ValueError as exc:
         raise MeshError(f"{name!r}: cannot build a particle model from its tets: {exc}") from exc
     timings["model"] = time.perf_counter() - t2

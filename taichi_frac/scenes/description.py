@@ -186,13 +186,15 @@ class SceneObject:
         """What ``geometry.prepare.prepare_body`` takes: the mesh path or the primitive spec."""
         return self.mesh if self.mesh is not None else self.primitive
 
-    def prepare(self, *, use_cache: bool = True, backend: str = "tetgen"):
-        """Mesh and model this object: ``(BodyModel, PrepareReport)`` (see prepare_body)."""
+    def prepare(self, *, use_cache: bool = True, backend: str = "tetgen", surface_contact: bool = False):
+        """Mesh and model this object: ``(BodyModel, PrepareReport)`` (see prepare_body;
+        ``surface_contact``: the scene's ``simulation.surface_contact``)."""
         from ..geometry.prepare import prepare_body
 
         return prepare_body(self.source, scale=self.scale, units=self.units, material=self.material,
                             particles=self.particles, repair=self.repair, backend=backend, use_cache=use_cache,
-                            smoothing_length_factor=self.fracture.smoothing_length_factor if self.breakable else None)
+                            smoothing_length_factor=self.fracture.smoothing_length_factor if self.breakable else None,
+                            surface_contact=surface_contact)
 
 
 COLLIDER_TYPES = ("ground", "box")

@@ -67,11 +67,11 @@ class _WorkerState:
         self.runs = 0
         self.closed = False
 
-    def prepare(self, obj):
+    def prepare(self, obj, *, surface_contact: bool = False):
         """``SceneObject.prepare`` memoised on what the model depends on."""
-        key = repr((obj.source, obj.scale, obj.units, obj.material, obj.particles, obj.repair))
+        key = repr((obj.source, obj.scale, obj.units, obj.material, obj.particles, obj.repair, surface_contact))
         if key not in self.models:
-            self.models[key] = obj.prepare()
+            self.models[key] = obj.prepare(surface_contact=surface_contact)
         return self.models[key]
 
 
