@@ -124,6 +124,24 @@ def test_a_scene_with_surface_contacts_groups_large_bodies_coarsely():
     assert n_of(True, coarse=0)[:2] == (4, 0)
 
 
+def test_a_body_whose_coarse_patches_fold_keeps_the_finer_grouping():
+    """Grouped by 12, the patches of a torus of 12 sections round its tube fold over more
+    than three planes (facets on far fewer than ``COARSE_MIN_FACETED`` of them, counted
+    here), so with a coarse n of 12 it keeps n = 4, and so do its pieces; a finely
+    meshed cube's patches stay flat and it takes the coarse n."""
+    from taichi_frac.model import COARSE_MIN_FACETED
+
+    ring = ring_model()
+    uniform = build_body_model(ring.vertices, ring.tets, DENSITY, boundary_group_size=12)
+    faceted = np.mean(np.any(np.linalg.norm(uniform.boundary_patches.facets, axis=2) > 0.5, axis=1))
+    assert faceted < COARSE_MIN_FACETED - 0.3
+    model = build_body_model(ring.vertices, ring.tets, DENSITY, coarse_group_size=12)
+    assert (model.boundary_group_size, model.coarse_group_size) == (4, 0)
+    cube = tetrahedralize(trimesh.creation.box((0.1, 0.1, 0.1)), target_tets=5000)
+    model = build_body_model(cube.vertices, cube.tets, DENSITY, coarse_group_size=12)
+    assert (model.boundary_group_size, model.coarse_group_size) == (12, 12)
+
+
 @functools.lru_cache(maxsize=None)
 def _slab():
     """A 0.6 x 0.6 x 0.1 m tet-meshed slab."""
