@@ -2,7 +2,7 @@
 with surface contacts the spheres only find which patches may touch, so coarser spheres
 (fewer of them, larger patches) cost less while the rest heights, which the patches set,
 stay, and so does a landing's impulse (it acts at the patch's lowest point,
-``collision.surface.SPOT_BAND``). What the coarser spheres do change is how a body of few
+``collision.surface.LANDING_BAND``). What the coarser spheres do change is how a body of few
 tets is covered, and the rolling resistance (a fraction of the sphere radius). Part of the
 contact page (``dynamics.contact_section``).
 """
@@ -43,7 +43,8 @@ def _label(n) -> str:
     from ..options import ParticleOptions
 
     coarse = ParticleOptions().surface_group_size
-    return f"4, and {coarse} for bodies of {COARSE_MIN_SPHERES * coarse}+ surface particles (the default)"
+    return (f"4, and {coarse} for bodies of {COARSE_MIN_SPHERES * coarse}+ surface particles whose patches keep their "
+            "facets (the default)")
 
 
 def _grouped(scene, n, surface: bool):

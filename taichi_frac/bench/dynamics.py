@@ -214,17 +214,20 @@ def _print_contact(ctx: BenchContext, scene, args, t0: float) -> int:
         f"{f' --contact-frames {frames}' if frames else ''}` (arch {args.arch}; {provenance()}, "
         f"load average {load_average()} at the start: "
         "times compare within this page): the same bodies with the "
-        "contacts computed from the true surface (patches of the boundary groups' surface triangles), from the "
-        "boundary spheres, and from the single-scale spheres, in one run.",
+        "contacts computed from the true surface (patches of the boundary groups' surface triangles, grouped by "
+        "default: 12 surface particles a sphere on a body of 384 or more whose patches keep their facets, else 4), "
+        "from the boundary spheres (4 a sphere), and from the single-scale spheres, in one run. The ring drop is "
+        "measured against single-scale, whose spheres sit on tets' centroids inside the surface; the "
+        "frictionless landing against the closed form for a rigid body struck at one point.",
         "",
         contact_section(ctx, scene, frames, seeded(CONTACT_SEED_SHIFTS)),
         "",
         "### Surface contacts against the boundary grouping n",
         "",
         "With surface contacts the spheres only find which patches may touch, and the patches set the rest "
-        "heights: coarser spheres (n adjacent surface particles each) are fewer to test. Where a landing's "
-        "impulse acts is a band of the sphere's radius tuned at n = 4, and a body of few tets gets few spheres. "
-        "In one run, after the table above:",
+        "heights and where a landing strikes (the patch's lowest point): coarser spheres (n adjacent surface "
+        "particles each) are fewer to test. A body of few tets gets a few large spheres whose patches fold round "
+        "its edges; the default keeps n = 4 for it. In one run, after the table above:",
         "",
         grouping_section(ctx, scene, frames, seeded(GROUPING_SEED_SHIFTS)),
         "",
