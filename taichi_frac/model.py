@@ -236,11 +236,10 @@ COARSE_MIN_SPHERES = 32
 
 #: A body (``build_body_model``) keeps the coarse n only where at least this fraction of
 #: its patches lie in a few planes (``ContactPatches.facets``), as the finer grouping's
-#: all do; else it and its pieces keep the finer n. A 1,389-tet torus of 12 sections round
-#: its tube kept facets on 27 % of its patches at n = 12 (85 % at 8, all at 4), pairs of
-#: its patches fell back to sphere contacts, and five of them stacked slid off one
-#: another (the top 108 mm low); the 13 rings' finer tori keep 95 %, a 4,822-tet cube
-#: all. Pieces are not tested: the patches along their cracks (tet faces in steps) fold
+#: all do; else it and its pieces keep the finer n. A 3,023-tet torus of 12 sections round
+#: its tube (the tests') keeps facets on 53 % of its patches at n = 12 (92 % at 8, all at
+#: 4), pairs of its patches fall back to sphere contacts, and five of them stacked rest
+#: 79 mm too high; the 13 rings' finer tori keep 95 %, a 4,822-tet cube all. Pieces are not tested: the patches along their cracks (tet faces in steps) fold
 #: at any n (a quarter to a half of a ring piece's patches at n = 4).
 COARSE_MIN_FACETED = 0.9
 

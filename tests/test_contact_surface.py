@@ -257,8 +257,14 @@ def test_a_resting_ring_stands_on_a_few_contacts_that_carry_its_weight():
     assert state["position"][0][2] == pytest.approx(0.025, abs=REST_TOLERANCE)
     n = int(world.contacts.count[None])
     ground = world.contacts.body_b.to_numpy()[:n] < 0
-    assert 3 <= ground.sum() <= 1 + 2 * reduction.DIRECTIONS
-    touching = ground & (world.contacts.separation.to_numpy()[:n] < REST_TOLERANCE)
+    separation = world.contacts.separation.to_numpy()[:n]
+    # Those within the contact margin of the deepest are reduced; farther ones (the next
+    # row of vertices, made speculatively as the ring jitters) are kept and hold nothing.
+    margin = world.options.contact_margin * world.contacts.radius.to_numpy()[:n]
+    reduced = ground & (separation - separation[ground].min() <= margin)
+    assert 3 <= reduced.sum() <= 1 + 2 * reduction.DIRECTIONS
+    assert np.all(world.contacts.normal_impulse.to_numpy()[:n][ground & ~reduced] == 0.0)
+    touching = ground & (separation < REST_TOLERANCE)
     points = world.contacts.point.to_numpy()[:n][touching]
     spread = np.max(np.linalg.norm(points[:, None, :2] - points[None, :, :2], axis=2))
     assert spread == pytest.approx(0.2, rel=0.1)

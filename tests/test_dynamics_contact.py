@@ -82,23 +82,22 @@ def test_ring_dropped_on_ground_comes_to_rest():
     body = world.add_body(model, (0, 0, 0.4), tilt, (0.3, 0, 0), (0, 0, 1.0))
     models = {body: model}
     radius = model.boundary_radius
-    peak, touched, rest_frame = 0.0, False, None
+    touched, energies, speeds = False, [], []
     for frame in range(200):  # 4 s
         world.advance(0.02, 10)
-        energy = kinetic_energy(world, models)
-        peak = max(peak, energy)
+        energies.append(kinetic_energy(world, models))
+        speeds.append(np.linalg.norm(world.body_state([body])["linear_velocity"][0]))
         particles = world.particle_state(body)
         depth = -(particles["position"][:, 2] - particles["radius"])
         if touched:
             assert np.all(depth <= 0.1 * radius)  # after the first contact substep
         touched |= world.stats.contacts > 0 or np.any(depth > 0)
-        if rest_frame is None and energy < 1e-6 * peak and frame > 10:
-            rest_frame = frame
-        if rest_frame is not None:
-            assert energy < 1e-6 * peak  # and it stays there
-            state = world.body_state([body])
-            assert np.linalg.norm(state["linear_velocity"][0]) < 1e-3
-    assert rest_frame is not None and rest_frame * 0.02 <= 3.0
+    # At rest from some frame within 3 s to the end (a rocking ring passes through
+    # nearly zero kinetic energy at each turn, so the first such frame is no proof).
+    resting = np.asarray(energies) < 1e-6 * max(energies)
+    rest_frame = len(resting) - int(np.argmin(resting[::-1])) if not resting.all() else 0
+    assert rest_frame * 0.02 <= 3.0
+    assert np.all(np.asarray(speeds[rest_frame:]) < 1e-3)
 
 
 def test_impacts_sum_to_the_momentum_change():
