@@ -66,9 +66,9 @@ PLANE_REACH = 0.5
 #: ring landing without friction then takes the closed-form impulse to 0.2-0.4 % at every
 #: tilt and every grouping n (``bench.bodies.tilted_landing``; the contact page). At the
 #: middle of the points within ``SPOT_BAND`` (a contact area's middle) the spot lay up to
-#: 5 mm nearer the ring's centre: the impulse came out up to 8 % over, and 12 % with
-#: spheres of 12 surface particles (the band grows with the radius). Single-scale's
-#: spheres, centred on tets' centroids inside the surface, are off by 6-7 % either way.
+#: 5 mm nearer the ring's centre: the impulse came out up to 12 % over. Single-scale's
+#: spheres, centred on tets' centroids inside the surface, are up to 6 % off either way,
+#: and the boundary spheres up to 15 %.
 LANDING_BAND = 0.001
 
 #: A patch of a body of many spheres resting on a static collider (one contact a patch,
