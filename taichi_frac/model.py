@@ -239,8 +239,9 @@ COARSE_MIN_SPHERES = 32
 #: all do; else it and its pieces keep the finer n. A 3,023-tet torus of 12 sections round
 #: its tube (the tests') keeps facets on 53 % of its patches at n = 12 (92 % at 8, all at
 #: 4), pairs of its patches fall back to sphere contacts, and five of them stacked rest
-#: 79 mm too high; the 13 rings' finer tori keep 95 %, a 4,822-tet cube all. Pieces are not tested: the patches along their cracks (tet faces in steps) fold
-#: at any n (a quarter to a half of a ring piece's patches at n = 4).
+#: 79 mm too high; the 13 rings' finer tori keep 95 %, a 4,822-tet cube all. Pieces are
+#: not tested: the patches along their cracks (tet faces in steps) fold at any n (a
+#: quarter to a half of a ring piece's patches at n = 4).
 COARSE_MIN_FACETED = 0.9
 
 
@@ -367,12 +368,11 @@ def build_fragment_models(
         keep = np.nonzero(~spoilt)[0]
         inherited = (mapped[~spoilt[owner]], sizes[keep], group_piece[keep], parent.collision_position[keep],
                      crack_face)
-    models = _assemble(parent.vertices[vertex_key - vertex_piece * v_parent], tets, parent.tet_volume[all_tets],
-                       neighbor, tet_start, vertex_start, parent.density, piece_n, keep_leftovers,
-                       parent.source_tet[all_tets], spacing=parent.spacing,
-                       root=parent.root if parent.root is not None else parent, inherited=inherited,
-                       props=[_mass_by_subtraction(parent, p) for p in pieces], coarse_group_size=coarse)
-    return models
+    return _assemble(parent.vertices[vertex_key - vertex_piece * v_parent], tets, parent.tet_volume[all_tets],
+                     neighbor, tet_start, vertex_start, parent.density, piece_n, keep_leftovers,
+                     parent.source_tet[all_tets], spacing=parent.spacing,
+                     root=parent.root if parent.root is not None else parent, inherited=inherited,
+                     props=[_mass_by_subtraction(parent, p) for p in pieces], coarse_group_size=coarse)
 
 
 def _mass_by_subtraction(parent: BodyModel, tets: np.ndarray) -> MassProperties | None:
