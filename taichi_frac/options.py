@@ -209,11 +209,12 @@ class ParticleOptions:
             boundary particle (paper: 4). 1 means single-scale (every surface particle
             collides on its own).
         surface_group_size: the n of a body that collides through its true surface
-            (``simulation.surface_contact``) and has at least 32 x n surface particles
-            (its pieces choose theirs the same way when it breaks): there the spheres
-            only find which surface patches may touch, so fewer, larger spheres cost less
-            while rest heights and landings stay exact (docs/guide/contact.md). Smaller
-            bodies and pieces keep boundary_group_size. 0: boundary_group_size for all.
+            (``simulation.surface_contact``), has at least 32 x n surface particles and
+            keeps facets on 90 % of its patches so grouped (its pieces choose by their
+            size the same way when it breaks): there the spheres only find which surface
+            patches may touch, so fewer, larger spheres cost less while rest heights and
+            landings stay exact (docs/guide/contact.md). Other bodies and pieces keep
+            boundary_group_size. 0: boundary_group_size for all.
         keep_leftovers: surface particles that cannot be grouped become their own boundary
             particle (True) or are dropped (False).
         min_dihedral_deg: quality bound passed to the mesher [degrees].
