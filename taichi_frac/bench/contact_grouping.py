@@ -78,7 +78,10 @@ def grouping_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) ->
     drops = {n: _ring_drop(ctx, False, True, *_grouping(n)) for n in GROUPINGS}
     cubes = {n: _cube_on_cube(ctx, False, True, 60, *_grouping(n)) for n in GROUPINGS}
     landings = {n: _landing(ctx, False, True, *_grouping(n)) for n in GROUPINGS}
-    variants = {"sphere": _grouped(scene, 4, False)} | {n: _grouped(scene, n, True) for n in GROUPINGS}
+    def variants_of(sc):  # sphere contacts at n = 4, then surface contacts at each grouping
+        return {"sphere": _grouped(sc, 4, False)} | {n: _grouped(sc, n, True) for n in GROUPINGS}
+
+    variants = variants_of(scene)
     off = {k: [] for k in variants}
     spheres = {}
     for _ in range(GROUPING_RING_RUNS):
@@ -89,9 +92,8 @@ def grouping_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) ->
     scenes = seed_scenes or [scene]
     on = {k: [] for k in variants}
     for sc in scenes:
-        for k in variants:
-            on[k].append(_ring_ms(ctx, _grouped(sc, 4, False) if k == "sphere" else _grouped(sc, k, True), True,
-                                  frames))
+        for k, variant in variants_of(sc).items():
+            on[k].append(_ring_ms(ctx, variant, True, frames))
     on_ms = {k: float(np.mean([r[0] for r in on[k]])) for k in variants}
     rows = []
     for n in GROUPINGS:

@@ -470,9 +470,7 @@ def _collider_contacts(bodies: ti.template(), particles: ti.template(), statics:
     ids = ti.Vector.zero(ti.i32, ti.static(surface.MANIFOLD_POINTS))
     if patch:
         v, _ = _point_velocity(bodies, a, x)
-        landing = -v.dot(n) > bounce_speed
-        single = landing or bodies.particle_count[a] > ti.static(surface.MANIFOLD_MAX_SPHERES)
-        gap, count, points, levels, ids = surface.against(bodies, particles, a, i, n, level, single, landing)
+        gap, count, points, levels, ids = surface.against(bodies, particles, a, i, n, level, -v.dot(n) > bounce_speed)
     r = particles.radius[i]
     for m in range(count):  # (a dynamic loop: unrolled, each _append was inlined four times)
         g = gap + levels[m]

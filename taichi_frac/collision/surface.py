@@ -72,7 +72,7 @@ PLANE_REACH = 0.5
 LANDING_BAND = 0.001
 
 #: A patch of a body of many spheres resting on a static collider (one contact a patch,
-#: ``against``'s ``single``) touches at the mean of its points within this fraction of the
+#: ``against``'s single point) touches at the mean of its points within this fraction of the
 #: sphere's radius of its lowest: a contact area's middle, which stays put while the body
 #: rocks by less than the band, where its lowest vertex hops from vertex to vertex. (The
 #: 13 unbreakable rings settle about as fast either way: single runs of the pile differ
@@ -94,7 +94,7 @@ MANIFOLD_POINTS = 4
 MANIFOLD_MAX_SPHERES = 16
 
 #: The id (``manifold``'s ids) of the one contact a patch makes at the middle of its band
-#: (``against``'s ``single``): past any patch's points.
+#: (``against``'s single point): past any patch's points.
 SPOT_ID = 4095
 
 #: Manifold points closer than this fraction of the sphere's radius to the ones already
@@ -304,15 +304,14 @@ def by_patches(particles: ti.template(), i, j):
 
 
 @ti.func
-def against(bodies: ti.template(), particles: ti.template(), a, i, n, level, single, landing):
+def against(bodies: ti.template(), particles: ti.template(), a, i, n, level, landing):
     """Sphere ``i`` of body ``a`` against a static collider whose support along the world
     normal ``n`` (out of the collider, into a) is ``level`` [m]: (gap [m] of the deepest
     point, and ``manifold``'s count, points (world [m]), levels along n and ids; the
-    single point's id is ``SPOT_ID``). ``single``: one point instead (``contact_spot``), for
-    an impact (``landing``: the patch approaches faster than the restitution threshold; at
-    its lowest point, ``LANDING_BAND``) and for a body of more than
-    ``MANIFOLD_MAX_SPHERES`` spheres (whose contacts ``reduction`` then thins out; at the
-    middle of its ``SPOT_BAND``).
+    single point's id is ``SPOT_ID``). One point instead (``contact_spot``) for an impact
+    (``landing``: the patch approaches faster than the restitution threshold; at its lowest
+    point, ``LANDING_BAND``) and for a body of more than ``MANIFOLD_MAX_SPHERES`` spheres
+    (whose contacts ``reduction`` then thins out; at the middle of its ``SPOT_BAND``).
     Spread over four contacts, an impact's restitution was shared unevenly: the ring
     drop's rebound fell to 12.9 % under single-scale's, its first impulse to 4.1 % under."""
     rot_a = bodies.rotation[a]
@@ -322,7 +321,7 @@ def against(bodies: ti.template(), particles: ti.template(), a, i, n, level, sin
     points = ti.Matrix.zero(ti.f32, ti.static(MANIFOLD_POINTS), 3)
     levels = ti.Vector.zero(ti.f32, ti.static(MANIFOLD_POINTS))
     ids = ti.Vector([SPOT_ID] * MANIFOLD_POINTS, dt=ti.i32)
-    if single:
+    if landing or bodies.particle_count[a] > ti.static(MANIFOLD_MAX_SPHERES):
         spot = contact_spot(particles, i, axis, low, ti.select(landing, LANDING_BAND, SPOT_BAND))
         for c in ti.static(range(3)):
             points[0, c] = spot[c]
