@@ -8,6 +8,9 @@
 - ``stability``: the hard cases of the dynamics and the fracture as a table;
 - ``dynamics``: the ``bench dynamics`` table (the 13-ring scene two- vs single-scale,
   the drop error at n = 4 against n = 1, a fragment pile);
+- ``contact``, ``contact_grouping``: its surface-contact page (docs/benchmarks/contact.md),
+  every contact mode on the same bodies, against exact rest heights and rigid-body
+  references (``rigid_drop``: an event-driven drop onto a frictionless plane);
 - ``report``: runs the parts and writes ``docs/benchmarks.md``, its plots and a summary.
 - ``bodies``, ``fracture_ring``: the bodies and impacts the report shares with the test
   suite, defined once so both describe the same set-ups.

@@ -146,6 +146,20 @@ def settle_and_hold(world, bodies, settle_frames: int, hold_frames: int):
     return settled, world.body_state(bodies)
 
 
+def _tilted(world, model, tilt: float, restitution: float, drop: float):
+    """Add a frictionless ground at z = 0 and ``model`` turned ``tilt`` [rad] about x, its
+    lowest vertex ``drop`` [m] above the ground, at rest: (body id, quaternion, rotation
+    matrix, centre-of-mass position)."""
+    from ..kinematics.quaternion import quaternion_matrix
+
+    q = (np.cos(tilt / 2), np.sin(tilt / 2), 0.0, 0.0)
+    rot = quaternion_matrix(np.array(q))
+    position = (0.0, 0.0, drop - float((model.vertices @ rot.T)[:, 2].min()))
+    world.add_ground(0.0, friction=0.0, restitution=restitution)
+    body = world.add_body(model, position, q, friction=0.0, restitution=restitution)
+    return body, q, rot, position
+
+
 def tilted_landing(world, model, tilt: float, restitution: float = 0.5, drop: float = 0.1,
                    substeps: int = 10) -> tuple[float, float, float]:
     """``model`` turned ``tilt`` [rad] about x, let fall without spin from ``drop`` [m] (its
@@ -160,14 +174,9 @@ def tilted_landing(world, model, tilt: float, restitution: float = 0.5, drop: fl
     nearer the centre than the lowest vertex of a tilted ring strikes 5-10 % harder. Choose
     a tilt at which one vertex is clearly lowest (a faceted tube with two level vertices
     touches along their edge)."""
-    from ..kinematics.quaternion import quaternion_matrix
-
-    q = (np.cos(tilt / 2), np.sin(tilt / 2), 0.0, 0.0)
-    rot = quaternion_matrix(np.array(q))
+    _, _, rot, _ = _tilted(world, model, tilt, restitution, drop)
     vertices = model.vertices @ rot.T
     arm = vertices[np.argmin(vertices[:, 2])]
-    world.add_ground(0.0, friction=0.0, restitution=restitution)
-    world.add_body(model, (0.0, 0.0, drop - arm[2]), q, friction=0.0, restitution=restitution)
     for _ in range(int(np.ceil(2.0 * np.sqrt(2.0 * drop / 9.81) / 0.01))):
         world.advance(0.01, substeps)
         rows = world.impacts()
@@ -181,3 +190,42 @@ def tilted_landing(world, model, tilt: float, restitution: float = 0.5, drop: fl
     lever = np.cross(arm, (0.0, 0.0, 1.0))
     inverse_mass = 1.0 / model.mass + lever @ np.linalg.solve(rot @ model.inertia @ rot.T, lever)
     return impulse, (1.0 + restitution) * speed / inverse_mass, speed
+
+
+#: [s] how often ``tilted_rebound`` reads the pose (a peak read this often is at most
+#: g (1 ms)^2 / 2 = 5 um low).
+REBOUND_SAMPLE = 0.002
+
+
+def tilted_rebound(world, model, tilt: float, substep: float, restitution: float = 0.5, drop: float = 0.3,
+                   bounce_speed: float = 0.2, window: float = 0.5, reference=None):
+    """``model`` dropped as in :func:`tilted_landing` (frictionless, from rest, ``drop``
+    [m]), simulated with substeps of ``substep`` [s] (at most ``REBOUND_SAMPLE``) and
+    dropped by the event-driven reference (``rigid_drop.drop``, the same restitution and
+    ``bounce_speed`` [m/s], the solver's restitution threshold): (the simulated rebound, the
+    reference's ``RigidDrop``). The rebound [m] is how far the centre of mass rises above
+    its height when the lowest vertex touches, until, having risen, it falls back through
+    that height (or ``window`` [s] after the first impact). ``reference``: a reference
+    already computed for these mass properties and this drop, to reuse."""
+    from . import rigid_drop
+
+    body, _, rot, position = _tilted(world, model, tilt, restitution, drop)
+    if reference is None:
+        reference = rigid_drop.drop(model.vertices, model.mass, model.inertia, position, rot, restitution,
+                                    bounce_speed, window=window)
+    touch = position[2] - drop
+    substeps = max(1, round(REBOUND_SAMPLE / substep))
+    struck, peak, rose = None, -np.inf, False
+    for frame in range(int(np.ceil((2.0 * np.sqrt(2.0 * drop / 9.81) + window) / REBOUND_SAMPLE))):
+        world.advance(REBOUND_SAMPLE, substeps)
+        if struck is None and world.impact_count():
+            struck = frame
+        if struck is not None:
+            state = world.body_state([body])
+            z, rising = float(state["position"][0][2]), state["linear_velocity"][0][2] > 0.0
+            peak, rose = max(peak, z), rose or rising
+            if (rose and not rising and z < touch) or (frame - struck) * REBOUND_SAMPLE > window:
+                break
+    if struck is None:
+        raise RuntimeError("the body never reached the ground")
+    return peak - touch, reference

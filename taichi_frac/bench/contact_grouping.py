@@ -4,7 +4,7 @@ with surface contacts the spheres only find which patches may touch, so coarser 
 stay, and so does a landing's impulse (it acts at the patch's lowest point,
 ``collision.surface.LANDING_BAND``). What the coarser spheres do change is how a body of few
 tets is covered, and the rolling resistance (a fraction of the sphere radius). Part of the
-contact page (``dynamics.contact_section``).
+contact page (``contact.contact_section``).
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ def _label(n) -> str:
 def _grouped(scene, n, surface: bool):
     """``scene`` with every object grouped by the ``GROUPINGS`` entry ``n`` and the contact
     mode ``surface`` (two-scale)."""
-    from .dynamics import _with_contact
+    from .contact import _with_contact
 
     group, coarse = _grouping(n)
     extra = {} if coarse is None else {"surface_group_size": coarse}
@@ -72,7 +72,7 @@ def grouping_section(ctx: BenchContext, scene, frames=None, seed_scenes=None) ->
     """The table of surface contacts at each of ``GROUPINGS`` (markdown): the 13 rings'
     time without and with fracture against sphere contacts at n = 4, in one run, and the
     ring drop and the coarse cube stack against their references."""
-    from .dynamics import LANDING_TILTS, _cube_on_cube, _landing, _ring_drop, landing_row
+    from .contact import LANDING_TILTS, _cube_on_cube, _landing, _ring_drop, landing_row
 
     reference = _ring_drop(ctx, single=True, surface=False)
     drops = {n: _ring_drop(ctx, False, True, *_grouping(n)) for n in GROUPINGS}
