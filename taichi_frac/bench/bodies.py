@@ -200,7 +200,8 @@ REBOUND_SAMPLE = 0.002
 def tilted_rebound(world, model, tilt: float, substep: float, restitution: float = 0.5, drop: float = 0.3,
                    bounce_speed: float = 0.2, window: float = 0.5, reference=None):
     """``model`` dropped as in :func:`tilted_landing` (frictionless, from rest, ``drop``
-    [m]), simulated with substeps of ``substep`` [s] (at most ``REBOUND_SAMPLE``) and
+    [m]), simulated with substeps of at most ``substep`` [s] (at most ``REBOUND_SAMPLE``; the
+    World shortens them while a body moves more than its spheres' mean radius in one) and
     dropped by the event-driven reference (``rigid_drop.drop``, the same restitution and
     ``bounce_speed`` [m/s], the solver's restitution threshold): (the simulated rebound, the
     reference's ``RigidDrop``). The rebound [m] is how far the centre of mass rises above

@@ -188,8 +188,9 @@ def rebound_label(references) -> str:
             + " impacts): its centre of mass's rise above its height at the first touch − the event-driven "
             "rigid-body reference's ("
             + " / ".join(f"{1e3 * references[d].rebound:.1f}" for d in REBOUND_TILTS)
-            + " mm) [%], with substeps of " + " / ".join(f"{1e3 * dt:g}" for dt in REBOUND_SUBSTEPS)
-            + " ms (the scenes' / fine)")
+            + " mm) [%], with substeps of at most " + " / ".join(f"{1e3 * dt:g}" for dt in REBOUND_SUBSTEPS)
+            + " ms (the scenes', which the World shortens while a body moves more than its spheres' mean radius in "
+            "one / fine)")
 
 
 def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) -> dict:
