@@ -148,8 +148,8 @@ def settle_and_hold(world, bodies, settle_frames: int, hold_frames: int):
 
 def _tilted(world, model, tilt: float, restitution: float, drop: float):
     """Add a frictionless ground at z = 0 and ``model`` turned ``tilt`` [rad] about x, its
-    lowest vertex ``drop`` [m] above the ground, at rest: (body id, quaternion, rotation
-    matrix, centre-of-mass position)."""
+    lowest vertex ``drop`` [m] above the ground, at rest: (body id, rotation matrix,
+    centre-of-mass position)."""
     from ..kinematics.quaternion import quaternion_matrix
 
     q = (np.cos(tilt / 2), np.sin(tilt / 2), 0.0, 0.0)
@@ -157,7 +157,7 @@ def _tilted(world, model, tilt: float, restitution: float, drop: float):
     position = (0.0, 0.0, drop - float((model.vertices @ rot.T)[:, 2].min()))
     world.add_ground(0.0, friction=0.0, restitution=restitution)
     body = world.add_body(model, position, q, friction=0.0, restitution=restitution)
-    return body, q, rot, position
+    return body, rot, position
 
 
 def tilted_landing(world, model, tilt: float, restitution: float = 0.5, drop: float = 0.1,
@@ -174,7 +174,7 @@ def tilted_landing(world, model, tilt: float, restitution: float = 0.5, drop: fl
     nearer the centre than the lowest vertex of a tilted ring strikes 5-10 % harder. Choose
     a tilt at which one vertex is clearly lowest (a faceted tube with two level vertices
     touches along their edge)."""
-    _, _, rot, _ = _tilted(world, model, tilt, restitution, drop)
+    _, rot, _ = _tilted(world, model, tilt, restitution, drop)
     vertices = model.vertices @ rot.T
     arm = vertices[np.argmin(vertices[:, 2])]
     for _ in range(int(np.ceil(2.0 * np.sqrt(2.0 * drop / 9.81) / 0.01))):
@@ -198,22 +198,23 @@ REBOUND_SAMPLE = 0.002
 
 
 def tilted_rebound(world, model, tilt: float, substep: float, restitution: float = 0.5, drop: float = 0.3,
-                   bounce_speed: float = 0.2, window: float = 0.5, reference=None):
+                   window: float = 0.5, reference=None):
     """``model`` dropped as in :func:`tilted_landing` (frictionless, from rest, ``drop``
     [m]), simulated with substeps of at most ``substep`` [s] (at most ``REBOUND_SAMPLE``; the
     World shortens them while a body moves more than its spheres' mean radius in one) and
-    dropped by the event-driven reference (``rigid_drop.drop``, the same restitution and
-    ``bounce_speed`` [m/s], the solver's restitution threshold): (the simulated rebound, the
+    dropped by the event-driven reference (``rigid_drop.drop``, with the same restitution,
+    and the world's restitution threshold and gravity): (the simulated rebound, the
     reference's ``RigidDrop``). The rebound [m] is how far the centre of mass rises above
     its height when the lowest vertex touches, until, having risen, it falls back through
     that height (or ``window`` [s] after the first impact). ``reference``: a reference
     already computed for these mass properties and this drop, to reuse."""
     from . import rigid_drop
 
-    body, _, rot, position = _tilted(world, model, tilt, restitution, drop)
+    body, rot, position = _tilted(world, model, tilt, restitution, drop)
     if reference is None:
         reference = rigid_drop.drop(model.vertices, model.mass, model.inertia, position, rot, restitution,
-                                    bounce_speed, window=window)
+                                    world.options.restitution_threshold, window=window,
+                                    gravity=-float(world.options.gravity[2]))
     touch = position[2] - drop
     substeps = max(1, round(REBOUND_SAMPLE / substep))
     struck, peak, rose = None, -np.inf, False

@@ -146,7 +146,7 @@ LANDING_LABEL = ("torus (40 x 12 sections, the tests') landing on its lowest ver
 #: Tilts [degrees] and substeps [s] of the frictionless drop from 0.3 m (``_rebound``):
 #: the report's ring drop's tilt (0.1 rad) and a steeper one, at the scenes' substep and
 #: at one fine enough that the contacts' geometry is all that is left.
-REBOUND_TILTS = (0.1 * 180 / 3.141592653589793, 20.0)
+REBOUND_TILTS = (float(np.degrees(0.1)), 20.0)
 REBOUND_SUBSTEPS = (0.002, 0.0001)
 
 

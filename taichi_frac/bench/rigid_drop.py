@@ -3,8 +3,9 @@
 The body (its vertices about the centre of mass, mass, inertia) falls under gravity onto
 the plane z = 0. Between impacts its motion is free flight: the centre of mass follows a
 parabola exactly, and the orientation turns by the angular velocity (from the conserved
-angular momentum) over steps of ``step`` seconds, which is exact for a body spinning about
-a principal axis (a ring tilted about a diameter). An impact is found at the moment a
+angular momentum) over steps of ``FAR_STEP`` seconds, ``step`` within ``NEAR`` of the
+plane, which is exact for a body spinning about a principal axis (a ring tilted about a
+diameter). An impact is found at the moment a
 vertex reaches the plane (bisection on the step) and resolved then, with no time step:
 the touching vertex that approaches fastest takes the impulse along +Z that sends it
 back at e times its approach speed (Newton's law; e = 0 below ``bounce_speed``), repeated
@@ -23,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-GRAVITY = 9.81  # [m/s^2], along -Z
+GRAVITY = 9.81  # [m/s^2], along -Z: the default
 #: Free-flight step while the lowest vertex is farther than ``NEAR`` [m] above the plane,
 #: and the step [s] near it (a pivoting vertex is held once a step).
 FAR_STEP = 1e-4
@@ -61,18 +62,19 @@ def _turn(angular_velocity, dt):
 
 
 def drop(vertices, mass: float, inertia, position, rotation, restitution: float, bounce_speed: float,
-         window: float = 0.5, step: float = 1e-5) -> RigidDrop:
+         window: float = 0.5, step: float = 1e-5, gravity: float = GRAVITY) -> RigidDrop:
     """Drop the body from rest: ``vertices`` (V, 3) [m] in its frame about the centre of
     mass, ``mass`` [kg], ``inertia`` (3, 3) [kg m^2] in its frame, ``position`` (3,) [m]
-    of its centre of mass, ``rotation`` (3, 3) body to world. Runs until the first bounce
-    is over (``RigidDrop.peak``) or ``window`` [s] after the first touch."""
+    of its centre of mass, ``rotation`` (3, 3) body to world, ``gravity`` [m/s^2] along
+    -Z. Runs until the first bounce is over (``RigidDrop.peak``) or ``window`` [s] after
+    the first touch."""
     vertices = np.asarray(vertices, dtype=np.float64)
     inverse = np.linalg.inv(np.asarray(inertia, dtype=np.float64))
     c = np.array(position, dtype=np.float64)
     rot = np.array(rotation, dtype=np.float64)
     v = np.zeros(3)
     momentum = np.zeros(3)  # angular, world frame [kg m^2/s]
-    fall = np.array([0.0, 0.0, -GRAVITY])
+    fall = np.array([0.0, 0.0, -gravity])
 
     def fly(c, rot, v, dt):
         w = rot @ inverse @ rot.T @ momentum
