@@ -37,12 +37,16 @@ class RigidDrop:
     highest z [m] from then until, having risen, it falls back through ``touch_height``
     (or the window ends); first_impulse: the first impact's impulse [N s]; impacts: (time
     [s] after the first touch, vertex index, approach speed [m/s], impulse [N s]) of every
-    impulse applied faster than the bounce speed."""
+    impulse applied faster than the bounce speed; simultaneous: how many impacts found two
+    or more vertices (within 10 nm of the plane) approaching faster than the bounce speed
+    at once, where sequential impulses are not the only answer (0 for a trustworthy
+    reference)."""
 
     touch_height: float
     peak: float
     first_impulse: float
     impacts: list
+    simultaneous: int
 
     @property
     def rebound(self) -> float:
@@ -80,28 +84,35 @@ def drop(vertices, mass: float, inertia, position, rotation, restitution: float,
         w = rot @ inverse @ rot.T @ momentum
         return c + v * dt + 0.5 * fall * dt * dt, _turn(w, dt) @ rot, v + fall * dt
 
-    t, first, touch, first_impulse, peak, rose, impacts = 0.0, None, None, 0.0, -np.inf, False, []
+    t, first, touch, first_impulse, peak, rose, impacts, simultaneous = 0.0, None, None, 0.0, -np.inf, False, [], 0
+    stalled = 0  # impacts in a row found without time passing
     while True:
         lowest = float((vertices @ rot.T + c)[:, 2].min())
         dt = FAR_STEP if lowest > NEAR else step
         c2, rot2, v2 = fly(c, rot, v, dt)
         z = (vertices @ rot2.T + c2)[:, 2]
         if z.min() < 0.0:
-            k = int(np.argmin(z))
             w2 = rot2 @ inverse @ rot2.T @ momentum
-            if (v2 + np.cross(w2, vertices[k] @ rot2.T))[2] < -bounce_speed:
-                # An impact: back to the instant it touches.
+            striking = (z < 0.0) & ((v2 + np.cross(w2, vertices @ rot2.T))[:, 2] < -bounce_speed)
+            if striking.any():
+                # An impact: back to the instant the deepest striking vertex touches (a vertex
+                # resting on the plane meanwhile is held at the step's end, as below).
+                k = int(np.argmin(np.where(striking, z, np.inf)))
                 lo, hi = 0.0, dt
                 for _ in range(48):
                     mid = 0.5 * (lo + hi)
                     cm, rm, _ = fly(c, rot, v, mid)
-                    lo, hi = (lo, mid) if (vertices @ rm.T + cm)[:, 2].min() < 0.0 else (mid, hi)
+                    lo, hi = (lo, mid) if (rm @ vertices[k] + cm)[2] < 0.0 else (mid, hi)
                 dt = lo
                 c2, rot2, v2 = fly(c, rot, v, dt)
+                stalled = stalled + 1 if dt < 1e-15 else 0
+                if stalled > 100:
+                    raise RuntimeError(f"the reference stalled at t = {t:.6f} s: an impact it cannot resolve")
             c, rot, v = c2, rot2, v2
             t += dt
-            v, applied = _resolve(vertices @ rot.T, rot @ inverse @ rot.T, mass, c, v, momentum,
-                                  restitution, bounce_speed)
+            v, applied, striking = _resolve(vertices @ rot.T, rot @ inverse @ rot.T, mass, c, v, momentum,
+                                            restitution, bounce_speed)
+            simultaneous += striking > 1
             if first is None:
                 first, touch, first_impulse = t, float(c[2]), sum(j for _, _, j in applied)
             impacts += [(t - first, vertex, speed, j) for vertex, speed, j in applied if speed > bounce_speed]
@@ -115,16 +126,19 @@ def drop(vertices, mass: float, inertia, position, rotation, restitution: float,
                 break
         elif t > 100.0:
             raise RuntimeError("the body never reached the plane (is it above z = 0 and falling?)")
-    return RigidDrop(touch_height=touch, peak=peak, first_impulse=first_impulse, impacts=impacts)
+    return RigidDrop(touch_height=touch, peak=peak, first_impulse=first_impulse, impacts=impacts,
+                     simultaneous=simultaneous)
 
 
 def _resolve(arms, inverse, mass, c, v, momentum, restitution, bounce_speed):
     """Impulses at the touching vertices (``arms`` (V, 3) [m]: vertices less the centre
     ``c``, world frame; ``inverse`` (3, 3) the world inverse inertia) until none approaches.
-    Updates ``momentum`` in place; returns the new velocity and (vertex, approach speed,
-    impulse) of each impulse."""
+    Updates ``momentum`` in place; returns the new velocity, (vertex, approach speed,
+    impulse) of each impulse, and how many touching vertices approached faster than
+    ``bounce_speed`` before them."""
     heights = arms[:, 2] + c[2]
     touching = np.nonzero(heights < max(float(heights.min()), 0.0) + 1e-8)[0]
+    striking = int(((v + np.cross(inverse @ momentum, arms[touching]))[:, 2] < -bounce_speed).sum())
     approach, applied = {}, []
     for _ in range(200):
         w = inverse @ momentum
@@ -140,4 +154,4 @@ def _resolve(arms, inverse, mass, c, v, momentum, restitution, bounce_speed):
         v = v + np.array([0.0, 0.0, j / mass])
         momentum += j * lever
         applied.append((k, speed, float(j)))
-    return v, applied
+    return v, applied, striking
