@@ -144,8 +144,9 @@ LANDING_LABEL = ("torus (40 x 12 sections, the tests') landing on its lowest ver
 
 
 #: Tilts [degrees] and substeps [s] of the frictionless drop from 0.3 m (``_rebound``):
-#: the report's ring drop's tilt (0.1 rad) and a steeper one, at the scenes' substep and
-#: at one fine enough that the contacts' geometry is all that is left.
+#: the report's ring drop's tilt (0.1 rad) and a steeper one, at the default substep (10
+#: a 50 fps frame, as the single ring's scene) and at one fine enough that the contacts'
+#: geometry is all that is left.
 REBOUND_TILTS = (float(np.degrees(0.1)), 20.0)
 REBOUND_SUBSTEPS = (0.002, 0.0001)
 
@@ -192,8 +193,8 @@ def rebound_label(references) -> str:
             "rigid-body reference's ("
             + " / ".join(f"{1e3 * references[d].rebound:.1f}" for d in REBOUND_TILTS)
             + " mm) [%], with substeps of at most " + " / ".join(f"{1e3 * dt:g}" for dt in REBOUND_SUBSTEPS)
-            + " ms (the scenes', which the World shortens while a body moves more than its spheres' mean radius in "
-            "one / fine)")
+            + " ms (the default, 10 a 50 fps frame, which the World shortens while a body moves more than its "
+            "spheres' mean radius in one / fine)")
 
 
 def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) -> dict:
