@@ -22,6 +22,7 @@ import numpy as np
 
 from .common import BenchContext, load_average, md_table, provenance
 
+
 def print_contact(ctx: BenchContext, scene, args, t0: float) -> int:
     """The surface-contact table, printed and written to ``args.contact_out``."""
     from pathlib import Path
