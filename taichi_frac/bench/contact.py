@@ -82,6 +82,16 @@ def _with_contact(scene, single: bool, surface: bool):
         scene.simulation, single_scale=single, surface_contact=surface))
 
 
+def _world(ctx: BenchContext, single: bool, surface: bool):
+    """The report's one World, emptied and set to a contact mode."""
+    from ..dynamics import DynamicsOptions
+
+    world = ctx.world()
+    world.clear()
+    world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
+    return world
+
+
 def _model(vertices, tets, single: bool, surface: bool, group: int = 4, coarse: int | None = None,
            density: float = 2400.0):
     """The BodyModel a contact mode collides with: single-scale n = 1; two-scale n =
@@ -119,16 +129,13 @@ def _landing(ctx: BenchContext, single: bool, surface: bool, group: int = 4, coa
     impact's normal impulse relative to the closed form, less 1."""
     import math
 
-    from ..dynamics import DynamicsOptions
     from . import bodies
 
     ring = bodies.ring_model()
     model = _model(ring.vertices, ring.tets, single, surface, group, coarse, bodies.DENSITY)
     errors = []
     for degrees in LANDING_TILTS:
-        world = ctx.world()
-        world.clear()
-        world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
+        world = _world(ctx, single, surface)
         impulse, exact, _ = bodies.tilted_landing(world, model, math.radians(degrees))
         errors.append(impulse / exact - 1.0)
     return errors
@@ -160,7 +167,6 @@ def _rebound(ctx: BenchContext, single: bool, surface: bool, references: dict) -
     properties)."""
     import math
 
-    from ..dynamics import DynamicsOptions
     from . import bodies
 
     ring = bodies.ring_model()
@@ -168,9 +174,7 @@ def _rebound(ctx: BenchContext, single: bool, surface: bool, references: dict) -
     errors = {}
     for substep in REBOUND_SUBSTEPS:
         for degrees in REBOUND_TILTS:
-            world = ctx.world()
-            world.clear()
-            world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
+            world = _world(ctx, single, surface)
             rebound, references[degrees] = bodies.tilted_rebound(world, model, math.radians(degrees), substep,
                                                                  reference=references.get(degrees))
             if references[degrees].simultaneous:
@@ -187,7 +191,8 @@ def rebound_row(errors) -> str:
 
 
 def rebound_label(references) -> str:
-    return ("torus (the tests') dropped without friction from 0.3 m, tilted 0.1 rad / 20°, e = 0.5 (it strikes on "
+    return ("torus (the tests') dropped without friction from 0.3 m, tilted "
+            + " / ".join(f"{d:.3g}" for d in REBOUND_TILTS) + "°, e = 0.5 (it strikes on "
             "one side, slams down on the other and bounces; "
             + " / ".join(f"{len(references[d].impacts)}" for d in REBOUND_TILTS)
             + " impacts): its centre of mass's rise above its height at the first touch − the event-driven "
@@ -206,15 +211,12 @@ def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) ->
 
     import trimesh
 
-    from ..dynamics import DynamicsOptions
     from ..geometry.tetra import tetrahedralize
     from . import grouping
 
     mesh = tetrahedralize(trimesh.creation.box((0.1, 0.1, 0.1)), target_tets=5000)
     model = _model(mesh.vertices, mesh.tets, single, surface)
-    world = ctx.world()
-    world.clear()
-    world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
+    world = _world(ctx, single, surface)
     world.add_ground(0.0, restitution=0.0)
     if surface:
         low = -float(model.vertices[:, 2].min())
@@ -246,15 +248,12 @@ def _cube_on_cube(ctx: BenchContext, single: bool, surface: bool, tets: int, gro
     ``_model``."""
     import trimesh
 
-    from ..dynamics import DynamicsOptions
     from ..geometry.tetra import tetrahedralize
     from .bodies import stack_cubes
 
     mesh = tetrahedralize(trimesh.creation.box((0.1, 0.1, 0.1)), target_tets=tets)
     model = _model(mesh.vertices, mesh.tets, single, surface, group, coarse)
-    world = ctx.world()
-    world.clear()
-    world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
+    world = _world(ctx, single, surface)
     layer = (model.particle_position[model.surface_particles], model.particle_radius[model.surface_particles]) \
         if single else (model.collision_position, model.boundary_radius)
     bottom, top = stack_cubes(world, model, -float(np.min(layer[0][:, 2] - layer[1])))
@@ -273,12 +272,9 @@ def _ring_stack(ctx: BenchContext, single: bool, surface: bool) -> dict:
     down 0.5 mm above the one below, restitution 0, for 2 s: the top ring's centre-of-mass
     height against exact (one tube diameter a ring), how far any ring moved in the last
     second, and whether all sleep."""
-    from ..dynamics import DynamicsOptions
     from .bodies import ring_model, settle_and_hold, stack_rings
 
-    world = ctx.world()
-    world.clear()
-    world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
+    world = _world(ctx, single, surface)
     ring = ring_model()
     rings = stack_rings(world, _model(ring.vertices, ring.tets, single, surface, density=ring.density), STACK_RINGS)
     settled, state = settle_and_hold(world, rings, 50, 50)
@@ -296,15 +292,12 @@ HEAP_TIMES = (1.0, 2.0, 3.0)
 def _chip_heaps(ctx: BenchContext, single: bool, surface: bool) -> list:
     """Chips asleep at each of ``HEAP_TIMES``, summed over the ``HEAPS`` heaps
     (``bodies.heap_asleep``), and the chips in all."""
-    from ..dynamics import DynamicsOptions
     from .bodies import heap_asleep
 
     asleep = [0] * len(HEAP_TIMES)
     chips = 0
     for seed in range(HEAPS):
-        world = ctx.world()
-        world.clear()
-        world.set_options(DynamicsOptions(single_scale=single, surface_contact=surface))
+        world = _world(ctx, single, surface)
         counts, total = heap_asleep(world, seed, HEAP_TIMES)
         asleep = [n + c for n, c in zip(asleep, counts)]
         chips += total
