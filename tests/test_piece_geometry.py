@@ -15,6 +15,7 @@ from taichi_frac.fracture.cracks import CrackPlane, RingCrack, analyze_impact, t
 from taichi_frac.fracture.fragments import make_fragments, split_body
 from taichi_frac.geometry.crack_offsets import FITTED_PIECE_TETS
 from taichi_frac.geometry.piece_checks import crack_deviation, edge_counts, inside, piece_quality, signed_volume
+from taichi_frac.geometry.piece_parts import LOST_VOLUME_SHARE
 from taichi_frac.geometry.piece_reach import BALL_BOUND, REACH_FACTOR
 from taichi_frac.geometry.piece_surface import cut_render_solid, piece_mesh
 from taichi_frac.geometry.render_solid import render_solid_from_surface
@@ -222,16 +223,16 @@ def test_finite_crack_and_ring_crack_make_closed_pieces_and_cut_again(box):
         assert solid.volume_scale == pytest.approx(root_scale, rel=1e-12)
 
 
-def test_a_piece_the_cut_fails_gets_the_surface_nearest_its_tets(box):
+def test_a_piece_the_wall_gap_loses_is_carved_from_its_neighbour(box):
     """Where the slabs leave a gap in the wall between two pieces, the part on both sides
     goes to one of them and the other keeps only a chip (here a bead of the artist's surface
-    beside it, a separate shell): both are failed, and each gets instead the render solid
-    nearer its own tet centroids than any other piece's, less what the piece the cut did not
-    fail holds. Three pieces of the box: A (x < 0), B (0 < x < 0.04), C (x > 0.04); the wall
-    between A and B gets no slab. Closed form: A and B together fill the box up to C's crack
-    face (x = 0.04 and half a slab; the bead is a crumb), C keeps its cut; A's and B's shares each lie within a
-    cell (a spacing) of their tets' volume across the box's section; their faces between
-    each other lie on no crack (HULL_FACE), those against C on C's crack face."""
+    beside it, a separate shell): the lost piece is carved out of that part along its tets'
+    nearest-centroid cells, the rest stays with the other. Three pieces of the box: A (x <
+    0), B (0 < x < 0.04), C (x > 0.04); the wall between A and B gets no slab. Closed form:
+    A and B together fill the box up to C's crack face (x = 0.04 and half a slab; the bead
+    is a crumb), C keeps its cut; A and B each lie within a cell (a spacing) of their tets'
+    volume across the box's section; their faces between each other lie on no crack
+    (HULL_FACE), B's against C on C's crack face."""
     from taichi_frac.geometry.render_solid import HULL_FACE
 
     model, report, _ = box
@@ -251,7 +252,7 @@ def test_a_piece_the_cut_fails_gets_the_surface_nearest_its_tets(box):
     leaky = [dataclasses.replace(walls[0], extent=1e-9), walls[1]]  # cuts no bond: no slab
     renders, counts = cut_render_solid(render, model, split.fragment_tets, leaky,
                                        [p.model.com_in_source for p in pieces])
-    assert counts["fallback_pieces"] == 2 and counts["cell_pieces"] == 2
+    assert counts["fallback_pieces"] == 0 and counts["carved_pieces"] == 1
     a, b, c = (pieces[i] for i in np.argsort([p.model.com_in_source[0] for p in pieces]))
     mesh = {id(p): piece_mesh(r) for p, r in zip(pieces, renders)}
     volume = {}
@@ -261,13 +262,45 @@ def test_a_piece_the_cut_fails_gets_the_surface_nearest_its_tets(box):
     section = SIZE[1] * SIZE[2]
     half_slab = 1e-4 * spacing
     assert volume[id(c)] == pytest.approx((SIZE[0] / 2 - 0.04 - half_slab) * section, rel=1e-6)
-    # (the bead, a separate shell under a tet's volume, is dropped as a crumb)
-    assert volume[id(a)] + volume[id(b)] == pytest.approx((SIZE[0] / 2 + 0.04 + half_slab) * section, rel=1e-6)
+    # (the bead, a separate shell under a tet's volume, is dropped as a crumb; so are the
+    # bits under a tet's volume the cells' faces cut off the part: 1.3e-5 of it)
+    assert volume[id(a)] + volume[id(b)] == pytest.approx((SIZE[0] / 2 + 0.04 + half_slab) * section, rel=1e-4)
     for piece in (a, b):
         assert abs(volume[id(piece)] - piece.model.volume) < spacing * section
         faces = mesh[id(piece)]
         assert (faces.face_crack == HULL_FACE).any()
     assert (mesh[id(b)].face_crack >= 0).any()  # its face against C is C's crack face
+
+
+def test_failed_pieces_get_the_solid_nearest_their_tets_less_the_others_parts(box):
+    """Three pieces of the box: A (x < 0), B (0 < x < 0.04), C (x > 0.04); one part holds A
+    and B (no wall between them), C has its own. With A and B failed, each gets the render
+    solid nearer its own tet centroids than the other's, less C's part. Closed form: the two
+    shares fill the box up to x = 0.04 without overlap, and each lies within a cell (a
+    spacing) of its tets' volume across the box's section."""
+    from taichi_frac.geometry.piece_parts import failed_piece_shells
+
+    model, report, _ = box
+    spacing = model.spacing
+    render = render_solid_from_surface(report.surface, model.com_in_source, spacing)
+    x_axis = np.array([1.0, 0.0, 0.0])
+    walls = [CrackPlane(point=np.array([x, 0.0, 0.0]) - model.com_in_source, normal=x_axis, extent=1.0,
+                        peak_stress=1.0) for x in (0.0, 0.04)]
+    split = split_body(model, walls, FractureOptions())
+    a, b, c = np.argsort([model.particle_position[np.asarray(t)].mean(axis=0)[0] for t in split.fragment_tets])
+    labels = np.full(model.tet_count, -1)
+    for k, tets in enumerate(split.fragment_tets):
+        labels[np.asarray(tets)] = k
+    face = 0.04 - model.com_in_source[0]
+    parts = [render.solid.trim_by_plane(-x_axis, -face), render.solid.trim_by_plane(x_axis, face)]
+    shares = {k: m3.Manifold.compose(failed_piece_shells(render.solid, model, labels, k, {a, b}, parts, [a, c], spacing))
+              for k in (a, b)}
+    section = SIZE[1] * SIZE[2]
+    assert shares[a].volume() + shares[b].volume() == pytest.approx(parts[0].volume(), rel=1e-9)
+    assert (shares[a] ^ shares[b]).volume() < 1e-12
+    for k in (a, b):
+        own = model.tet_volume[np.asarray(split.fragment_tets[k])].sum()
+        assert abs(shares[k].volume() - own) < spacing * section
 
 
 def test_a_crack_through_a_merged_piece_leaves_it_one_shell(box):
@@ -512,6 +545,8 @@ def _check_struck(pieces, renders, counts, mean_volume_error=0.02, fallback_shar
         assert quality["distance_to_tets_spacings"] <= BALL_BOUND * REACH_FACTOR + 1e-6, quality
         if piece.model.tet_count >= FITTED_PIECE_TETS:
             assert abs(quality["volume_error"]) < large_volume_error, quality
+        # (a piece the vote left with chips is carved from its neighbour, never left a sliver)
+        assert quality["volume_error"] > -LOST_VOLUME_SHARE, quality
         errors.append(abs(quality["volume_error"]))
         volumes.append(piece.model.volume)
         shells.append(quality["shells"])

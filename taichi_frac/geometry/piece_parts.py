@@ -126,7 +126,7 @@ def failed_pieces(parts, owner, model, fragment_tets) -> set[int]:
     between two pieces, the part on both sides goes to one of them by the vote and the other
     keeps only chips), and the piece that got the part holding a lost piece's tets when the
     volume it gained is more than SWALLOWED_VOLUME_SHARE of its own. A piece with no part at
-    all was carved already (``carve_missing_pieces``) or has no render solid."""
+    all was carved already (``carve_lost_pieces``) or has no render solid."""
     rendered = np.zeros(len(fragment_tets))
     for part, o in zip(parts, owner):
         if o >= 0:
@@ -147,25 +147,36 @@ def failed_pieces(parts, owner, model, fragment_tets) -> set[int]:
     return failed
 
 
-def carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing):
+def carve_lost_pieces(parts, owner, model, fragment_tets, labels, spacing):
     """A piece no part went to (a few tets where cracks meet, smaller than the planes can
-    resolve) is carved out of the part holding its tets: the part's intersection with its
-    tets' nearest-centroid cells (``_own_cells``; where the diagram is degenerate, the convex
-    hull of its tets) becomes the piece (owner -(k + 2)), the rest stays. Its faces inside
-    the part are then the cells', not a crack's: counted in the stats. The carving can cut
-    the rest in two or more: the largest stays with its owner, the others are voted for again
-    (a chip beyond it belongs to the tets around it)."""
+    resolve), or whose parts hold less than LOST_VOLUME_SHARE of its tets' volume while
+    another piece's part holds its tets (the slabs left a gap in the wall between them and
+    the vote gave the material on both sides to the other), is carved out of the part
+    holding its tets: the part's intersection with its tets' nearest-centroid cells
+    (``_own_cells``; where the diagram is degenerate, the convex hull of its tets) becomes
+    the piece (owner -(k + 2)), the rest stays. Its faces inside the part are then the
+    cells', not a crack's: counted in the stats. The carving can cut the rest in two or more:
+    the largest stays with its owner, the others are voted for again (a chip beyond it
+    belongs to the tets around it)."""
     from .render_solid import HULL_FACE, without_dust
 
     parts, owner = list(parts), list(owner)
+    rendered = np.zeros(len(fragment_tets))
+    for part, o in zip(parts, owner):
+        if o >= 0:
+            rendered[o] += part.volume()
     for k, tets in enumerate(fragment_tets):
-        if k in owner or -(k + 2) in owner:
+        if -(k + 2) in owner:
             continue
         tets = np.asarray(tets, dtype=np.int64)
-        best = _part_holding(_probe_points(model, tets), parts)
-        if best is None:
+        if k in owner and rendered[k] >= LOST_VOLUME_SHARE * float(model.tet_volume[tets].sum()):
             continue
-        hull = _own_cells(model, labels, k, spacing, np.arange(len(labels)))
+        best = _part_holding(_probe_points(model, tets), parts)
+        if best is None or owner[best] == k:
+            continue
+        # (a lost piece's cells against its taker's tets alone: the part's rest is the taker's)
+        pool = np.arange(len(labels)) if k not in owner else np.nonzero(np.isin(labels, [k, owner[best]]))[0]
+        hull = _own_cells(model, labels, k, spacing, pool)
         if hull is None:  # (a degenerate diagram)
             hull = with_crack_index(m3.Manifold.hull_points(
                 np.ascontiguousarray(model.vertices[model.tets[tets]].reshape(-1, 3))), HULL_FACE)

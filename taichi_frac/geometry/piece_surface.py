@@ -61,7 +61,7 @@ import numpy as np
 from .crack_offsets import (FITTED_PIECE_TETS, MOVES, crack_segments, moved_crack, piece_target_volumes,
                             segment_shifts, tilt_frames, volume_misfit, volume_offsets)
 from .crack_slabs import SLAB_PAST_FACTOR, plane_slab, segment_slabs, sphere_shell
-from .piece_parts import (assign_parts, carve_missing_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
+from .piece_parts import (assign_parts, carve_lost_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
                           overfull_pieces, overreaching_pieces)
 from .piece_shells import join_stray_shells, without_crumbs
 from .piece_reach import KEPT_SHARE, trim_overreach
@@ -343,7 +343,7 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
     owner = assign_parts(parts, model, labels, spacing, corners)
     parts, owner, received = divide_joined_parts(parts, owner, model, labels, spacing, corners)
     stats["pieces_given_divided_parts"] = len(received)
-    parts, owner = carve_missing_pieces(parts, owner, model, fragment_tets, labels, spacing)
+    parts, owner = carve_lost_pieces(parts, owner, model, fragment_tets, labels, spacing)
     stats["parts"] = len(parts)
     stats["carved_pieces"] = len({o for o in owner if o < -1})
     owner = [-(o + 2) if o < -1 else o for o in owner]
