@@ -158,6 +158,14 @@ def warm_up(ctx: BenchContext) -> None:
     ctx.progress(f"warm-up (kernel compilation): {time.perf_counter() - t0:.1f} s, {events} fracture events")
 
 
+def spread(values) -> str:
+    """'median / 95th percentile / max' of ``values``, two decimals ('-' when empty)."""
+    values = np.asarray(values, dtype=np.float64)
+    if not len(values):
+        return "-"
+    return " / ".join(f"{v:.2f}" for v in (np.median(values), np.percentile(values, 95), values.max()))
+
+
 def provenance() -> str:
     """'commit C, date, CPU with N cores': what a page written by its own command ran at."""
     info = machine_info()

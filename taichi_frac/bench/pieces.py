@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import REPO, SCENES, BenchContext, Section, load_average, md_table, provenance
+from .common import REPO, SCENES, BenchContext, Section, load_average, md_table, provenance, spread
 
 SHARED_MESH = REPO.parent / "shared" / "meshes" / "spot.obj"
 #: Pieces with at least this many tets are the "large" ones the volume bound is read on: a
@@ -105,8 +105,11 @@ def measure_pieces(records) -> dict:
         mid=len(mid), mid_over=int(np.sum(np.abs(mid) > VOLUME_BOUND)),
         mid_median=float(np.median(np.abs(mid))) if len(mid) else float("nan"),
         far=sum(q["distance_to_tets_spacings"] > 1.0 for q in quality),
-        distance=_spread([q["distance_to_tets_spacings"] for q in quality]),
-        large_volume_spread=_spread(100 * np.abs(large_volume)) if large else "-",
+        distance=spread([q["distance_to_tets_spacings"] for q in quality]),
+        distance_back=spread([q["distance_from_tets_spacings"] for q in quality]),
+        within=sum(q["distance_to_tets_spacings"] <= 1.0 and q["distance_from_tets_spacings"] <= 1.0
+                   for q in quality),
+        large_volume_spread=spread(100 * np.abs(large_volume)) if large else "-",
     )
 
 
@@ -126,17 +129,11 @@ def _trimmed(render_cuts, volume: float) -> str:
     return f"{pieces} ({1e6 * trimmed:.2f} cm³, {100 * trimmed / max(volume, 1e-300):.3f} %)"
 
 
-def _spread(values) -> str:
-    """'median / 95th percentile / max' of ``values``, two decimals ('-' when empty)."""
-    values = np.asarray(values, dtype=np.float64)
-    if not len(values):
-        return "-"
-    return " / ".join(f"{v:.2f}" for v in (np.median(values), np.percentile(values, 95), values.max()))
-
-
 def _mesh_case(ctx: BenchContext, fit_rounds: int | None = None):
     """spot.obj (full resolution, with UVs) struck once: prepare, analyse, split, cut (the
-    crack planes fitted ``fit_rounds`` times; None: FractureOptions' default)."""
+    crack planes fitted ``fit_rounds`` times; None: FractureOptions' default). Returns the
+    pieces' measures, the cut's time [s], the surface's triangle count, the cut's counts and
+    (model, render solid) of the whole body."""
     from ..fracture.cracks import analyze_impact
     from ..fracture.fragments import make_fragments, split_body
     from ..geometry.piece_surface import cut_render_solid
@@ -167,7 +164,17 @@ def _mesh_case(ctx: BenchContext, fit_rounds: int | None = None):
     counts = dict(counts, volume=model.volume)
     records = [BodyRecord(name="spot", model=p.model, root=model, material=material, fracture=options,
                           particles=particles, breakable=True, render=r) for p, r in zip(pieces, renders)]
-    return measure_pieces(records), [seconds], len(report.surface.faces), counts
+    return measure_pieces(records), [seconds], len(report.surface.faces), counts, (model, render.solid)
+
+
+def _scene_solid(path: Path, name: str):
+    """(BodyModel, render solid) of the object ``name`` of the scene at ``path``."""
+    from ..geometry.render_solid import render_solid_from_surface
+    from ..scenes import load_scene
+
+    obj = next(o for o in load_scene(path).objects if o.name == name)
+    model, report = obj.prepare()
+    return model, render_solid_from_surface(report.surface, model.com_in_source, model.spacing).solid
 
 
 def run(ctx: BenchContext) -> Section:
@@ -177,6 +184,7 @@ def run(ctx: BenchContext) -> Section:
     from ..geometry.crack_offsets import (FITTED_PIECE_TETS, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR,
                                           SMALL_PIECE_WEIGHT, VOLUME_TOLERANCE)
     from ..options import FractureOptions
+    from .perfect_cut import FLOOR_HEADER, PLANES, WEDGE_TETS, floor_rows, perfect_cuts
     from .tables import run_scene
 
     t0 = time.perf_counter()
@@ -199,9 +207,15 @@ def run(ctx: BenchContext) -> Section:
                               f"{1e3 * np.max(cuts):.0f}" if cuts else "-", f"{split_ms:.2f}",
                               f"{summary.ms_per_frame['mean']:.1f}"])
             ctx.progress(f"{label}: {m['pieces']} pieces, {m['closed']} closed, crack RMS {m['crack_rms']:.1e}")
+    floors = []
+    for label, path, name in (("single ring", SCENES / "single_ring.toml", "ring"),
+                              ("a glass wall", SCENES / "glass_walls.toml", "wall0")):
+        floors += floor_rows(label, perfect_cuts(*_scene_solid(path, name)))
     if SHARED_MESH.exists():
         for fit_rounds, suffix in ((None, ""), (0, f", {UNMOVED}")):
-            m, cuts, triangles, counts = _mesh_case(ctx, fit_rounds)
+            m, cuts, triangles, counts, body = _mesh_case(ctx, fit_rounds)
+            if fit_rounds is None:
+                floors += floor_rows(SHARED_MESH.name, perfect_cuts(*body))
             rows.append((f"{SHARED_MESH.name} ({triangles:,} triangles), one impact{suffix}", m))
             cost_rows.append([f"{SHARED_MESH.name}, one impact{suffix}", 1,
                               f"{counts['fallback_pieces']} ({counts['cell_pieces']})",
@@ -213,7 +227,7 @@ def run(ctx: BenchContext) -> Section:
                      m["multi_shell"], f"{m['crack_rms']:.1e}", f"{m['large_volume_spread']} ({m['large']})",
                      f"{100 * m['median_volume']:.1f} %", m["volume_over"],
                      f"{100 * m['mid_median']:.1f} % / {m['mid_over']} of {m['mid']}", m["distance"], m["far"],
-                     f"{m['tet_height']:.2f}"]
+                     m["distance_back"], f"{m['within']} of {m['rendered']}", f"{m['tet_height']:.2f}"]
                     for label, m in rows]
     markdown = "\n".join([
         "Each broken piece's render surface is the artist's surface cut along the cracks "
@@ -229,10 +243,10 @@ def run(ctx: BenchContext) -> Section:
         f"{OVERREACH_FACTOR:.0f} spacings from its nearest tet, or the one that lost that volume to it) gets "
         "the solid nearer its tets' centroids than the other failed pieces', less what the others hold (it "
         "is measured with the rest); only where that fails too does it keep its tets' boundary, exact in "
-        "volume: those are counted in the third column and left out of the render columns. The distance "
-        "is one-sided: the largest, over a piece's render "
-        "vertices, distance to its tets' union (0 inside), in particle spacings (the body's mean tet "
-        "V^(1/3)). A flat crack face crosses the tets' staircase, so it lies up to "
+        "volume: those are counted in the third column and left out of the render columns. The render-to-tets "
+        "distance is the largest, over a piece's render vertices, distance to its tets' union (0 inside); the "
+        "tets-to-render one the largest, over its tets' boundary vertices, distance to its render solid; both "
+        "in particle spacings (the body's mean tet V^(1/3)). A flat crack face crosses the tets' staircase, so it lies up to "
         "about a tet's height (last column) from its piece's tets and its volume differs from theirs by that "
         "layer: the distance and volume columns measure that difference, not an error of the cut alone. "
         f"What lies farther than {REACH_FACTOR:g} spacings from a piece's tets and within that of another's "
@@ -261,8 +275,20 @@ def run(ctx: BenchContext) -> Section:
                   f"{100 * VOLUME_BOUND:.0f} %",
                   "render-to-tets distance per piece [spacings]: median / 95th pct / max",
                   "pieces farther than 1 spacing",
+                  "tets-to-render distance per piece [spacings]: median / 95th pct / max",
+                  "pieces within 1 spacing both ways",
                   "a tet's height, mean [spacings]"],
                  quality_rows),
+        "",
+        "The floor under the distance and volume columns: each body's render solid cut exactly by "
+        f"{PLANES} random planes through its particles and its tets split by the same planes (each tet to the "
+        "side its centroid lies on), so the pieces and the flat faces agree as well as flat faces can: halves, "
+        f"and wedges where a second plane at 30-90° to the first leaves about {' or '.join(map(str, WEDGE_TETS))} "
+        "tets (the pieces made where cracks meet). A tet straddling the plane with its centroid on the piece's "
+        "side reaches past the face by up to 3/4 of its extent along the normal, so no flat face lies within "
+        "one spacing of its tets both ways, and a small piece's staircase is a large share of its volume:",
+        "",
+        md_table(FLOOR_HEADER, floors),
         "",
         "What cutting the render solids costs (only runs that write a cache pay it):",
         "",
