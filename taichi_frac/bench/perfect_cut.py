@@ -80,7 +80,7 @@ def perfect_cut(model, solid, planes) -> Cut | None:
 
 def perfect_cuts(model, solid, seed: int = 0, planes: int = PLANES) -> dict:
     """{kind: [Cut]} over ``planes`` random planes through ``model``'s particles: 'halves'
-    (both sides of each plane) and 'wedge of N tets' per ``WEDGE_TETS``."""
+    (both sides of each plane) and 'wedges of about N tets' per ``WEDGE_TETS``."""
     rng = np.random.default_rng(seed)
     centroids = model.particle_position
     cuts = {"halves": []} | {f"wedges of about {n} tets": [] for n in WEDGE_TETS}
