@@ -4,9 +4,10 @@ flat cut of a body's tets (bench/perfect_cut.py), against closed forms on a box.
 import numpy as np
 import trimesh
 
-from taichi_frac.bench.perfect_cut import perfect_cut, tet_boundary
+from taichi_frac.bench.perfect_cut import perfect_cut
 from taichi_frac.geometry.piece_checks import outside_distance, signed_volume
 from taichi_frac.geometry.render_solid import render_solid_from_surface
+from taichi_frac.geometry.topology import boundary_faces
 
 from support.pieces import SIZE
 
@@ -18,9 +19,9 @@ def test_outside_distance_is_zero_inside_and_the_gap_outside():
     np.testing.assert_allclose(outside_distance(points, cube.vertices, cube.faces), expected, atol=1e-12)
 
 
-def test_tet_boundary_of_a_box_s_tets_is_closed_and_holds_their_volume(box):
+def test_boundary_faces_of_a_box_s_tets_are_closed_and_hold_their_volume(box):
     model, _, _ = box
-    faces = tet_boundary(model.tets)
+    faces = boundary_faces(model.tets)[0]
     assert len(faces) == len(model.surface_faces)
     assert np.isclose(signed_volume(model.vertices, faces), model.tet_volume.sum(), rtol=1e-12)
     assert np.isclose(signed_volume(model.vertices, faces), np.prod(SIZE), rtol=1e-9)
@@ -38,7 +39,7 @@ def test_a_perfect_cut_leaves_the_tets_reaching_past_the_plane(box):
     assert cut.tets == int(mine.sum())
     render_volume = (model.vertices[:, 0].max() - d) * SIZE[1] * SIZE[2]
     assert np.isclose(cut.volume_error, render_volume / model.tet_volume[mine].sum() - 1.0, atol=1e-9)
-    corners = model.vertices[np.unique(tet_boundary(model.tets[mine]))]
+    corners = model.vertices[np.unique(boundary_faces(model.tets[mine])[0])]
     depth = np.max(d - corners[:, 0])
     assert np.isclose(cut.from_tets, depth / model.spacing, rtol=1e-9)
     x = model.vertices[model.tets[mine]][:, :, 0]

@@ -191,6 +191,7 @@ def rebound_row(errors) -> str:
 
 
 def rebound_label(references) -> str:
+    """The rebound row's label, with each tilt's impacts and rebound from ``references``."""
     return ("torus (the tests') dropped without friction from 0.3 m, tilted "
             + " / ".join(f"{d:.3g}" for d in REBOUND_TILTS) + "°, e = 0.5 (it strikes on "
             "one side, slams down on the other and bounces; "
@@ -201,6 +202,17 @@ def rebound_label(references) -> str:
             + " mm) [%], with substeps of at most " + " / ".join(f"{1e3 * dt:g}" for dt in REBOUND_SUBSTEPS)
             + " ms (the default, 10 a 50 fps frame, which the World shortens while a body moves more than its "
             "spheres' mean radius in one / fine)")
+
+
+def _sphere_depth(model, single: bool) -> float:
+    """[m] how far the collision spheres reach below ``model``'s centre of mass, unturned:
+    the single-scale spheres (surface particles) or the boundary spheres."""
+    if single:
+        surface = model.surface_particles
+        centres, radii = model.particle_position[surface], model.particle_radius[surface]
+    else:
+        centres, radii = model.collision_position, model.boundary_radius
+    return -float(np.min(centres[:, 2] - radii))
 
 
 def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) -> dict:
@@ -218,12 +230,7 @@ def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) ->
     model = _model(mesh.vertices, mesh.tets, single, surface)
     world = _world(ctx, single, surface)
     world.add_ground(0.0, restitution=0.0)
-    if surface:
-        low = -float(model.vertices[:, 2].min())
-    else:
-        layer = (model.particle_position[model.surface_particles], model.particle_radius[model.surface_particles]) \
-            if single else (model.collision_position, model.boundary_radius)
-        low = -float(np.min(layer[0][:, 2] - layer[1]))
+    low = -float(model.vertices[:, 2].min()) if surface else _sphere_depth(model, single)
     half = math.pi / 8
     q = (math.cos(half), math.sin(half), 0.0, 0.0) if on_edge else (1.0, 0.0, 0.0, 0.0)
     height = low if not on_edge else (0.05 * math.sqrt(2.0) + (low - 0.05))
@@ -254,9 +261,7 @@ def _cube_on_cube(ctx: BenchContext, single: bool, surface: bool, tets: int, gro
     mesh = tetrahedralize(trimesh.creation.box((0.1, 0.1, 0.1)), target_tets=tets)
     model = _model(mesh.vertices, mesh.tets, single, surface, group, coarse)
     world = _world(ctx, single, surface)
-    layer = (model.particle_position[model.surface_particles], model.particle_radius[model.surface_particles]) \
-        if single else (model.collision_position, model.boundary_radius)
-    bottom, top = stack_cubes(world, model, -float(np.min(layer[0][:, 2] - layer[1])))
+    bottom, top = stack_cubes(world, model, _sphere_depth(model, single))
     for _ in range(50):
         world.advance(0.02, 10)
     z = world.body_state([bottom, top])["position"][:, 2]

@@ -35,14 +35,6 @@ class Cut:
     from_tets: float
 
 
-def tet_boundary(tets: np.ndarray) -> np.ndarray:
-    """(F,3) the outward faces of the union of ``tets`` (T,4), positively oriented: the
-    faces no other of them shares."""
-    faces = np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 1]]])
-    _, inverse, uses = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
-    return faces[uses[inverse.reshape(-1)] == 1]
-
-
 def perfect_cut(model, solid, planes) -> Cut | None:
     """The piece on the positive side of every plane (``normal``, ``offset``): n.x >= d) of
     ``planes``: the render ``solid`` (a manifold3d Manifold in the body frame) trimmed by
@@ -51,6 +43,7 @@ def perfect_cut(model, solid, planes) -> Cut | None:
     no render lies there."""
     from ..geometry.piece_checks import inside, outside_distance, signed_volume
     from ..geometry.render_solid import solid_arrays
+    from ..geometry.topology import boundary_faces
 
     centroids = model.particle_position
     mask = np.all([centroids @ np.asarray(n) >= d for n, d in planes], axis=0)
@@ -70,7 +63,7 @@ def perfect_cut(model, solid, planes) -> Cut | None:
     offsets = np.cumsum([0] + [len(v) for v, _ in parts])
     vertices = np.concatenate([v for v, _ in parts])
     faces = np.concatenate([f + o for (_, f), o in zip(parts, offsets)])
-    boundary = tet_boundary(model.tets[tets])
+    boundary = boundary_faces(model.tets[tets])[0]
     to_tets = outside_distance(vertices, model.vertices, boundary)
     from_tets = outside_distance(model.vertices[np.unique(boundary)], vertices, faces)
     return Cut(tets=len(tets),

@@ -120,17 +120,24 @@ def overfull_pieces(parts, owner, model, labels, spacing) -> set[int]:
     return failed
 
 
-def failed_pieces(parts, owner, model, fragment_tets) -> set[int]:
-    """Pieces the cut failed, to be given their tets' boundary: those whose parts hold less
-    than LOST_VOLUME_SHARE of their tets' volume (where the slabs leave a gap in the wall
-    between two pieces, the part on both sides goes to one of them by the vote and the other
-    keeps only chips), and the piece that got the part holding a lost piece's tets when the
-    volume it gained is more than SWALLOWED_VOLUME_SHARE of its own. A piece with no part at
-    all was carved already (``carve_lost_pieces``) or has no render solid."""
-    rendered = np.zeros(len(fragment_tets))
+def _rendered_volumes(parts, owner, count: int) -> np.ndarray:
+    """(count,) [m^3] the volume of the ``parts`` each piece owns (``owner``: each part's
+    piece, negative: none)."""
+    rendered = np.zeros(count)
     for part, o in zip(parts, owner):
         if o >= 0:
             rendered[o] += part.volume()
+    return rendered
+
+
+def failed_pieces(parts, owner, model, fragment_tets) -> set[int]:
+    """Pieces the cut failed, to be given their tets' boundary: those whose parts hold less
+    than LOST_VOLUME_SHARE of their tets' volume after ``carve_lost_pieces`` (no other
+    piece's part held their tets, or carving them out of it left nothing), and the piece
+    that got the part holding a lost piece's tets when the volume it gained is more than
+    SWALLOWED_VOLUME_SHARE of its own. A piece with no part at all was carved already or
+    has no render solid."""
+    rendered = _rendered_volumes(parts, owner, len(fragment_tets))
     failed = set()
     for k, tets in enumerate(fragment_tets):
         tets = np.asarray(tets, dtype=np.int64)
@@ -161,10 +168,7 @@ def carve_lost_pieces(parts, owner, model, fragment_tets, labels, spacing):
     from .render_solid import HULL_FACE, without_dust
 
     parts, owner = list(parts), list(owner)
-    rendered = np.zeros(len(fragment_tets))
-    for part, o in zip(parts, owner):
-        if o >= 0:
-            rendered[o] += part.volume()
+    rendered = _rendered_volumes(parts, owner, len(fragment_tets))
     for k, tets in enumerate(fragment_tets):
         if -(k + 2) in owner:
             continue
