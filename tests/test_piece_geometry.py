@@ -223,11 +223,12 @@ def test_finite_crack_and_ring_crack_make_closed_pieces_and_cut_again(box):
         assert solid.volume_scale == pytest.approx(root_scale, rel=1e-12)
 
 
-def test_a_piece_the_wall_gap_loses_is_carved_from_its_neighbour(box):
+@pytest.mark.parametrize("bead", [True, False], ids=["keeps-a-chip", "keeps-nothing"])
+def test_a_piece_the_wall_gap_loses_is_carved_from_its_neighbour(box, bead):
     """Where the slabs leave a gap in the wall between two pieces, the part on both sides
     goes to one of them and the other keeps only a chip (here a bead of the artist's surface
-    beside it, a separate shell): the lost piece is carved out of that part along its tets'
-    nearest-centroid cells, the rest stays with the other. Three pieces of the box: A (x <
+    beside it, a separate shell) or nothing: the lost piece is carved out of that part along
+    its tets' nearest-centroid cells, the rest stays with the other. Three pieces of the box: A (x <
     0), B (0 < x < 0.04), C (x > 0.04); the wall between A and B gets no slab. Closed form:
     A and B together fill the box up to C's crack face (x = 0.04 and half a slab; the bead
     is a crumb), C keeps its cut; A and B each lie within a cell (a spacing) of their tets'
@@ -238,9 +239,9 @@ def test_a_piece_the_wall_gap_loses_is_carved_from_its_neighbour(box):
     model, report, _ = box
     spacing = model.spacing
     side = 0.5 * spacing
-    bead = trimesh.creation.box(extents=(side, side, side))
-    bead.apply_translation([0.02, SIZE[1] / 2 + 0.3 * spacing + side / 2, 0.0])
-    surface = trimesh.util.concatenate([report.surface, bead])
+    chip = trimesh.creation.box(extents=(side, side, side))
+    chip.apply_translation([0.02, SIZE[1] / 2 + 0.3 * spacing + side / 2, 0.0])
+    surface = trimesh.util.concatenate([report.surface, chip]) if bead else report.surface
     render = render_solid_from_surface(surface, model.com_in_source, model.spacing)
     x_axis = np.array([1.0, 0.0, 0.0])
     walls = [CrackPlane(point=np.array([x, 0.0, 0.0]) - model.com_in_source, normal=x_axis, extent=1.0,
@@ -270,6 +271,13 @@ def test_a_piece_the_wall_gap_loses_is_carved_from_its_neighbour(box):
         faces = mesh[id(piece)]
         assert (faces.face_crack == HULL_FACE).any()
     assert (mesh[id(b)].face_crack >= 0).any()  # its face against C is C's crack face
+    # B is carved against A's tets alone: its face against C is the whole of C's crack
+    # face, with no layer of the tets' staircase cut off beside it (drawn against every
+    # tet, C's too, the cells cut B short of it).
+    layer = m3.Manifold.cube((spacing, SIZE[1] + 1.0, SIZE[2] + 1.0)).translate(
+        (0.04 - spacing, -SIZE[1] / 2 - 0.5, -SIZE[2] / 2 - 0.5))
+    beside = renders[pieces.index(b)].solid.translate(tuple(b.model.com_in_source + model.com_in_source)) ^ layer
+    assert beside.volume() == pytest.approx((spacing - half_slab) * section, rel=1e-6)
 
 
 def test_failed_pieces_get_the_solid_nearest_their_tets_less_the_others_parts(box):
