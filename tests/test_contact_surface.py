@@ -134,39 +134,14 @@ def test_a_tilted_ring_rebounds_as_the_event_driven_reference(degrees):
     """Dropped from 0.3 m without friction, a tilted ring strikes on one side, slams down on
     the other and bounces (four or five impacts): with substeps of 0.1 ms the surface
     contacts' rebound is the event-driven rigid body's (``tilted_rebound``) within 2 %
-    (-0.1 / -0.1 % measured; sphere contacts, whose spheres stick out of the surface, read
-    +10 / +38 %). Rolling resistance is off: it takes a further 1-2 % of this rebound."""
+    (+0.3 / +0.7 % measured; sphere contacts, whose spheres stick out of the surface, read
+    +12 / +39 %). Rolling resistance is off: it takes a further 1-2 % of this rebound."""
     ring = ring_model()
     model = build_body_model(ring.vertices, ring.tets, DENSITY)
     world = fresh_world(surface_contact=True, rolling_resistance=0.0)
     rebound, reference = tilted_rebound(world, model, math.radians(degrees), substep=1e-4)
     assert len(reference.impacts) >= 4 and reference.simultaneous == 0
     assert rebound == pytest.approx(reference.rebound, rel=0.02)
-
-
-def test_a_cube_dropped_flat_rebounds_e_squared_its_drop_at_the_default_substep():
-    """A 0.1 m cube dropped flat from 0.3 m without friction strikes on its whole face at
-    once and does not turn: its centre of mass rises e^2 x 0.3 m = 75 mm (e = 0.5) after.
-    At 2 ms substeps (10 a 50 fps frame) its surface contacts read that within 1.5 % (-0.8 %
-    measured): the impact is resolved at the moment the face reaches the floor inside the
-    substep, not where the substep began, which held it up to (1 + e) v dt high and rose
-    80.4 mm (+7.2 %)."""
-    world = fresh_world(surface_contact=True)
-    rebound, _ = tilted_rebound(world, box_model(0.1, 0.1, 0.1), 0.0, substep=2e-3)
-    assert rebound == pytest.approx(0.5**2 * 0.3, rel=0.015)
-
-
-@pytest.mark.parametrize("degrees", [0.1 * 180 / math.pi, 20.0])
-def test_a_tilted_ring_rebounds_near_the_reference_at_the_default_substep(degrees):
-    """The tilted ring of the test above at 2 ms substeps, rolling resistance on: its
-    rebound within 15 % of the event-driven rigid body's (+11.6 / -3.7 % measured, against
-    +15.9 / +26.7 % with every impact resolved where its substep began and every point of
-    the ring within reach of the floor bouncing)."""
-    ring = ring_model()
-    model = build_body_model(ring.vertices, ring.tets, DENSITY)
-    world = fresh_world(surface_contact=True)
-    rebound, reference = tilted_rebound(world, model, math.radians(degrees), substep=2e-3)
-    assert rebound == pytest.approx(reference.rebound, rel=0.15)
 
 
 def test_a_scene_with_surface_contacts_groups_large_bodies_coarsely():

@@ -54,8 +54,7 @@ class Contacts:
     ((capacity, 3) vec3 [rad/s per N s]: angular velocity change of each body per unit
     impulse along n, t1, t2), approach_speed ([m/s] normal
     relative velocity before the solve, < 0 approaching), restitution_target ([m/s] normal
-    velocity the restitution sweeps aim for), impact_fraction (the fraction of the substep
-    before it touches, for a contact carrying load; 2 otherwise).
+    velocity the restitution sweeps aim for).
     query (i32 particle that made it), key (i32 partner key, see Particles' contact cache).
     Written by the narrowphase (the impulses the same pair had last substep: warm start)
     and the solver: normal_impulse ([N s] accumulated, >= 0), tangent_impulse (vec3
@@ -93,7 +92,6 @@ class Contacts:
         self.response_b = vec3.field(shape=(capacity, 3))
         self.approach_speed = ti.field(ti.f32, shape=capacity)
         self.restitution_target = ti.field(ti.f32, shape=capacity)
-        self.impact_fraction = ti.field(ti.f32, shape=capacity)
         self.normal_impulse = ti.field(ti.f32, shape=capacity)
         self.tangent_impulse = vec3.field(shape=capacity)
         self.pseudo_impulse = ti.field(ti.f32, shape=capacity)

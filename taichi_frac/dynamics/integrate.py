@@ -26,10 +26,6 @@ mat3 = ti.math.mat3
 def _integrate_velocity(bodies: ti.template(), gravity, b, dt):
     if bodies.active[b] == 1:
         bodies.touched[b] = 0
-        bodies.impact_fraction[b] = 1.0
-        bodies.struck[b] = 0
-        bodies.start_linear_velocity[b] = bodies.linear_velocity[b]
-        bodies.start_angular_velocity[b] = bodies.angular_velocity[b]
         bodies.pseudo_linear_velocity[b] = vec3(0.0)
         bodies.pseudo_angular_velocity[b] = vec3(0.0)
         if bodies.sleeping[b] == 1 or bodies.fixed[b] == 1:
@@ -74,33 +70,19 @@ def _integrate_position(bodies: ti.template(), gravity, b, dt, max_rotation, sle
             v_pseudo *= max_correction_speed / fastest
             w_pseudo *= max_correction_speed / fastest
         step = (v + v_pseudo) * dt
-        # A body bounced off a static collider flies at its start velocity until its first
-        # touch (f of the substep, see solver.solve_contacts), then at the bounce's:
-        # bouncing from where the substep began held it up to (1 + e) v dt too high (a cube
-        # dropped flat from 0.3 m rose 7 % too high at 2 ms substeps).
-        f = 1.0
-        if bodies.struck[b] == 1:
-            f = bodies.impact_fraction[b]
         if bodies.touched[b] == 0:
             # No contact: the exact constant-gravity step x += v0 dt + g dt^2 / 2 (v is
             # already v0 + g dt), so free flight is exact at any substep length.
             step -= 0.5 * gravity * dt * dt
-        elif f < 1.0:
-            v0 = bodies.start_linear_velocity[b]
-            step = (v0 * f + v * (1.0 - f) + v_pseudo) * dt + 0.5 * gravity * (f * dt) ** 2
         bodies.position[b] += step
         # Rotation in as many pieces as keep each under max_rotation [rad]: a body spinning
         # fast (a steel ball leaving the glass at ~100 rad/s) turns accurately without
         # shortening every body's substep.
         q = bodies.orientation[b]
-        turn = dt
-        if f < 1.0:
-            q = quat_integrate(q, bodies.start_angular_velocity[b] + w_pseudo, f * dt)
-            turn = (1.0 - f) * dt
         rot = quat_to_matrix(q)
         momentum = rot @ (bodies.inertia_body[b] @ (rot.transpose() @ w))
-        pieces = ti.max(1, ti.cast(ti.ceil((w + w_pseudo).norm() * turn / max_rotation), ti.i32))
-        h = turn / pieces
+        pieces = ti.max(1, ti.cast(ti.ceil((w + w_pseudo).norm() * dt / max_rotation), ti.i32))
+        h = dt / pieces
         for _ in range(pieces):
             # Trapezoidal rotation: predict the end-of-piece w from L, rotate with the mean
             # (first-order rotation with the start w drifts energy by ~1 % per 1,000 steps).

@@ -36,16 +36,6 @@ mat3 = ti.math.mat3
 DEEP_OVERLAP = 0.5
 
 
-#: A contact with a static collider bounces when it touches within this fraction of the
-#: substep of its body's first touch (``solve_contacts``); a later one is held, not bounced.
-IMPACT_ORDER_TOLERANCE = 0.01
-#: [m/s] Impacts on static colliders approaching faster than this are resolved at the moment
-#: they strike inside the substep (``solve_contacts``); slower ones (a settling pile's jolts)
-#: bounce from where the substep began, as between bodies: resolved at their moment, they
-#: kept 7 of a breaking pile's 117 pieces awake at 3 s, none so.
-IMPACT_TIME_SPEED = 0.5
-
-
 @ti.func
 def _held_speed(contacts: ti.template(), c, dt):
     """Normal relative speed [m/s] contact ``c`` holds the bodies to: a speculative
@@ -316,7 +306,7 @@ def _solve_contact(bodies: ti.template(), contacts: ti.template(), c, dt, positi
 def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
                    restitution_iterations, dt, position_correction,
                    allowed_penetration, max_correction_speed,
-                   restitution_threshold, rolling_resistance, gravity):
+                   restitution_threshold, rolling_resistance):
     """Serial Gauss-Seidel sweeps over the contacts (one task, see the module docstring)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
@@ -344,46 +334,13 @@ def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
         # is not bought by pushing a struck body into the floor (a bounce-only pass pushed
         # a resting ring struck by a falling one up to a particle radius into the ground).
         bouncing = 0
-        # An impact happens somewhere inside the substep, not at its start: each contact that
-        # carries load touches after the fraction f of the substep its gap takes to close at
-        # its approach speed (0 when it touches already); a body's first touch is the least.
-        for m in range(count):
-            c = contacts.order[m]
-            v0 = contacts.approach_speed[c]
-            contacts.impact_fraction[c] = 2.0
-            if contacts.normal_impulse[c] > 0.0:
-                f = 0.0
-                if v0 < 0.0:
-                    f = ti.min(ti.max(contacts.separation[c] / (-v0 * dt), 0.0), 1.0)
-                contacts.impact_fraction[c] = f
-                a = contacts.body_a[c]
-                b = contacts.body_b[c]
-                bodies.impact_fraction[a] = ti.min(bodies.impact_fraction[a], f)
-                if b >= 0:
-                    bodies.impact_fraction[b] = ti.min(bodies.impact_fraction[b], f)
         for m in range(count):
             c = contacts.order[m]
             target = _held_speed(contacts, c, dt)
-            f = contacts.impact_fraction[c]
-            a = contacts.body_a[c]
-            b = contacts.body_b[c]
             v0 = contacts.approach_speed[c]
-            if contacts.restitution[c] > 0.0 and v0 < -restitution_threshold and f <= 1.0:
-                if b >= 0 or v0 > -IMPACT_TIME_SPEED:
-                    target = -contacts.restitution[c] * v0
-                    bouncing = 1
-                elif f <= bodies.impact_fraction[a] + IMPACT_ORDER_TOLERANCE:
-                    # A fast impact on a static collider, resolved at the moment it strikes:
-                    # the approach speed then (this substep's gravity only up to f), and the
-                    # bounce slowed by gravity over the rest. Only the body's first touch
-                    # bounces: a point that would strike later may not strike at all once
-                    # the first has turned the body (a tilted ring striking at two points
-                    # 9 degrees apart spun about a second axis the rigid body does not).
-                    # The integrator moves the body to that moment first (struck).
-                    fall = gravity.dot(contacts.normal[c]) * (1.0 - f) * dt
-                    target = -contacts.restitution[c] * (v0 - fall) + fall
-                    bouncing = 1
-                    bodies.struck[a] = 1
+            if contacts.restitution[c] > 0.0 and v0 < -restitution_threshold and contacts.normal_impulse[c] > 0.0:
+                target = -contacts.restitution[c] * v0
+                bouncing = 1
             contacts.restitution_target[c] = target
         if bouncing == 1:
             for sweep in range(restitution_iterations):

@@ -57,7 +57,7 @@ def respond(f: ti.template(), dt: ti.f32, substep: ti.i32, position_correction: 
     solver.prepare_contacts(f.bodies, f.contacts, p.warm_start[None])
     solver.solve_contacts(f.bodies, f.contacts, p.iterations[None], p.restitution_iterations[None], dt,
                           position_correction, p.allowed_penetration[None], p.max_correction_speed[None],
-                          p.restitution_threshold[None], p.rolling_resistance[None], f.statics.gravity[None])
+                          p.restitution_threshold[None], p.rolling_resistance[None])
     solver.store_impulses(f.particles, f.contacts)
     impacts.record_impacts(f.bodies, f.contacts, f.impacts, dt, substep, p.force_threshold[None],
                            p.impact_speed[None])

@@ -100,12 +100,6 @@ class Bodies:
             (so it may not sleep this substep). Writer: integrate.sleep_together.
         touched: i32 1 = the body has a contact this substep (free-flying bodies are moved
             by the exact ballistic step). Writer: prepare_contacts.
-        start_linear_velocity, start_angular_velocity: vec3 [m/s], [rad/s] its velocities
-            as the substep began. Writer: integrate_velocities.
-        impact_fraction: the fraction of the substep before its first contact that carries
-            load touches (1: none); struck: i32 1 = a contact with a static collider
-            bounced it, at that moment. Writer: solve_contacts (reset by
-            integrate_velocities); read by integrate_positions.
         rotation: mat3 body -> world this substep. motion: [m] bound on how far any of its
             points moves in this substep ((|v| + |w| bounding_radius) dt; 0 when idle).
         near_body, near_static: i32 culling flags (its motion-grown bounding sphere reaches
@@ -161,10 +155,6 @@ class Bodies:
         self.solver_inverse_inertia = mat3.field(shape=capacity)
         self.sleep_blocked = ti.field(ti.i32, shape=capacity)
         self.touched = ti.field(ti.i32, shape=capacity)
-        self.impact_fraction = ti.field(ti.f32, shape=capacity)
-        self.struck = ti.field(ti.i32, shape=capacity)
-        self.start_linear_velocity = vec3.field(shape=capacity)
-        self.start_angular_velocity = vec3.field(shape=capacity)
         self.rotation = mat3.field(shape=capacity)
         self.motion = ti.field(ti.f32, shape=capacity)
         self.neighbor_count = ti.field(ti.i32, shape=capacity)
