@@ -72,21 +72,13 @@ def overreaching_pieces(parts, owner, model, labels, spacing, corners) -> set[in
     is less than 1 / SWALLOWED_VOLUME_SHARE times the volume the first rendered beyond its
     own tets' (else its loss is too small to see). ``corners``: id(part) -> (part, its
     vertices), where known."""
-    from scipy.spatial import cKDTree
-
-    limit = OVERREACH_FACTOR * spacing
-    everyone = None
     failed = set()
     for k in sorted({o for o in owner if o >= 0}):
         mine = np.nonzero(labels == k)[0]
         if not len(mine):
             continue
         vertices = np.concatenate([_vertices(p, corners) for p, o in zip(parts, owner) if o == k])
-        far = vertices[cKDTree(model.particle_position[mine]).query(vertices)[0] > limit]
-        if not len(far):
-            continue
-        everyone = cKDTree(model.particle_position) if everyone is None else everyone
-        nearest = labels[everyone.query(far)[1]]
+        nearest = _far_owners(vertices, model, labels, mine, spacing)
         if np.all(nearest == k):
             continue
         failed.add(k)
@@ -95,6 +87,18 @@ def overreaching_pieces(parts, owner, model, labels, spacing, corners) -> set[in
             if victim >= 0 and excess > SWALLOWED_VOLUME_SHARE * float(model.tet_volume[labels == victim].sum()):
                 failed.add(int(victim))
     return failed
+
+
+def _far_owners(vertices: np.ndarray, model, labels, mine: np.ndarray, spacing: float) -> np.ndarray:
+    """The pieces (labels) of the tets nearest those of ``vertices`` (N,3) [m] that lie
+    farther than OVERREACH_FACTOR spacings from every centroid of the tets ``mine``: where a
+    piece whose tets are ``mine`` reaches (a vertex that far from every tet, where the
+    surface has detail the tets leave out, is its nearest piece's)."""
+    from scipy.spatial import cKDTree
+
+    centroids = model.particle_position
+    far = vertices[cKDTree(centroids[mine]).query(vertices)[0] > OVERREACH_FACTOR * spacing]
+    return labels[cKDTree(centroids).query(far)[1]] if len(far) else np.zeros(0, dtype=labels.dtype)
 
 
 def overfull_pieces(parts, owner, model, labels, spacing) -> set[int]:
@@ -200,22 +204,21 @@ def _carved(part: m3.Manifold, model, labels, k: int, holders, spacing: float):
     volume (the part holds another piece's material beyond a gap), the cells are drawn
     against every tet instead. Where the diagram is degenerate, the convex hull of ``k``'s
     tets."""
-    from scipy.spatial import cKDTree
-
     from .render_solid import HULL_FACE
 
     mine = np.nonzero(labels == k)[0]
     own = float(model.tet_volume[mine].sum())
     carved = cells = None
-    for pool in (np.nonzero(np.isin(labels, [k, *holders]))[0], np.arange(len(labels))):
+    pools = [np.nonzero(np.isin(labels, [k, *holders]))[0]]
+    if len(pools[0]) < len(labels):  # (when those are every tet, the first carve is the last)
+        pools.append(np.arange(len(labels)))
+    for pool in pools:
         cells = _own_cells(model, labels, k, spacing, pool)
         if cells is None:
             break
         carved = part ^ cells
         vertices = np.asarray(carved.to_mesh64().vert_properties)[:, :3]
-        far = vertices[cKDTree(model.particle_position[mine]).query(vertices)[0] > OVERREACH_FACTOR * spacing]
-        # (as overreaching_pieces: a vertex that far from every tet is its nearest piece's)
-        foreign = len(far) and np.any(labels[cKDTree(model.particle_position).query(far)[1]] != k)
+        foreign = np.any(_far_owners(vertices, model, labels, mine, spacing) != k)
         if not foreign and not _gained(carved.volume(), own, spacing):
             return carved, cells
     if cells is None:
