@@ -174,6 +174,35 @@ def tilt_frames_for(cracks, sites):
     return tilt_frames(cracks, [sites], 0.2)
 
 
+def _quartered_box(box):
+    """The box cut into quarters by z = 0 and x = 0 (body frame, each oblique by a hair):
+    (model, render solid, cracks, the pieces' tets, labels, ``_separating_cracks``, segments,
+    the pieces' centres (4,3) [m], and the segments' shifts (S,) [m]: the horizontal crack's
+    left pair's up by 0.3 spacings, its right pair's down by 0.2, the rest 0)."""
+    from taichi_frac.geometry.crack_offsets import crack_segments
+    from taichi_frac.geometry.piece_surface import _separating_cracks
+
+    model, report, _ = box
+    render = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)
+    flat = CrackPlane(point=np.zeros(3), normal=np.array([1e-4, 0.0, 1.0]) / np.linalg.norm([1e-4, 0.0, 1.0]),
+                      extent=1.0, peak_stress=1.0)
+    upright = CrackPlane(point=np.zeros(3), normal=np.array([1.0, 1e-4, 0.0]) / np.linalg.norm([1.0, 1e-4, 0.0]),
+                         extent=1.0, peak_stress=1.0)
+    cracks = [flat, upright]
+    tets = split_body(model, cracks, FractureOptions()).fragment_tets
+    assert len(tets) == 4
+    labels = np.full(model.tet_count, -1, dtype=np.int64)
+    for k, t in enumerate(tets):
+        labels[np.asarray(t)] = k
+    per_crack = _separating_cracks(model, np.asarray(model.bonds, dtype=np.int64), labels, cracks)
+    segments = crack_segments(per_crack, len(tets))
+    centre = np.array([model.particle_position[np.asarray(t)].mean(axis=0) for t in tets])
+    side = np.sign(centre[segments.pieces, 0])  # (S,2) left -1 / right +1 of the upright crack
+    shifts = model.spacing * np.where((segments.crack == 0) & (side[:, 0] == side[:, 1]),
+                                      np.where(side[:, 0] < 0, 0.3, -0.2), 0.0)
+    return model, render, cracks, tets, labels, per_crack, segments, centre, shifts
+
+
 def test_shifted_segments_cut_closed_pieces_with_the_step_walled(box):
     """The box cut into quarters by z = 0 and x = 0 (body frame, oblique by a hair so no
     face is coplanar with the tets'): the horizontal crack parts two pairs of pieces, and its
@@ -182,32 +211,15 @@ def test_shifted_segments_cut_closed_pieces_with_the_step_walled(box):
     strip between the wall at the segments' step and the vertical crack (under a spacing
     wide); each piece is closed and one shell (the wall keeps the upper left piece apart from
     the lower right), its crack faces on its own segment's plane."""
-    from taichi_frac.geometry.crack_offsets import MOVES, crack_segments, moved_crack
-    from taichi_frac.geometry.piece_surface import _cut, _separating_cracks
+    from taichi_frac.geometry.crack_offsets import MOVES, moved_crack
+    from taichi_frac.geometry.piece_surface import _cut
 
-    model, report, _ = box
-    render = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)
+    model, render, cracks, tets, labels, per_crack, segments, centre, shifts = _quartered_box(box)
     spacing = model.spacing
-    flat = CrackPlane(point=np.zeros(3), normal=np.array([1e-4, 0.0, 1.0]) / np.linalg.norm([1e-4, 0.0, 1.0]),
-                      extent=1.0, peak_stress=1.0)
-    upright = CrackPlane(point=np.zeros(3), normal=np.array([1.0, 1e-4, 0.0]) / np.linalg.norm([1.0, 1e-4, 0.0]),
-                         extent=1.0, peak_stress=1.0)
-    cracks = [flat, upright]
-    split = split_body(model, cracks, FractureOptions())
-    tets = split.fragment_tets
-    assert len(tets) == 4
-    labels = np.full(model.tet_count, -1, dtype=np.int64)
-    for k, t in enumerate(tets):
-        labels[np.asarray(t)] = k
-    per_crack = _separating_cracks(model, np.asarray(model.bonds, dtype=np.int64), labels, cracks)
-    segments = crack_segments(per_crack, len(tets))
+    flat = cracks[0]
     # Each crack parts the two pairs across it and, by the bonds cut by both where they cross,
     # the two diagonal pairs.
     assert segments.crack.tolist() == [0, 0, 0, 0, 1, 1, 1, 1]
-    centre = np.array([model.particle_position[np.asarray(t)].mean(axis=0) for t in tets])
-    side = np.sign(centre[segments.pieces, 0])  # (S,2) left -1 / right +1 of the upright crack
-    shifts = np.where((segments.crack == 0) & (side[:, 0] == side[:, 1]), np.where(side[:, 0] < 0, 0.3, -0.2), 0.0)
-    shifts *= spacing
     assert np.count_nonzero(shifts) == 2
     zeros = np.zeros((len(cracks), MOVES))
     origins = np.zeros((len(tets), 3))
@@ -303,3 +315,58 @@ def test_smaller_pieces_are_fitted_when_asked_but_never_at_a_larger_one_s_cost()
             np.testing.assert_allclose(change, [0.0, 0.04 * target_b / 0.5], atol=1e-9)
         else:
             assert not np.any(change), change
+
+
+def test_stretch_heights_hold_each_stretch_s_shift_and_blend_at_its_edge():
+    """Two rows of crossings 0.1 m apart, the left row's stretch shifted by 3 mm and the right
+    one's by -2 mm: at a crossing the field is its stretch's shift (the next row's weight is
+    exp(-4) of its own at the 0.1 m spacing's blend, so within 2 % of the step), halfway
+    between the rows their mean, and it never leaves the two."""
+    from taichi_frac.geometry.crack_slabs import stretch_heights
+
+    ys = np.linspace(-0.5, 0.5, 11)
+    flat = np.array([[x, y] for x in (-0.05, 0.05) for y in ys])
+    heights = np.where(flat[:, 0] < 0, 3e-3, -2e-3)
+    field = stretch_heights(flat, heights, 0.1)
+    np.testing.assert_allclose(field(flat), heights, atol=0.02 * 5e-3)
+    np.testing.assert_allclose(field(np.column_stack([np.zeros(11), ys])), 0.5e-3, atol=1e-12)
+    grid = np.random.default_rng(0).uniform(-0.6, 0.6, (500, 2))
+    values = field(grid)
+    assert values.min() >= -2e-3 - 1e-15 and values.max() <= 3e-3 + 1e-15
+
+
+def test_rough_stretches_share_one_surface_and_move_their_pieces_volume(box):
+    """The quarters of the box (as above) with rough crack faces (0.3 spacings of noise): the
+    horizontal crack's left stretch shifted up by 0.3 spacings and its right one down by 0.2,
+    in one warped surface. Each piece is closed and one shell; the pieces still fill the box
+    (both sides of a crack share one surface); and each piece's volume differs from the same
+    rough cut unshifted by its stretch's shift times its face (a closed form: an upper piece
+    loses h times its width times the box's depth), to within the blend across the step
+    (a strip of about two spacings by the box's depth, at the 0.5-spacing step)."""
+    from taichi_frac.geometry.crack_offsets import MOVES
+    from taichi_frac.geometry.piece_surface import _cut
+
+    model, render, cracks, tets, labels, per_crack, segments, centre, shifts = _quartered_box(box)
+    spacing = model.spacing
+    zeros = np.zeros((len(cracks), MOVES))
+    origins = np.zeros((len(tets), 3))
+    amplitude = 0.3 * spacing
+
+    def cut(moves):
+        pieces, stats, _, _ = _cut(render, model, tets, labels, cracks, per_crack, [None, None], origins, amplitude,
+                                   4 * spacing, 3, 1.0, zeros, segments, moves)
+        assert stats["fallback_pieces"] == 0 and all(p is not None for p in pieces)
+        return pieces
+
+    shifted, still = cut(shifts), cut(np.zeros_like(shifts))
+    half, low = SIZE / 2 - model.com_in_source, -SIZE / 2 - model.com_in_source
+    for k, (piece, before) in enumerate(zip(shifted, still)):
+        assert_closed(piece_mesh(piece))
+        assert len(piece.solid.decompose()) == 1
+        right, up = centre[k, 0] > 0, centre[k, 2] > 0
+        h = (-0.2 if right else 0.3) * spacing
+        width = half[0] if right else -low[0]
+        expected = (-h if up else h) * width * SIZE[1]
+        assert piece.solid.volume() - before.solid.volume() == pytest.approx(expected, abs=2.0 * spacing * SIZE[1]
+                                                                              * 0.5 * spacing), k
+    assert sum(p.solid.volume() for p in shifted) == pytest.approx(np.prod(SIZE), rel=1e-4)

@@ -16,6 +16,7 @@ LAYERS = [
     ("scenes", 3), ("geometry.prepare", 3), ("geometry.piece_surface", 3), ("geometry.piece_parts", 3),
     ("geometry.piece_checks", 3), ("geometry.piece_shells", 3), ("geometry.crack_offsets", 3),
     ("geometry.render_solid", 3), ("geometry.piece_reach", 3), ("geometry.crack_slabs", 3),
+    ("geometry.tet_cells", 3),
     ("fracture", 4),
     ("dynamics", 5),
     ("collision", 6),

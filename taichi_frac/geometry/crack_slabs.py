@@ -92,7 +92,8 @@ def _cells(diagram, points) -> list:
 def plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, spacing: float, roughness: float,
                 roughness_scale: float, seed: int, index: int,
                 thickness_factor: float = SLAB_THICKNESS_FACTOR,
-                reach_factor: float = SLAB_REACH_FACTOR, apart_from=(), past: float = 0.0) -> m3.Manifold | None:
+                reach_factor: float = SLAB_REACH_FACTOR, apart_from=(), past: float = 0.0,
+                segment: np.ndarray | None = None, shifts: np.ndarray | None = None) -> m3.Manifold | None:
     """The thin slab on a plane crack over the part of the plane nearer a separating bond
     crossing than any other: ``sites`` (N,3) [m] where bonds cross the plane, ``separating``
     (N,) bool those between different pieces cut by this crack. Each separating site's
@@ -102,13 +103,21 @@ def plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, s
     ``thickness_factor`` x ``spacing`` thick, reaching ``reach_factor`` spacings; kept off
     the other slabs of the plane cracks ``apart_from`` (CrackSurfaces) by a strip along each
     one's line through this plane; grown by ``past`` spacings beyond that halfway line
-    (``SLAB_PAST_FACTOR`` for a crack's own slab)."""
+    (``SLAB_PAST_FACTOR`` for a crack's own slab). A rough slab may also carry the stretches'
+    shifts (``segment`` (N,) each crossing's stretch, ``shifts`` (S,) [m] each stretch's:
+    ``stretch_heights``) in its one warped surface: unlike ``segment_slabs``' flat stretches,
+    it needs no walls, and the two sides of the crack still share one surface."""
     e1, e2 = tangent_frame(crack.normal)
     rel = sites - crack.point
     flat = np.stack([rel @ e1, rel @ e2], axis=1)  # (N,2)
     if not separating.any():
         return None
     outline, keep = _cut_outline(flat, separating, spacing, reach_factor * spacing, past)
+    height = None
+    if segment is not None and roughness > 0:
+        cut = separating[keep]
+        height = stretch_heights(flat[keep][cut], np.where(segment[keep][cut] >= 0,
+                                                           shifts[np.maximum(segment[keep][cut], 0)], 0.0), spacing)
     flat = flat[keep]
     for other in apart_from:
         outline = outline - _strip_along(crack, other, flat, spacing, thickness_factor, roughness, e1, e2)
@@ -116,19 +125,68 @@ def plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, s
     if outline.is_empty():
         return None
     thickness = thickness_factor * spacing
-    slab = m3.Manifold.extrude(outline, thickness).translate((0.0, 0.0, -0.5 * thickness))
     if roughness > 0:
-        slab = slab.refine_to_length(roughness_scale / 3.0)
+        def lift(points):  # (K,2) [m] -> (K,) [m]: the crack face's height along the normal
+            lifted = roughness * value_noise(points[:, 0] / roughness_scale, points[:, 1] / roughness_scale,
+                                             seed * 1009 + index)
+            return lifted + height(points) if height is not None else lifted
 
-        def displace(points):
-            points = np.array(points, dtype=np.float64)
-            noise = value_noise(points[:, 0] / roughness_scale, points[:, 1] / roughness_scale, seed * 1009 + index)
-            points[:, 2] += roughness * noise
-            return points
-
-        slab = slab.warp_batch(displace)
+        slab = warped_slab(outline, thickness, roughness_scale / 3.0, lift)
+    else:
+        slab = m3.Manifold.extrude(outline, thickness).translate((0.0, 0.0, -0.5 * thickness))
     frame = np.column_stack([e1, e2, crack.normal, crack.point])  # (3,4): slab frame -> body
     return slab.transform(frame)
+
+
+def warped_slab(outline: m3.CrossSection, thickness: float, length: float, lift) -> m3.Manifold:
+    """A slab ``thickness`` [m] thick over ``outline`` (2-D, [m]) whose mid-surface is lifted
+    along z by ``lift`` ((K,2) [m] -> (K,) [m]), triangulated to edges of at most ``length``
+    [m]. Its top and bottom are one triangulation offset by the thickness, so they never
+    cross however steeply the lift varies (a warped extrusion's two caps, triangulated apart,
+    would: its thickness is far below a triangle's interpolation error)."""
+    sheet = m3.Manifold.extrude(outline, thickness).refine_to_length(length).to_mesh()
+    points = np.asarray(sheet.vert_properties, dtype=np.float64)[:, :3]
+    triangles = np.asarray(sheet.tri_verts, dtype=np.int64)
+    top = np.all(points[triangles, 2] > 0.0, axis=1)  # (the upper cap, wound counter-clockwise from above)
+    used, faces = np.unique(triangles[top], return_inverse=True)
+    faces = faces.reshape(-1, 3)
+    uv = points[used, :2]
+    z = lift(uv)
+    n = len(uv)
+    vertices = np.concatenate([np.column_stack([uv, z + 0.5 * thickness]), np.column_stack([uv, z - 0.5 * thickness])])
+    edges = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    code = edges[:, 0] * n + edges[:, 1]
+    rim = edges[~np.isin(code, edges[:, 1] * n + edges[:, 0])]  # (the cap's boundary, each edge once)
+    a, b = rim[:, 0], rim[:, 1]
+    walls = np.concatenate([np.stack([b, a, a + n], axis=1), np.stack([b, a + n, b + n], axis=1)])
+    mesh = m3.Mesh(vert_properties=vertices.astype(np.float32),
+                   tri_verts=np.concatenate([faces, faces[:, ::-1] + n, walls]).astype(np.uint32))
+    return m3.Manifold(mesh)
+
+
+#: Width [particle spacings] over which a rough crack's stretches blend from one shift to the
+#: next (``stretch_heights``); the warped mesh's triangles smooth it further.
+STRETCH_BLEND_FACTOR = 0.5
+
+
+def stretch_heights(flat: np.ndarray, heights: np.ndarray, spacing: float):
+    """The shift field [m] over a crack plane whose cut crossings ``flat`` (M,2) [m] carry the
+    shifts ``heights`` (M,) [m] of their stretches: near a crossing its stretch's shift,
+    blended over STRETCH_BLEND_FACTOR spacings across the Voronoi edges between stretches
+    (a soft nearest-crossing weight). Returns a function of points (K,2) [m] -> (K,) [m]."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(flat)
+    count = min(6, len(flat))
+    tau2 = (STRETCH_BLEND_FACTOR * spacing) ** 2
+
+    def height(points: np.ndarray) -> np.ndarray:
+        distance, nearest = tree.query(points, k=count)
+        distance, nearest = distance.reshape(len(points), -1), nearest.reshape(len(points), -1)
+        weight = np.exp(-(distance**2 - distance[:, :1] ** 2) / tau2)
+        return np.sum(weight * heights[nearest], axis=1) / np.sum(weight, axis=1)
+
+    return height
 
 
 def _strip_along(crack: CrackSurface, other: CrackSurface, flat: np.ndarray, spacing: float,

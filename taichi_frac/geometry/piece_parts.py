@@ -11,6 +11,7 @@ import manifold3d as m3
 import numpy as np
 
 from .render_solid import solid_arrays, with_crack_index
+from .tet_cells import LOCAL_DIAGRAM_FACTOR, own_cells, voronoi_cells
 
 #: A part's vote reads at most about this many of its faces (evenly spread over its list).
 MAX_VOTING_FACES = 256
@@ -21,6 +22,15 @@ MAX_PROBED_TETS = 64
 #: A piece whose parts hold less than this share of its tets' volume lost its material to a
 #: neighbour (the slabs left a gap in the wall between them): it gets its tets' boundary.
 LOST_VOLUME_SHARE = 0.5
+#: A piece of PARTLY_LOST_TETS tets or more whose parts hold less than PARTLY_LOST_SHARE of
+#: its tets' volume, and leave out a tet centroid farther than PARTLY_LOST_DEPTH [particle
+#: spacings] (plus the crack faces' noise amplitude) from those they hold, has the rest
+#: carved out of the other piece's part holding it (rough cracks meeting at a point gave a
+#: third of a 170-tet piece to its neighbour so). A crack face moved past a layer of its
+#: centroids leaves out only centroids beside held ones.
+PARTLY_LOST_SHARE = 0.9
+PARTLY_LOST_TETS = 100
+PARTLY_LOST_DEPTH = 1.5
 #: The piece whose part holds a lost piece's tets gets its tets' boundary too when the lost
 #: volume is more than this share of its own tets' volume (else it would carry it along).
 SWALLOWED_VOLUME_SHARE = 0.05
@@ -158,24 +168,42 @@ def failed_pieces(parts, owner, model, fragment_tets) -> set[int]:
     return failed
 
 
-def carve_lost_pieces(parts, owner, model, fragment_tets, labels, spacing):
+def carve_lost_pieces(parts, owner, model, fragment_tets, labels, spacing, roughness: float = 0.0):
     """A piece no part went to (a few tets where cracks meet, smaller than the planes can
     resolve), or whose parts hold less than LOST_VOLUME_SHARE of its tets' volume while
     another piece's part holds its tets (the slabs left a gap in the wall between them and
     the vote gave the material on both sides to the other), is carved out of the part
-    holding its tets: the part's intersection with its tets' nearest-centroid cells
+    holding its tets; so is a piece of PARTLY_LOST_TETS or more under PARTLY_LOST_SHARE
+    whose parts leave out a chunk of its tets (deeper than PARTLY_LOST_DEPTH spacings plus
+    the crack faces' noise amplitude ``roughness`` [m]), out of the part holding the tets
+    its own parts do not: the part's intersection with its tets' nearest-centroid cells
     (``_carved``) becomes the piece (owner -(k + 2)), the rest stays. Its faces inside the part are then the
     cells', not a crack's: counted in the stats. The carving can cut the rest in two or more:
     the largest stays with its owner, the others are voted for again (a chip beyond it
     belongs to the tets around it)."""
+    from scipy.spatial import cKDTree
+
     from .render_solid import without_dust
 
     parts, owner = list(parts), list(owner)
     rendered = _rendered_volumes(parts, owner, len(fragment_tets))
-    lost = [k for k, tets in enumerate(fragment_tets)
-            if k not in owner or rendered[k] < LOST_VOLUME_SHARE * float(model.tet_volume[np.asarray(tets)].sum())]
-    for k in lost:
+    volumes = [float(model.tet_volume[np.asarray(tets)].sum()) for tets in fragment_tets]
+    lost = [k for k in range(len(fragment_tets)) if k not in owner or rendered[k] < LOST_VOLUME_SHARE * volumes[k]]
+    partly = [k for k, tets in enumerate(fragment_tets) if k not in lost and len(tets) >= PARTLY_LOST_TETS
+              and rendered[k] < PARTLY_LOST_SHARE * volumes[k]]
+    for k in lost + partly:
         tets = np.asarray(fragment_tets[k], dtype=np.int64)
+        if k in partly:  # (the tets its own parts do not hold)
+            held = np.zeros(len(tets), dtype=bool)
+            for part, o in zip(parts, owner):
+                if o == k:
+                    held |= _winding_inside(model.particle_position[tets], part)
+            # (a face moved past a layer of its centroids leaves them out beside the held ones:
+            # not lost)
+            if held.all() or not held.any() or cKDTree(model.particle_position[tets[held]]).query(
+                    model.particle_position[tets[~held]])[0].max() <= PARTLY_LOST_DEPTH * spacing + roughness:
+                continue
+            tets = tets[~held]
         best = _part_holding(_probe_points(model, tets), parts)
         if best is None or owner[best] == k:
             continue
@@ -213,7 +241,7 @@ def _carved(part: m3.Manifold, model, labels, k: int, holders, spacing: float):
     if len(pools[0]) < len(labels):  # (when those are every tet, the first carve is the last)
         pools.append(np.arange(len(labels)))
     for pool in pools:
-        cells = _own_cells(model, labels, k, spacing, pool)
+        cells = own_cells(model, labels, k, spacing, pool)
         if cells is None:
             break
         carved = part ^ cells
@@ -280,11 +308,6 @@ FOREIGN_DEPTH_FACTOR = 1.0
 #: other pieces' cells (what those pieces hold is then taken away: their crack faces bound it;
 #: what they do not hold there, between their crack faces and its cells, is its).
 SHARE_REACH_FACTOR = 2.5
-#: How far [particle spacings] about the centroids whose cells may go to another piece the
-#: Voronoi diagram that divides a part reads the centroids (a cell depends only on its
-#: neighbours, within twice its reach); half of it bounds how far from the part such a
-#: centroid can lie and still reach it.
-LOCAL_DIAGRAM_FACTOR = 4.0
 #: How many times the parts cut off are checked and divided again (a part cut off and voted
 #: to a piece can reach past that piece's tets in turn).
 DIVIDE_ROUNDS = 3
@@ -393,7 +416,7 @@ def _divide_part(part, k, holding, depth, model, labels, spacing, corners, own_t
                                & (centroids <= high + LOCAL_DIAGRAM_FACTOR * spacing), axis=1))[0]
     around = np.union1d(around, seeds)
     local = around[cKDTree(centroids[seeds]).query(centroids[around])[0] <= LOCAL_DIAGRAM_FACTOR * spacing]
-    cells = _voronoi_cells(centroids[local], spacing)
+    cells = voronoi_cells(centroids[local], spacing)
     near_local = np.searchsorted(local, near)  # (local is sorted and holds every one of them)
     touching = to_surface < cells.radius(near_local)
     touching[~touching] = _inside_solid(centroids[near[~touching]], part, 0.1 * spacing)
@@ -453,88 +476,6 @@ def _vertices(part, corners) -> np.ndarray:
     return known[1] if known is not None and known[0] is part else np.asarray(part.to_mesh64().vert_properties)[:, :3]
 
 
-def _voronoi_cells(points: np.ndarray, spacing: float):
-    """The Voronoi diagram of ``points`` (N,3) [m] (bounded by a box 20 spacings beyond
-    them, so every point's cell is closed): ``.radius(indices)`` each cell's reach from its
-    point [m]; ``.union(indices)`` the union of those points' cells as one closed manifold
-    (its faces HULL_FACE), or None where qhull's diagram is degenerate there."""
-    from scipy.spatial import Voronoi
-
-    from .render_solid import _PROPERTY_COUNT, _CRACK, HULL_FACE
-
-    low, high = points.min(axis=0) - 20 * spacing, points.max(axis=0) + 20 * spacing
-    fence = np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1]) for z in (low[2], high[2])])
-    diagram = Voronoi(np.concatenate([points, fence]))
-    regions = [diagram.regions[r] for r in diagram.point_region[:len(points)]]
-    owner_of = np.repeat(np.arange(len(points)), [len(region) for region in regions])
-    reach = np.zeros(len(points))  # (N,) [m] each point's farthest cell corner
-    np.maximum.at(reach, owner_of, np.linalg.norm(diagram.vertices[np.concatenate(regions)] - points[owner_of], axis=1))
-    ridge_points = np.asarray(diagram.ridge_points, dtype=np.int64)
-
-    class Cells:
-        @staticmethod
-        def joined(indices, seeds):
-            """The ``indices`` whose cells connect, through cells of ``indices``, to one of
-            the ``seeds``' cells."""
-            from scipy.sparse import coo_matrix
-            from scipy.sparse.csgraph import connected_components
-
-            chosen = np.zeros(len(diagram.points), dtype=bool)
-            chosen[indices] = True
-            both = ridge_points[chosen[ridge_points[:, 0]] & chosen[ridge_points[:, 1]]]
-            graph = coo_matrix((np.ones(len(both)), (both[:, 0], both[:, 1])), shape=(len(chosen),) * 2)
-            component = connected_components(graph, directed=False)[1]
-            seeded = np.unique(component[np.asarray(seeds, dtype=np.int64)[chosen[seeds]]])
-            return np.asarray(indices)[np.isin(component[indices], seeded)]
-
-        @staticmethod
-        def radius(indices):
-            return reach[indices]
-
-        @staticmethod
-        def union(indices):
-            # The union's boundary is every ridge between a chosen point and one not chosen:
-            # a convex polygon, its corners sorted by angle about its centre and fanned into
-            # triangles facing away from the chosen point; neighbouring ridges share the
-            # diagram's vertices, so the surface is closed.
-            chosen = np.zeros(len(diagram.points), dtype=bool)
-            chosen[np.asarray(indices, dtype=np.int64)] = True
-            rows = np.nonzero(chosen[ridge_points[:, 0]] != chosen[ridge_points[:, 1]])[0]
-            if not len(rows):
-                return None
-            rings = [diagram.ridge_vertices[r] for r in rows]
-            sizes = np.array([len(ring) for ring in rings])
-            corner = np.concatenate(rings).astype(np.int64)
-            if (sizes < 3).any() or (corner < 0).any():
-                return None
-            ridge = np.repeat(np.arange(len(rows)), sizes)
-            a, b = ridge_points[rows, 0], ridge_points[rows, 1]
-            inner = np.where(chosen[a], a, b)
-            normal = diagram.points[np.where(chosen[a], b, a)] - diagram.points[inner]  # out of the union
-            position = diagram.vertices[corner]
-            centre = np.stack([np.bincount(ridge, weights=position[:, k]) for k in range(3)], axis=1) / sizes[:, None]
-            start = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-            e1 = position[start] - centre
-            e2 = np.cross(normal, e1)
-            rel = position - centre[ridge]
-            angle = np.arctan2(np.einsum("ij,ij->i", rel, e2[ridge]), np.einsum("ij,ij->i", rel, e1[ridge]))
-            corner = corner[np.lexsort((angle, ridge))]  # each ring counter-clockwise about its normal
-            fans = sizes - 2  # triangles of each ring: (first, t, t + 1) for t in 1 .. size - 2
-            step = np.arange(fans.sum()) - np.repeat(np.cumsum(fans) - fans, fans) + 1
-            first = np.repeat(start, fans)
-            fan = np.stack([first, first + step, first + step + 1], axis=1)
-            triangles = corner[fan]
-            used, faces = np.unique(triangles, return_inverse=True)
-            props = np.zeros((len(used), _PROPERTY_COUNT))
-            props[:, :3] = diagram.vertices[used]
-            props[:, _CRACK] = HULL_FACE
-            solid = m3.Manifold(m3.Mesh64(vert_properties=props,
-                                          tri_verts=np.ascontiguousarray(faces.reshape(-1, 3), dtype=np.uint64)))
-            return solid if solid.status() == m3.Error.NoError and not solid.is_empty() else None
-
-    return Cells()
-
-
 def failed_piece_shells(solid: m3.Manifold, model, labels, k: int, failed, parts, owner, spacing: float) -> list:
     """The shells of the render ``solid`` (the body's, uncut) that piece ``k``, one the cut
     ``failed``, gets: its share nearest its tets (``nearest_cells_share``) less the ``parts``
@@ -571,23 +512,8 @@ def nearest_cells_share(solid: m3.Manifold, model, labels, k: int, among, spacin
     failed = np.isin(labels, list(among))
     rest = np.nonzero(~failed)[0]
     beyond = rest[cKDTree(centroids[failed]).query(centroids[rest])[0] > SHARE_REACH_FACTOR * spacing]
-    region = _own_cells(model, labels, k, spacing, np.union1d(np.nonzero(failed)[0], beyond))
+    region = own_cells(model, labels, k, spacing, np.union1d(np.nonzero(failed)[0], beyond))
     if region is None:
         return None
     share = solid ^ region
     return None if share.is_empty() else share
-
-
-def _own_cells(model, labels, k: int, spacing: float, pool: np.ndarray):
-    """The union of piece ``k``'s tet centroids' cells in the Voronoi diagram of the centroids
-    ``pool`` (indices, sorted, k's among them) about them (HULL_FACE faces), or None where it
-    is degenerate or k has no tets."""
-    from scipy.spatial import cKDTree
-
-    centroids = model.particle_position
-    mine = np.nonzero(labels == k)[0]
-    if not len(mine):
-        return None
-    # (the diagram about k's centroids only: their cells depend on their neighbours alone)
-    pool = pool[cKDTree(centroids[mine]).query(centroids[pool])[0] <= LOCAL_DIAGRAM_FACTOR * spacing]
-    return _voronoi_cells(centroids[pool], spacing).union(np.searchsorted(pool, mine))

@@ -48,7 +48,9 @@ A piece's crumbs are dropped and its other stray shells bridged to the main shel
 against, its own or a neighbour's (``piece_shells.join_stray_shells``).
 
 ``crack_roughness`` (FractureOptions) displaces the slabs' faces along the crack normal
-by smooth value noise, the same on both faces, so the two sides of a crack still fit.
+by smooth value noise, the same on both faces, so the two sides of a crack still fit; a
+rough crack's stretches are shifted within that one warped sheet
+(``crack_slabs.warped_slab``).
 """
 
 from __future__ import annotations
@@ -59,7 +61,7 @@ import manifold3d as m3
 import numpy as np
 
 from .crack_offsets import (FITTED_PIECE_TETS, MOVES, crack_segments, moved_crack, piece_target_volumes,
-                            segment_shifts, tilt_frames, volume_misfit, volume_offsets)
+                            segment_shifts, tilt_frames, volume_errors, volume_misfit, volume_offsets)
 from .crack_slabs import SLAB_PAST_FACTOR, plane_slab, segment_slabs, sphere_shell
 from .piece_parts import (assign_parts, carve_lost_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
                           overfull_pieces, overreaching_pieces)
@@ -76,6 +78,14 @@ FIT_STEPS = (1.0, 0.5)
 #: A fit is cut only when its linear model promises to take this share off the pieces'
 #: squared volume errors: each cut costs as much as the first.
 FIT_GAIN = 0.25
+
+#: A piece whose relative volume error grows by more than this in a moved cut took (or lost)
+#: material across a gap the move opened: the moves of its faces are frozen.
+JUMP_ERROR = 0.02
+
+#: The moves frozen after such a jump: those of the crossings within this many spacings [-] of
+#: the material that changed hands (the faces that opened the gap lie there).
+NEAR_CHANGE_FACTOR = 2.0
 
 
 def _separating_cracks(model, bonds, labels, cracks):
@@ -149,8 +159,8 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     moves, see FIT_STEPS). Where that is not enough (a plane between many pairs of pieces),
     up to ``fit_rounds`` times more, the stretch of a plane between each pair of pieces is
     shifted on its own (``crack_offsets.CrackSegments``, the fewest stretches that do it),
-    with a wall across each step between two (``crack_slabs.segment_slabs``; not for rough
-    cracks). A moved cut in which a piece fails that did not is never kept: a crack moved
+    with a wall across each step between two (``crack_slabs.segment_slabs``; a rough crack's
+    blended into its one warped slab). A moved cut in which a piece fails that did not is never kept: a crack moved
     past the end of another's slab joins two pieces there. The cracks (stretches) of the
     pieces that failed then stay, and the others fit again. Last, each piece loses the wedge
     tips its flat faces run past its tets into a neighbour's (``piece_reach.trim_overreach``).
@@ -200,19 +210,21 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
                                                             moves, frames, piece_origins, frozen=frozen,
                                                             min_tets=plane_min_tets),
         cut=lambda moves: _cut(*args, moves),
-        freeze=on_failed)
+        freeze=on_failed, near=None)
     # Then each stretch of a plane between one pair of pieces on its own (crack_offsets.CrackSegments).
     segments = crack_segments(per_crack, len(fragment_tets))
     if fit_min_tets != plane_min_tets:  # (the stretches read smaller pieces than the planes did)
         kept = kept._replace(misfit=volume_misfit(kept.solids, targets, fragment_tets, fit_min_tets))
     kept, shifts, more = _fit_rounds(
-        fit_rounds if segments.count and not roughness else 0, kept, np.zeros(segments.count), targets,
+        fit_rounds if segments.count else 0, kept, np.zeros(segments.count), targets,
         fragment_tets, fit_min_tets,
         fit=lambda solids, sources, moves, frozen: segment_shifts(solids, piece_origins, sources, cracks, segments,
                                                                   targets, fragment_tets, spacing, moves, frozen,
                                                                   fit_min_tets),
         cut=lambda moves: _cut(*args, moved, segments, moves),
-        freeze=lambda newly: np.isin(segments.pieces, newly).any(axis=1))
+        freeze=lambda newly: np.isin(segments.pieces, newly).any(axis=1),
+        near=lambda before, after, jumped: _stretches_near(
+            segments, _changed_material(before, after, jumped, piece_origins, spacing), spacing))
     reach = np.abs(moved[:, 0]) + np.linalg.norm(moved[:, 1:], axis=1)
     stats = dict(kept.stats, moved_cracks=int(np.sum(reach > 0.0)),
                  largest_offset=float(np.max(reach, initial=0.0)) / spacing, fit_cuts=cuts + more,
@@ -232,7 +244,8 @@ class _Kept(NamedTuple):
     misfit: float
 
 
-def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, min_tets: int, fit, cut, freeze):
+def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, min_tets: int, fit, cut, freeze,
+                near):
     """Up to ``rounds`` times, the moves ``fit(solids, sources, moves, frozen)`` proposes
     (further moves, the misfit its linear model predicts), cut (``cut(moves)``: ``_cut``'s
     result) with all of them or else half (FIT_STEPS), kept when the pieces' volumes come
@@ -240,7 +253,13 @@ def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, mi
     fails a piece the kept cut did not (one crack passing the end of another's slab joins
     two pieces there) is not kept: ``freeze(newly)`` (bool, per move row) says which moves
     then stay, and the rest fit again. Stops when the fit promises
-    less than FIT_GAIN off the misfit. ``kept``: the ``_Kept`` cut made with ``moves``.
+    less than FIT_GAIN off the misfit. A cut that is no nearer, in which a piece's error grew by
+    more than JUMP_ERROR (a moved face passed the end of another crack's and a part holding
+    material of two pieces went to the other one, a change the linear model cannot know),
+    freezes the moves ``near(before, after, jumped)`` names (bool, per move row: those by the
+    material that changed hands), else those of the pieces that jumped; a cut that fails a
+    piece freezes those too (``near`` None: no such check; a whole plane is by most of what
+    changes hands). ``kept``: the ``_Kept`` cut made with ``moves``.
     Returns (kept, moves, cuts made)."""
     frozen = np.zeros(len(moves), dtype=bool)
     cuts = 0
@@ -253,17 +272,58 @@ def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, mi
             pieces, stats, _, sources = cut(tried)
             cuts += 1
             newly = np.setdiff1d(stats["fallback_ids"], kept.stats["fallback_ids"])
-            if len(newly):
-                frozen |= freeze(newly)
-                break
             solids = [p.solid if p is not None else None for p in pieces]
             misfit = volume_misfit(solids, targets, fragment_tets, min_tets)
-            if misfit < kept.misfit:
+            if not len(newly) and misfit < kept.misfit:
                 kept, moves = _Kept(pieces, solids, stats, sources, misfit), tried
+                break
+            jumped = jumped_pieces(kept.solids, solids, targets, fragment_tets, min_tets) if near else []
+            if len(newly) or len(jumped):
+                rows = near(kept.solids, solids, jumped) if len(jumped) else np.zeros(len(moves), dtype=bool)
+                if len(newly):
+                    rows |= freeze(newly)
+                frozen |= rows if rows.any() else freeze(jumped)
                 break
         else:
             break
     return kept, moves, cuts
+
+
+def jumped_pieces(before, after, targets, fragment_tets, min_tets: int) -> np.ndarray:
+    """The pieces (indices) of ``min_tets`` tets or more whose relative volume error grows by
+    more than JUMP_ERROR from the solids ``before`` to ``after`` (manifolds or None)."""
+    was = np.abs(volume_errors(before, targets, fragment_tets, min_tets))
+    now = np.abs(volume_errors(after, targets, fragment_tets, min_tets))
+    return np.nonzero(np.nan_to_num(now - was) > JUMP_ERROR)[0]
+
+
+def _changed_material(before, after, jumped, origins, spacing: float) -> np.ndarray:
+    """(K,3) [m] the body-frame vertices of the material that left or joined the pieces
+    ``jumped`` between the solids ``before`` and ``after`` (each in its piece's frame, whose
+    origin is ``origins[k]``), in bits of a tet's volume (one spacing cubed) or more."""
+    points = []
+    for k in jumped:
+        if before[k] is None or after[k] is None:
+            continue
+        for bit in (after[k] - before[k]).decompose() + (before[k] - after[k]).decompose():
+            if bit.volume() >= spacing**3:
+                points.append(np.asarray(bit.to_mesh().vert_properties)[:, :3] + np.asarray(origins[k]))
+    return np.concatenate(points) if points else np.zeros((0, 3))
+
+
+def _stretches_near(segments, points: np.ndarray, spacing: float) -> np.ndarray:
+    """(S,) bool: the ``segments`` (``crack_offsets.CrackSegments``) with a cut crossing within
+    NEAR_CHANGE_FACTOR spacings of one of ``points`` (K,3) [m]."""
+    rows = np.zeros(segments.count, dtype=bool)
+    if not len(points):
+        return rows
+    for tree, cut_segment in zip(segments.trees, segments.cut_segment):
+        if tree is None:
+            continue
+        found = [i for row in tree.query_ball_point(points, NEAR_CHANGE_FACTOR * spacing) for i in row]
+        hit = cut_segment[np.unique(np.asarray(found, dtype=np.int64))]
+        rows[hit[hit >= 0]] = True
+    return rows
 
 
 def _trimmed(pieces, stats, model, labels, piece_origins):
@@ -315,8 +375,10 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
             if wall is not None:
                 slabs.append(with_crack_index(wall, HULL_FACE))
         elif isinstance(crack, CrackPlane):
+            stretched = segment is not None and np.any(shifts[segment[segment >= 0]])
             parts = [(surface, plane_slab(surface, sites, separating, spacing, roughness, roughness_scale, seed,
-                                           first, past=SLAB_PAST_FACTOR))]
+                                           first, past=SLAB_PAST_FACTOR + roughness / spacing,
+                                           segment=segment if stretched else None, shifts=shifts))]
         else:
             parts = [(surface, sphere_shell(surface, spacing))]
         for part, slab in parts:
@@ -343,7 +405,7 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
     owner = assign_parts(parts, model, labels, spacing, corners)
     parts, owner, received = divide_joined_parts(parts, owner, model, labels, spacing, corners)
     stats["pieces_given_divided_parts"] = len(received)
-    parts, owner = carve_lost_pieces(parts, owner, model, fragment_tets, labels, spacing)
+    parts, owner = carve_lost_pieces(parts, owner, model, fragment_tets, labels, spacing, roughness)
     stats["parts"] = len(parts)
     stats["carved_pieces"] = len({o for o in owner if o < -1})
     owner = [-(o + 2) if o < -1 else o for o in owner]
