@@ -43,6 +43,10 @@ def _scene_cases(quick: bool):
         unmoved = [f"{o.name}.fracture.crack_fit_rounds=0" for o in scene.breakable_objects]
         cases.append((label, scene, frames))
         cases.append((f"{label}, {UNMOVED}", load_scene(path, overrides + unmoved), frames))
+        # Rough crack faces, the noise's amplitude ROUGH_SPACINGS of each body's particle spacing.
+        rough = [f"{o.name}.fracture.crack_roughness={ROUGH_SPACINGS * o.prepare()[0].spacing:.6g}"
+                 for o in scene.breakable_objects]
+        cases.append((f"{label}, {ROUGH}", load_scene(path, overrides + rough), frames))
         if len(scene.breakable_objects) > 1:  # (the scenes of many pieces of a few tens of tets)
             smaller = [f"{o.name}.fracture.crack_fit_min_tets={SMALL_FIT_TETS}" for o in scene.breakable_objects]
             cases.append((f"{label}, {SMALL_FIT}", load_scene(path, overrides + smaller), frames))
@@ -55,6 +59,10 @@ UNMOVED = "cracks unmoved"
 #: ``crack_fit_min_tets`` of the cases that fit the crack stretches to smaller pieces too.
 SMALL_FIT_TETS = 30
 SMALL_FIT = f"stretches fitted to pieces of {SMALL_FIT_TETS}+ tets"
+
+#: ``crack_roughness`` of the rough-crack cases [particle spacings].
+ROUGH_SPACINGS = 0.3
+ROUGH = f"rough cracks ({ROUGH_SPACINGS:g} spacings)"
 
 
 def tet_height(model) -> float:
@@ -263,7 +271,9 @@ def run(ctx: BenchContext) -> Section:
         "same runs with the cracks where the analysis put them; the rows "
         f"'{SMALL_FIT}' fit the stretches to the pieces of {SMALL_FIT_TETS} tets or more too "
         f"(`crack_fit_min_tets` {SMALL_FIT_TETS}), a smaller piece's error counted at {SMALL_PIECE_WEIGHT:g} of a "
-        "larger one's.",
+        f"larger one's; the rows '{ROUGH}' roughen the crack faces (`crack_roughness` {ROUGH_SPACINGS:g} particle "
+        "spacings, the default scale): their RMS column is the noise's, and their stretches are shifted in one "
+        "warped surface, without walls.",
         "",
         md_table(["case", "pieces", "on their tets' boundary (cut failed)",
                   "tet faces: non-manifold edges (in pieces)",
