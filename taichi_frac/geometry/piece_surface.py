@@ -79,8 +79,8 @@ FIT_STEPS = (1.0, 0.5)
 #: squared volume errors: each cut costs as much as the first.
 FIT_GAIN = 0.25
 
-#: A piece whose relative volume error grows by more than this in a moved cut took (or lost)
-#: material across a gap the move opened: the moves of its faces are frozen.
+#: A piece whose relative volume error grows by more than this in a moved cut that is no
+#: nearer took (or lost) material across a gap the move opened: the moves there are frozen.
 JUMP_ERROR = 0.02
 
 #: The moves frozen after such a jump: those of the crossings within this many spacings [-] of
@@ -160,8 +160,8 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     up to ``fit_rounds`` times more, the stretch of a plane between each pair of pieces is
     shifted on its own (``crack_offsets.CrackSegments``, the fewest stretches that do it),
     with a wall across each step between two (``crack_slabs.segment_slabs``; a rough crack's
-    blended into its one warped slab). A moved cut in which a piece fails that did not is never kept: a crack moved
-    past the end of another's slab joins two pieces there. The cracks (stretches) of the
+    blended into its one warped slab). A moved cut in which a piece fails that did not is
+    never kept: a crack moved past the end of another's slab joins two pieces there. The cracks (stretches) of the
     pieces that failed then stay, and the others fit again. Last, each piece loses the wedge
     tips its flat faces run past its tets into a neighbour's (``piece_reach.trim_overreach``).
 
@@ -258,8 +258,8 @@ def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, mi
     material of two pieces went to the other one, a change the linear model cannot know),
     freezes the moves ``near(before, after, jumped)`` names (bool, per move row: those by the
     material that changed hands), else those of the pieces that jumped; a cut that fails a
-    piece freezes those too (``near`` None: no such check; a whole plane is by most of what
-    changes hands). ``kept``: the ``_Kept`` cut made with ``moves``.
+    piece freezes those too (``near`` None: no such check, as for whole planes, most of which
+    lie near whatever changes hands). ``kept``: the ``_Kept`` cut made with ``moves``.
     Returns (kept, moves, cuts made)."""
     frozen = np.zeros(len(moves), dtype=bool)
     cuts = 0
