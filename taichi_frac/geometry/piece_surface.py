@@ -223,8 +223,9 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
                                                                   fit_min_tets),
         cut=lambda moves: _cut(*args, moved, segments, moves),
         freeze=lambda newly: np.isin(segments.pieces, newly).any(axis=1),
-        near=lambda before, after, jumped: _stretches_near(
-            segments, _changed_material(before, after, jumped, piece_origins, spacing), spacing))
+        near=lambda before, after, jumped, newly: _stretches_near(
+            segments, np.concatenate([_changed_material(before, after, jumped, piece_origins, spacing),
+                                      model.particle_position[np.isin(labels, newly)]]), spacing))
     reach = np.abs(moved[:, 0]) + np.linalg.norm(moved[:, 1:], axis=1)
     stats = dict(kept.stats, moved_cracks=int(np.sum(reach > 0.0)),
                  largest_offset=float(np.max(reach, initial=0.0)) / spacing, fit_cuts=cuts + more,
@@ -256,10 +257,11 @@ def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, mi
     less than FIT_GAIN off the misfit. A cut that is no nearer, in which a piece's error grew by
     more than JUMP_ERROR (a moved face passed the end of another crack's and a part holding
     material of two pieces went to the other one, a change the linear model cannot know),
-    freezes the moves ``near(before, after, jumped)`` names (bool, per move row: those by the
-    material that changed hands), else those of the pieces that jumped; a cut that fails a
-    piece freezes those too (``near`` None: no such check, as for whole planes, most of which
-    lie near whatever changes hands). ``kept``: the ``_Kept`` cut made with ``moves``.
+    freezes the moves ``near(before, after, jumped, failed)`` names (bool, per move row: those
+    by the material that changed hands), else those of the pieces that jumped. A cut that
+    fails pieces whose own moves are all frozen already freezes those by their tets too
+    (``failed``; a neighbour's move opened the gap). ``near`` None: neither check, as for
+    whole planes, most of which lie near whatever changes hands. ``kept``: the ``_Kept`` cut made with ``moves``.
     Returns (kept, moves, cuts made)."""
     frozen = np.zeros(len(moves), dtype=bool)
     cuts = 0
@@ -279,9 +281,11 @@ def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, mi
                 break
             jumped = jumped_pieces(kept.solids, solids, targets, fragment_tets, min_tets) if near else []
             if len(newly) or len(jumped):
-                rows = near(kept.solids, solids, jumped) if len(jumped) else np.zeros(len(moves), dtype=bool)
-                if len(newly):
-                    rows |= freeze(newly)
+                rows = freeze(newly)
+                # (failed pieces whose own moves are frozen already: a neighbour's move opened the gap)
+                stuck = len(newly) and not np.any(rows & ~frozen)
+                if near and (len(jumped) or stuck):
+                    rows |= near(kept.solids, solids, jumped, newly if stuck else newly[:0])
                 frozen |= rows if rows.any() else freeze(jumped)
                 break
         else:
@@ -413,7 +417,7 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
     failed |= overreaching_pieces(parts, owner, model, labels, spacing, corners)
     # (a piece given the material nearest its tets beyond a gap they leave holds more than
     # them by that gap's volume: not a neighbour's material)
-    failed |= overfull_pieces(parts, owner, model, labels, spacing) - received
+    failed |= overfull_pieces(parts, owner, model, labels, spacing, roughness) - received
     stats["fallback_pieces"] = len(failed)
     stats["fallback_ids"] = sorted(failed)
     # Each piece's parts without its crumbs, once: the welds and the pieces below read them.
