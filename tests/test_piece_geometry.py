@@ -624,20 +624,27 @@ def test_single_ring_struck_from_below():
     _check_struck(*_struck(model, report, material, options, model.particle_position[low], [0.0, 0.0, 1.0]))
 
 
-def test_glass_wall_struck_by_the_ball():
+@functools.lru_cache(maxsize=1)
+def _glass_wall():
+    """(model, ``_struck`` of the glass walls scene's breakable wall hit at its centre along
+    x, taking the cut's keywords)."""
     from taichi_frac.scenes import load_scene
 
     scene = load_scene(SCENES / "glass_walls.toml")
     obj = next(o for o in scene.objects if o.breakable)
     model, report = obj.prepare()
     centre = np.argmin(np.linalg.norm(model.particle_position, axis=1))
-    # The wall is three particle spacings thick: a crack plane's staircase of tets is then
-    # a large share of a piece, measured 3.0 % (volume-weighted) against the planes.
     # The SPH stress's crack set; under the halfspace stress one piece of over 300 tets misses
     # its tets' volume by 4.1 %.
     fracture = dataclasses.replace(obj.fracture, stress_model="sph")
-    struck = functools.partial(_struck, model, report, obj.material, fracture, model.particle_position[centre],
-                               [1.0, 0.0, 0.0], force_scale=4000.0)
+    return model, functools.partial(_struck, model, report, obj.material, fracture, model.particle_position[centre],
+                                    [1.0, 0.0, 0.0], force_scale=4000.0)
+
+
+def test_glass_wall_struck_by_the_ball():
+    # The wall is three particle spacings thick: a crack plane's staircase of tets is then
+    # a large share of a piece, measured 3.0 % (volume-weighted) against the planes.
+    _, struck = _glass_wall()
     fitted = struck()
     _check_struck(*fitted, mean_volume_error=0.04, multi_shell=1)
     # Moving the cracks fails no piece the cut on the cracks as placed did not (a move that
@@ -652,15 +659,8 @@ def test_rough_glass_wall_keeps_its_pieces_volumes():
     piece closed and outward, and, with the stretches fitted in the warped surface, every
     piece of 100 tets or more within 2 % of its tets' volume (measured 0.15 %; with whole
     planes alone 3.4 %, 7 pieces over 2 %)."""
-    from taichi_frac.scenes import load_scene
-
-    scene = load_scene(SCENES / "glass_walls.toml")
-    obj = next(o for o in scene.objects if o.breakable)
-    model, report = obj.prepare()
-    centre = np.argmin(np.linalg.norm(model.particle_position, axis=1))
-    fracture = dataclasses.replace(obj.fracture, stress_model="sph")
-    pieces, renders, counts = _struck(model, report, obj.material, fracture, model.particle_position[centre],
-                                      [1.0, 0.0, 0.0], force_scale=4000.0, roughness=0.3 * model.spacing, seed=1)
+    model, struck = _glass_wall()
+    pieces, renders, counts = struck(roughness=0.3 * model.spacing, seed=1)
     assert counts["moved_segments"] > 0
     for piece, solid in zip(pieces, renders):
         if solid is None:

@@ -116,8 +116,9 @@ def plane_slab(crack: CrackSurface, sites: np.ndarray, separating: np.ndarray, s
     height = None
     if segment is not None and roughness > 0:
         cut = separating[keep]
-        height = stretch_heights(flat[keep][cut], np.where(segment[keep][cut] >= 0,
-                                                           shifts[np.maximum(segment[keep][cut], 0)], 0.0), spacing)
+        stretch = segment[keep][cut]  # (each cut crossing's stretch; -1: none, not shifted)
+        height = stretch_heights(flat[keep][cut], np.where(stretch >= 0, shifts[np.maximum(stretch, 0)], 0.0),
+                                 spacing)
     flat = flat[keep]
     for other in apart_from:
         outline = outline - _strip_along(crack, other, flat, spacing, thickness_factor, roughness, e1, e2)

@@ -374,12 +374,12 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
         first = len(new_cracks)
         surface = moved_crack(crack, frames[i], offsets[i])
         segment = segments.of_site[i] if segments is not None else None
-        if segment is not None and roughness == 0 and np.any(shifts[segment[segment >= 0]]):
+        stretched = segment is not None and np.any(shifts[segment[segment >= 0]])
+        if stretched and roughness == 0:
             parts, wall = segment_slabs(surface, sites, separating, segment, shifts, spacing)
             if wall is not None:
                 slabs.append(with_crack_index(wall, HULL_FACE))
         elif isinstance(crack, CrackPlane):
-            stretched = segment is not None and np.any(shifts[segment[segment >= 0]])
             parts = [(surface, plane_slab(surface, sites, separating, spacing, roughness, roughness_scale, seed,
                                            first, past=SLAB_PAST_FACTOR + roughness / spacing,
                                            segment=segment if stretched else None, shifts=shifts))]
