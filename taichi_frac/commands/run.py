@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -29,11 +30,21 @@ def register(subparsers) -> None:
     p.add_argument("--overwrite", action="store_true",
                    help="write the cache even while another run holds its lock (that run then stops)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--progress-json", action="store_true",
+                   help="report progress as one JSON object a frame on stderr, for programs that run this "
+                        "command (the Blender add-on): {\"frame\", \"frames\", \"time\", \"fragments\", \"fps\"}")
     p.set_defaults(func=main)
 
 
-def _progress_printer(quiet: bool):
-    """A progress callback: a rich bar on a terminal, a line every 10 % otherwise."""
+def _progress_printer(quiet: bool, as_json: bool = False):
+    """A progress callback: a rich bar on a terminal, a line every 10 % otherwise, or with
+    ``as_json`` one JSON line a frame (flushed, so a reading program sees each frame at once)."""
+    if as_json:
+        def cb(frame, total, t, frags, fps):
+            print(json.dumps({"frame": frame, "frames": total, "time": round(t, 6), "fragments": frags,
+                              "fps": round(fps, 3)}), file=sys.stderr, flush=True)
+
+        return cb, None
     if quiet:
         return None, None
     if sys.stderr.isatty():
@@ -132,7 +143,7 @@ def main(args) -> int:
     except FileNotFoundError as exc:
         raise OptionError(str(exc)) from None
     output = False if args.no_output else (Path(args.output) if args.output else None)
-    cb, bar = _progress_printer(args.quiet)
+    cb, bar = _progress_printer(args.quiet, args.progress_json)
     try:
         sim = Simulation(scene, output=output, arch=args.arch, progress=cb, frames=args.frames,
                          single_scale=True if args.single_scale else None, fracture=not args.no_fracture,
