@@ -5,7 +5,3 @@ Animation of Brittle Materials" (see ../shared/paper/BRIEF.md for the corrected 
 """
 
 __version__ = "0.1.0"
-
-# ``taichi_frac.sweep(...)`` runs a variant sweep; the package of the same name holds its
-# modules (import them as ``from taichi_frac.sweep.results import ...``).
-from .sweep import sweep  # noqa: E402

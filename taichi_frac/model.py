@@ -15,15 +15,14 @@ Layers:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from functools import cached_property
+from dataclasses import dataclass
 
 import numpy as np
 
 from .geometry import rows
 from .geometry.mass import MassProperties, tet_mass_properties
 from .geometry.collision_centres import CENTRE_REACH, contact_sphere_centres
-from .geometry.contact_patches import ContactPatches, contact_patches, contact_patches_many
+from .geometry.contact_patches import ContactPatches, patches_of
 from .geometry.rays import near_faces
 from .geometry.surface_groups import group_surface_particles
 from .geometry.topology import (
@@ -87,9 +86,6 @@ class BodyModel:
             normal until its outermost point lies on the true surface (so the coarse layer
             does not stand proud of the body), no further than keeps it inside the body
             behind it. None: collide at boundary_position. Use ``collision_position``.
-        neighbor_lists: the SPH neighbour lists of the physics particles, by smoothing
-            length h [m] -> (offsets (T+1,) int64, indices int32), CSR, built when a breakable
-            body is prepared and kept with the model (``fracture/neighbors.py``).
     """
 
     vertices: np.ndarray
@@ -121,31 +117,22 @@ class BodyModel:
     coarse_group_size: int = 0
     particle_spacing: float | None = None
     root: BodyModel | None = None
-    # (not an argument: a model made from another by dataclasses.replace starts empty)
-    neighbor_lists: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def collision_position(self) -> np.ndarray:
         """(N,3) [m] centres of the boundary spheres used for collision."""
         return self.boundary_position if self.boundary_contact_position is None else self.boundary_contact_position
 
-    @cached_property
+    @property
     def boundary_patches(self) -> "ContactPatches":
         """The true surface under each boundary sphere (``contact_patches``), computed on
-        first use and kept with the model."""
-        return contact_patches(*self._patch_groups(False))
+        first use and kept beside the model while it lives."""
+        return patches_of([self], single=False)[0]
 
-    @cached_property
+    @property
     def surface_particle_patches(self) -> "ContactPatches":
         """The same for the single-scale layer: one patch per surface particle."""
-        return contact_patches(*self._patch_groups(True))
-
-    def _patch_groups(self, single: bool):
-        """(self, member offsets, members) of ``surface_particle_patches`` (``single``) or
-        ``boundary_patches``: what ``contact_patches`` takes."""
-        if single:
-            return self, np.arange(self.surface_particle_count + 1), self.surface_particles
-        return self, self.boundary_member_offsets, self.boundary_members
+        return patches_of([self], single=True)[0]
 
     @property
     def spacing(self) -> float:
@@ -169,18 +156,6 @@ class BodyModel:
     @property
     def volume(self) -> float:
         return float(self.tet_volume.sum())
-
-
-def patches_of(models, single: bool) -> list:
-    """Each model's ``surface_particle_patches`` (``single``) or ``boundary_patches``: those
-    not computed yet in one ``contact_patches_many`` pass (the same arrays as one call
-    each), kept with their models as the properties keep them."""
-    name = "surface_particle_patches" if single else "boundary_patches"
-    missing = list({id(m): m for m in models if name not in m.__dict__}.values())
-    if missing:
-        for model, patches in zip(missing, contact_patches_many([m._patch_groups(single) for m in missing])):
-            model.__dict__[name] = patches  # (where cached_property keeps its value)
-    return [getattr(m, name) for m in models]
 
 
 def build_body_model(

@@ -53,9 +53,9 @@ def prepare_objects(scene, *, fracture: bool = True, prepare=None) -> tuple[list
                 from None
         breakable = bool(obj.breakable and fracture)
         if breakable:
-            # The SPH neighbour lists are part of a breakable body's static model (built by
-            # prepare_body; here again for a model from a ``prepare`` callable, where it is a
-            # no-op if they are there); its fragments' are restricted from them.
+            # A breakable body's SPH neighbour lists, built once and kept beside its model (a
+            # no-op for a model reused from a ``prepare`` callable); its fragments' are
+            # restricted from them.
             from .fracture.neighbors import model_neighbor_lists, smoothing_length
 
             model_neighbor_lists(model, smoothing_length(model, obj.fracture))

@@ -4,7 +4,9 @@ One frame is: the World's substeps (broadphase, narrowphase, contact impulses, i
 ``World.begin_frame`` / ``substep`` / ``end_frame``) → the fracture stage
 (``fracture/stage.py``: only for breakable bodies hit above their force threshold: contact
 displacement, stress, cracks, split into fragments that replace the parent in the world) →
-the recorder (``io/recorder.py``: one pose per live body, the pieces' surfaces). With
+the piece surfaces (``surfaces/stage.py``: each split's pieces cut from their parent's
+render solid, only when a cache is written) → the recorder (``io/recorder.py``: one pose
+per live body, the pieces' surfaces). With
 ``resimulate_fractures`` the stage runs after every substep instead, and this loop runs a
 substep again after a split, so the impact that broke a body meets its pieces. Each stage
 is timed; a stage a scene does not use costs nothing (no breakable body: the fracture stage
@@ -23,7 +25,7 @@ import numpy as np
 
 from . import interrupts, runtime
 from .fracture.stage import BodyRecord, FractureStage
-from .options import OptionError
+from .options import LOOKS, OptionError
 
 __all__ = ["BodyRecord", "NonFinitePoseError", "RunSummary", "Simulation", "StageTimes"]
 
@@ -107,6 +109,7 @@ class Simulation:
     Attributes (for benches and tests): ``world``; ``records`` (body id -> BodyRecord, every
     body that lived); ``fracture_stage`` (``fracture.stage.FractureStage``, None without
     fracture); ``recorder`` (``io.recorder.CacheRecorder``, None without a cache);
+    ``surfaces`` (``surfaces.SurfaceStage``, None without a cache);
     ``fracture_events``, ``mass_dropped``, ``resimulated_substeps``, ``render_cuts``,
     ``times`` (StageTimes).
     """
@@ -128,6 +131,7 @@ class Simulation:
         self.prepare_reports = []
         self.fracture_stage: FractureStage | None = None  # (fracture enabled)
         self.recorder = None  # io.recorder.CacheRecorder (a cache is written)
+        self.surfaces = None  # surfaces.SurfaceStage (a cache is written)
         if output is None:
             output = scene.output_path
         self.output_path = None if output is False else output
@@ -157,15 +161,17 @@ class Simulation:
         prepared, self.prepare_seconds = prepare_objects(scene, fracture=self.fracture_enabled,
                                                          prepare=self._prepare)
         self.prepare_reports = [p.report for p in prepared]
+        self._initial_surfaces = []  # (body, name, look, surfaces.BodySurface): the cache's first bodies
         self.world = furnish_world(scene, world_capacity(scene, prepared, single_scale=single_scale),
                                    dynamics_options(scene, single_scale=single_scale), arch=arch, world=world)
         if self.output_path is not None:
             from .io.recorder import CacheRecorder
+            from .surfaces import SurfaceStage
 
             out = scene.output
             self.recorder = CacheRecorder(self.output_path, fps=sim.fps, checkpoint_every=out.checkpoint_every,
-                                          checkpoint_seconds=out.checkpoint_seconds, records=self.records,
-                                          lock=self._lock)
+                                          checkpoint_seconds=out.checkpoint_seconds, lock=self._lock)
+            self.surfaces = SurfaceStage()
         for p in prepared:
             obj, model = p.obj, p.model
             body = self.world.add_body(
@@ -179,8 +185,9 @@ class Simulation:
                 particles=obj.particles, breakable=p.breakable,
                 friction=obj.friction, restitution=obj.restitution,
             )
-            if self.recorder is not None:
-                self.recorder.prepare_body(self.records[body], p.report)
+            if self.surfaces is not None:
+                self._initial_surfaces.append((body, obj.name, LOOKS[obj.material.look],
+                                               self.surfaces.add_body(body, model, p.report)))
         self.initial_mass = sum(r.model.mass for r in self.records.values())
         self._dynamics_seconds_at_start = dict(self.world.stats.seconds)  # a reused World keeps counting
         self.table1 = dict(
@@ -198,7 +205,7 @@ class Simulation:
     # ------------------------------------------------------------------ output
 
     def _open_cache(self):
-        self.recorder.open()
+        self.recorder.open(self._initial_surfaces)
         self._write_frame(0)
 
     def _write_frame(self, frame: int):
@@ -280,15 +287,15 @@ class Simulation:
         return seconds
 
     def _record(self, fractures) -> None:
-        """Hand the stage's splits to the recorder (timed with the splits)."""
+        """Cut the splits' piece surfaces and hand them to the recorder (timed with the splits)."""
         if self.recorder is None or not fractures:
             return
         t = time.perf_counter()
-        cuts = len(self.recorder.render_cuts)
         for fracture in fractures:
-            self.recorder.record_fracture(fracture)
+            pieces = self.surfaces.cut(fracture)
+            self.times.render_surfaces += pieces.seconds
+            self.recorder.record_fracture(fracture, pieces.surfaces)
         self.times.fragment_split += time.perf_counter() - t
-        self.times.render_surfaces += sum(seconds for seconds, _ in self.recorder.render_cuts[cuts:])
 
     # ------------------------------------------------------------------ loop
 
@@ -304,8 +311,8 @@ class Simulation:
 
     @property
     def render_cuts(self) -> list[tuple[float, dict]]:
-        """Per split that cut a render solid: (seconds, geometry/piece_surface.py's counts)."""
-        return [] if self.recorder is None else self.recorder.render_cuts
+        """Per split that cut a render solid: (seconds, surfaces/cut.py's counts)."""
+        return [] if self.surfaces is None else self.surfaces.cuts
 
     @property
     def fragment_count(self) -> int:

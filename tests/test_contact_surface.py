@@ -15,7 +15,8 @@ import trimesh
 
 from taichi_frac.geometry.tetra import tetrahedralize
 from taichi_frac.geometry.contact_patches import contact_patches, contact_patches_many
-from taichi_frac.model import build_body_model, patches_of
+from taichi_frac.geometry.contact_patches import patches_of
+from taichi_frac.model import build_body_model
 from taichi_frac.scenes import BUILTIN_SCENE_DIR, euler_deg_to_quaternion, load_scene
 from taichi_frac.simulation import Simulation
 from taichi_frac.bench.tables import other_seeds

@@ -1,4 +1,4 @@
-"""The crack fit (geometry/crack_offsets.py): planes shifted and tilted, ring cracks resized
+"""The crack fit (surfaces/crack_fit.py): planes shifted and tilted, ring cracks resized
 and crack stretches shifted on their own so each piece's render solid holds its tets'
 volume, against hand-computed cuts of boxes and of the box body."""
 
@@ -8,9 +8,9 @@ import pytest
 
 from taichi_frac.fracture.cracks import CrackPlane
 from taichi_frac.fracture.fragments import split_body
-from taichi_frac.geometry.piece_checks import crack_deviation, piece_quality
-from taichi_frac.geometry.piece_surface import piece_mesh
-from taichi_frac.geometry.render_solid import render_solid_from_surface
+from taichi_frac.surfaces.checks import crack_deviation, piece_quality
+from taichi_frac.surfaces.cut import piece_mesh
+from taichi_frac.surfaces.solid import render_solid_from_surface
 from taichi_frac.options import FractureOptions
 
 from support.pieces import SIZE, assert_closed, split_and_cut
@@ -21,14 +21,14 @@ def test_volume_offsets_move_a_plane_to_the_tets_volume():
     Moving the plane by d changes the left piece by +d (its crack face's outward normal is
     the crack's), so the fit moves it by -0.05 m, inside the bound of half a 0.2 m spacing; half
     a 0.06 m spacing stops it at -0.03 m."""
-    from taichi_frac.geometry.crack_offsets import crack_face_moves, volume_misfit, volume_offsets
-    from taichi_frac.geometry.render_solid import _CRACK, _PROPERTY_COUNT
+    from taichi_frac.surfaces.crack_fit import crack_face_moves, volume_misfit, volume_offsets
+    from taichi_frac.surfaces.layout import CRACK, PROPERTY_COUNT
 
     def half(lo, hi):
         mesh = m3.Manifold.cube((hi - lo, 1.0, 1.0)).translate((lo, 0.0, 0.0)).to_mesh64()
-        props = np.zeros((len(mesh.vert_properties), _PROPERTY_COUNT))
+        props = np.zeros((len(mesh.vert_properties), PROPERTY_COUNT))
         props[:, :3] = np.asarray(mesh.vert_properties)[:, :3]
-        props[:, _CRACK] = np.where(np.isclose(props[:, 0], 0.5), 0, -1)  # the cut face's corners
+        props[:, CRACK] = np.where(np.isclose(props[:, 0], 0.5), 0, -1)  # the cut face's corners
         return m3.Manifold(m3.Mesh64(vert_properties=props, tri_verts=np.array(mesh.tri_verts, dtype=np.uint64)))
 
     solids = [half(0.0, 0.5), half(0.5, 1.0)]
@@ -52,7 +52,7 @@ def test_volume_offsets_move_a_plane_to_the_tets_volume():
 def _box_with_crack_faces(lo, hi, crack_of_face):
     """The box [lo, hi] (3,) [m] as a render-solid manifold whose face on side (axis, 0 low /
     1 high) carries crack index ``crack_of_face.get((axis, side), -1)``."""
-    from taichi_frac.geometry.render_solid import _CRACK, _PROPERTY_COUNT
+    from taichi_frac.surfaces.layout import CRACK, PROPERTY_COUNT
 
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     props, triangles = [], []
@@ -64,9 +64,9 @@ def _box_with_crack_faces(lo, hi, crack_of_face):
                 point = np.where(np.arange(3) == axis, (lo, hi)[side], 0.0)
                 point[u], point[v] = (lo[u], hi[u])[a], (lo[v], hi[v])[b]
                 corners.append(point)
-            row = np.zeros((4, _PROPERTY_COUNT))
+            row = np.zeros((4, PROPERTY_COUNT))
             row[:, :3] = corners
-            row[:, _CRACK] = crack_of_face.get((axis, side), -1)
+            row[:, CRACK] = crack_of_face.get((axis, side), -1)
             first = 4 * len(props)
             quad = [[0, 1, 2], [0, 2, 3]] if side == 1 else [[0, 2, 1], [0, 3, 2]]
             triangles += [[first + i for i in t] for t in quad]
@@ -85,7 +85,7 @@ def test_tilted_planes_fit_a_saddle_that_shifts_cannot():
     cannot help (the fit promises nothing); tilting a plane moves its face up on one side of
     the other plane and down on the other, which fits exactly in the linear model. Cut by
     the moved planes, the columns come within 5e-5 m^3 of their targets (from 5e-3)."""
-    from taichi_frac.geometry.crack_offsets import moved_crack, tilt_frames, volume_misfit, volume_offsets
+    from taichi_frac.surfaces.crack_fit import moved_crack, tilt_frames, volume_misfit, volume_offsets
 
     x_plane = CrackPlane(point=np.array([0.5, 0.5, 0.5]), normal=np.array([1.0, 0.0, 0.0]), extent=1.0,
                          peak_stress=1.0)
@@ -135,7 +135,7 @@ def test_segments_fit_a_row_of_pieces_one_plane_cannot():
     that; a shift of each column's own segment by d changes it by -0.25 d, so the fit gives
     d = e x target / 0.25 (within half a 0.2 m spacing), and moves nothing a frozen segment
     or an unfitted piece alone touches."""
-    from taichi_frac.geometry.crack_offsets import crack_segments, segment_face_moves, segment_shifts, volume_offsets
+    from taichi_frac.surfaces.crack_fit import crack_segments, segment_face_moves, segment_shifts, volume_offsets
 
     crack = [CrackPlane(point=np.array([0.5, 0.5, 0.5]), normal=np.array([0.0, 0.0, 1.0]), extent=1.0,
                         peak_stress=1.0)]
@@ -169,7 +169,7 @@ def test_segments_fit_a_row_of_pieces_one_plane_cannot():
 
 
 def tilt_frames_for(cracks, sites):
-    from taichi_frac.geometry.crack_offsets import tilt_frames
+    from taichi_frac.surfaces.crack_fit import tilt_frames
 
     return tilt_frames(cracks, [sites], 0.2)
 
@@ -179,8 +179,8 @@ def _quartered_box(box):
     (model, render solid, cracks, the pieces' tets, labels, ``_separating_cracks``, segments,
     the pieces' centres (4,3) [m], and the segments' shifts (S,) [m]: the horizontal crack's
     left pair's up by 0.3 spacings, its right pair's down by 0.2, the rest 0)."""
-    from taichi_frac.geometry.crack_offsets import crack_segments
-    from taichi_frac.geometry.piece_surface import _separating_cracks
+    from taichi_frac.surfaces.crack_fit import crack_segments
+    from taichi_frac.surfaces.cut import _separating_cracks
 
     model, report, _ = box
     render = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)
@@ -211,8 +211,8 @@ def test_shifted_segments_cut_closed_pieces_with_the_step_walled(box):
     strip between the wall at the segments' step and the vertical crack (under a spacing
     wide); each piece is closed and one shell (the wall keeps the upper left piece apart from
     the lower right), its crack faces on its own segment's plane."""
-    from taichi_frac.geometry.crack_offsets import MOVES, moved_crack
-    from taichi_frac.geometry.piece_surface import _cut
+    from taichi_frac.surfaces.crack_fit import MOVES, moved_crack
+    from taichi_frac.surfaces.cut import _cut
 
     model, render, cracks, tets, labels, per_crack, segments, centre, shifts = _quartered_box(box)
     spacing = model.spacing
@@ -252,7 +252,7 @@ def test_fitted_plane_gives_the_pieces_their_tets_volume(box):
     moves parallel to itself, within half a spacing, and both pieces come within 0.05 % of
     their tets' volume (one plane, two pieces: the fit is exact), crack faces on the moved
     plane."""
-    from taichi_frac.geometry.crack_offsets import MAX_OFFSET_FACTOR
+    from taichi_frac.surfaces.crack_fit import MAX_OFFSET_FACTOR
 
     model, report, _ = box
     render = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)
@@ -291,7 +291,7 @@ def test_smaller_pieces_are_fitted_when_asked_but_never_at_a_larger_one_s_cost()
     times B's volume (whose share of 0.5 d is small) the segment takes B exactly to its
     target, d = 0.04 x target / 0.5; against a block only twice B's volume, what the block
     would lose outweighs it and nothing moves."""
-    from taichi_frac.geometry.crack_offsets import SMALL_PIECE_WEIGHT, crack_segments, segment_shifts
+    from taichi_frac.surfaces.crack_fit import SMALL_PIECE_WEIGHT, crack_segments, segment_shifts
 
     crack = [CrackPlane(point=np.array([0.5, 0.5, 0.5]), normal=np.array([0.0, 0.0, 1.0]), extent=1.0,
                         peak_stress=1.0)]
@@ -322,7 +322,7 @@ def test_stretch_heights_hold_each_stretch_s_shift_and_blend_at_its_edge():
     one's by -2 mm: at a crossing the field is its stretch's shift (the next row's weight is
     exp(-4) of its own at the 0.1 m spacing's blend, so within 2 % of the step), halfway
     between the rows their mean, and it never leaves the two."""
-    from taichi_frac.geometry.crack_slabs import stretch_heights
+    from taichi_frac.surfaces.slabs import stretch_heights
 
     ys = np.linspace(-0.5, 0.5, 11)
     flat = np.array([[x, y] for x in (-0.05, 0.05) for y in ys])
@@ -343,8 +343,8 @@ def test_rough_stretches_share_one_surface_and_move_their_pieces_volume(box):
     rough cut unshifted by its stretch's shift times its face (a closed form: an upper piece
     loses h times its width times the box's depth), to within the blend across the step
     (a strip of about two spacings by the box's depth, at the 0.5-spacing step)."""
-    from taichi_frac.geometry.crack_offsets import MOVES
-    from taichi_frac.geometry.piece_surface import _cut
+    from taichi_frac.surfaces.crack_fit import MOVES
+    from taichi_frac.surfaces.cut import _cut
 
     model, render, cracks, tets, labels, per_crack, segments, centre, shifts = _quartered_box(box)
     spacing = model.spacing

@@ -10,18 +10,16 @@ PACKAGE = Path(__file__).resolve().parents[1] / "taichi_frac"
 
 #: (module prefix, layer): 0 is the top; the longest matching prefix decides.
 LAYERS = [
-    ("cli", 0), ("__main__", 0), ("commands", 0), ("sweep", 0), ("bench", 0),
+    ("cli", 0), ("__main__", 0), ("commands", 0), ("sweep", 0),
     ("simulation", 1),
-    ("io", 2), ("fracture.stage", 2), ("scene_setup", 2),
-    ("scenes", 3), ("geometry.prepare", 3), ("geometry.piece_surface", 3), ("geometry.piece_parts", 3),
-    ("geometry.piece_checks", 3), ("geometry.piece_shells", 3), ("geometry.crack_offsets", 3),
-    ("geometry.render_solid", 3), ("geometry.piece_reach", 3), ("geometry.crack_slabs", 3),
-    ("geometry.tet_cells", 3),
-    ("fracture", 4),
-    ("dynamics", 5),
-    ("collision", 6),
-    ("model", 7), ("geometry", 7),
-    ("kinematics", 8), ("options", 8), ("runtime", 8), ("interrupts", 8),
+    ("io", 2), ("scene_setup", 2),
+    ("surfaces", 3),
+    ("scenes", 4),
+    ("fracture", 5),
+    ("dynamics", 6),
+    ("collision", 7),
+    ("model", 8), ("geometry", 8),
+    ("kinematics", 9), ("options", 9), ("runtime", 9), ("interrupts", 9),
 ]
 
 
@@ -53,9 +51,9 @@ def imports(path: Path):
 
 
 def test_layer_lookup_by_longest_prefix():
-    assert layer("fracture.stage") == 2 and layer("fracture.cracks") == 4
-    assert layer("geometry.prepare") == 3 and layer("geometry.rays") == 7
-    assert layer("kinematics.quaternion.quat_mul") == 8 and layer("numpy") is None
+    assert layer("fracture.stage") == 5 and layer("surfaces.cut") == 3
+    assert layer("geometry.prepare") == 8 and layer("kinematics.quaternion.quat_mul") == 9
+    assert layer("numpy") is None
 
 
 def test_no_module_imports_a_layer_above_its_own():

@@ -1,12 +1,12 @@
-"""The piece-geometry page's distances (geometry/piece_checks.py) and its floor, a perfect
+"""The piece-geometry page's distances (surfaces/checks.py) and its floor, a perfect
 flat cut of a body's tets (bench/perfect_cut.py), against closed forms on a box."""
 
 import numpy as np
 import trimesh
 
 from taichi_frac.bench.perfect_cut import perfect_cut
-from taichi_frac.geometry.piece_checks import outside_distance, signed_volume
-from taichi_frac.geometry.render_solid import render_solid_from_surface
+from taichi_frac.surfaces.checks import outside_distance, signed_volume
+from taichi_frac.surfaces.solid import render_solid_from_surface
 from taichi_frac.geometry.topology import boundary_faces
 
 from support.pieces import SIZE

@@ -1,5 +1,5 @@
-"""Render surfaces of broken pieces (geometry/piece_surface.py) against closed-form cuts of a
-box, and the checks (geometry/piece_checks.py) on the paper's bodies and a shared mesh. The
+"""Render surfaces of broken pieces (surfaces/cut.py) against closed-form cuts of a
+box, and the checks (surfaces/checks.py) on the paper's bodies and a shared mesh. The
 crack fit's own tests are in test_crack_fit.py."""
 
 import dataclasses
@@ -13,12 +13,12 @@ import trimesh
 
 from taichi_frac.fracture.cracks import CrackPlane, RingCrack, analyze_impact, tangent_frame
 from taichi_frac.fracture.fragments import make_fragments, split_body
-from taichi_frac.geometry.crack_offsets import FITTED_PIECE_TETS
-from taichi_frac.geometry.piece_checks import crack_deviation, edge_counts, inside, piece_quality, signed_volume
-from taichi_frac.geometry.piece_parts import LOST_VOLUME_SHARE
-from taichi_frac.geometry.piece_reach import BALL_BOUND, REACH_FACTOR
-from taichi_frac.geometry.piece_surface import cut_render_solid, piece_mesh
-from taichi_frac.geometry.render_solid import render_solid_from_surface
+from taichi_frac.surfaces.crack_fit import FITTED_PIECE_TETS
+from taichi_frac.surfaces.checks import crack_deviation, edge_counts, inside, piece_quality, signed_volume
+from taichi_frac.surfaces.parts import LOST_VOLUME_SHARE
+from taichi_frac.surfaces.reach import BALL_BOUND, REACH_FACTOR
+from taichi_frac.surfaces.cut import cut_render_solid, piece_mesh
+from taichi_frac.surfaces.solid import render_solid_from_surface
 from taichi_frac.geometry.prepare import prepare_body
 from taichi_frac.options import FractureOptions, material_preset
 from taichi_frac.scenes import BUILTIN_SCENE_DIR as SCENES
@@ -51,8 +51,8 @@ def test_voronoi_cells_union_is_the_region_nearest_those_points():
     import manifold3d as m3
     from scipy.spatial import cKDTree
 
-    from taichi_frac.geometry.piece_parts import _inside_solid
-    from taichi_frac.geometry.tet_cells import voronoi_cells
+    from taichi_frac.surfaces.parts import _inside_solid
+    from taichi_frac.surfaces.tet_cells import voronoi_cells
 
     rng = np.random.default_rng(3)
     points = rng.uniform(-1.0, 1.0, size=(400, 3))
@@ -76,8 +76,9 @@ def test_face_with_corners_of_two_origins_gets_the_crack_it_lies_on():
     them where a cut meets a face): a face on crack 0's plane gets 0, one on crack 1's plane
     (corners -1, 1, 0) gets 1, one on neither gets the artist's surface (-1), one with a hull
     corner and on no crack the hull's index."""
-    from taichi_frac.geometry.piece_surface import _face_cracks
-    from taichi_frac.geometry.render_solid import HULL_FACE, CrackSurface
+    from taichi_frac.surfaces.cut import _face_cracks
+    from taichi_frac.surfaces.layout import HULL_FACE
+    from taichi_frac.surfaces.solid import CrackSurface
 
     spacing = 0.01
     cracks = (CrackSurface(np.zeros(3), np.array([0.0, 0.0, 1.0])), CrackSurface(np.zeros(3), np.array([1.0, 0.0, 0.0])))
@@ -93,7 +94,7 @@ def test_a_sliver_with_no_uv_takes_its_nearest_corner_s():
     """Hand-made: an outer sliver whose corners the booleans left without UVs (NaN) takes,
     corner by corner, the UV of the nearest outer corner that has one; an inner face's
     NaN corners stay (their UVs come from their crack)."""
-    from taichi_frac.geometry.piece_surface import _outer_uvs
+    from taichi_frac.surfaces.cut import _outer_uvs
 
     triangles = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]],
                           [[1.0, 0, 1e-9], [0, 1, 1e-9], [0.5, 0.5, 0]],
@@ -112,8 +113,8 @@ def test_a_slab_runs_past_the_halfway_line_whole_or_in_stretches():
     and y > 0) and crossings it did not cut along x = 2 (spacing 1): the slab's edge lies
     on the halfway line x = 1 moved SLAB_PAST_FACTOR further, for the whole slab and for
     the union of its stretches alike."""
-    from taichi_frac.geometry.crack_slabs import SLAB_PAST_FACTOR, plane_slab, segment_slabs
-    from taichi_frac.geometry.render_solid import CrackSurface
+    from taichi_frac.surfaces.slabs import SLAB_PAST_FACTOR, plane_slab, segment_slabs
+    from taichi_frac.surfaces.solid import CrackSurface
 
     crack = CrackSurface(np.zeros(3), np.array([0.0, 0.0, 1.0]))
     ys = np.arange(-5.0, 6.0)
@@ -235,7 +236,7 @@ def test_a_piece_the_wall_gap_loses_is_carved_from_its_neighbour(box, bead):
     is a crumb), C keeps its cut; A and B each lie within a cell (a spacing) of their tets'
     volume across the box's section; their faces between each other lie on no crack
     (HULL_FACE), B's against C on C's crack face."""
-    from taichi_frac.geometry.render_solid import HULL_FACE
+    from taichi_frac.surfaces.layout import HULL_FACE
 
     model, report, _ = box
     spacing = model.spacing
@@ -288,7 +289,7 @@ def test_a_large_piece_partly_held_by_its_neighbour_gets_the_rest_carved_back(bo
     rest carved out of A's part along its tets' nearest-centroid cells. Closed form: B then
     holds its tets' volume to within a cell (a spacing) over the carved face (0.03 m by the
     box's height), and the parts still fill the box (nothing is lost)."""
-    from taichi_frac.geometry.piece_parts import PARTLY_LOST_SHARE, PARTLY_LOST_TETS, carve_lost_pieces
+    from taichi_frac.surfaces.parts import PARTLY_LOST_SHARE, PARTLY_LOST_TETS, carve_lost_pieces
 
     model, _, _ = box
     spacing = model.spacing
@@ -328,7 +329,7 @@ def test_failed_pieces_get_the_solid_nearest_their_tets_less_the_others_parts(bo
     solid nearer its own tet centroids than the other's, less C's part. Closed form: the two
     shares fill the box up to x = 0.04 without overlap, and each lies within a cell (a
     spacing) of its tets' volume across the box's section."""
-    from taichi_frac.geometry.piece_parts import failed_piece_shells
+    from taichi_frac.surfaces.parts import failed_piece_shells
 
     model, report, _ = box
     spacing = model.spacing
@@ -383,8 +384,8 @@ def test_stray_shells_join_the_main_shell_they_touch():
     (joined to it), a bit against piece 1's main box only (it goes to piece 1) and a bit
     touching nothing (it stays apart). Closed form: the bridge over the 1 x 1 contact fills
     the gap and no more (it lies inside the boxes elsewhere), so each joined solid is 4^3 + 1."""
-    from taichi_frac.geometry.piece_shells import join_stray_shells
-    from taichi_frac.geometry.render_solid import with_crack_index
+    from taichi_frac.surfaces.shells import join_stray_shells
+    from taichi_frac.surfaces.solid import with_crack_index
 
     def cube(low, high):
         low, high = np.asarray(low, float), np.asarray(high, float)
@@ -409,7 +410,7 @@ def test_the_faces_touching_a_shell_are_those_a_plain_loop_finds():
     one triangle as large as the whole set (the k-d tree's reach is each box's own)."""
     from trimesh.triangles import closest_point
 
-    from taichi_frac.geometry.piece_shells import _touching
+    from taichi_frac.surfaces.shells import _touching
 
     rng = np.random.default_rng(3)
     mesh = trimesh.creation.icosphere(subdivisions=3)
@@ -433,7 +434,7 @@ def test_a_piece_reaching_far_past_its_tets_gets_its_tets_boundary(box):
     """A part that holds the whole box given to the piece of the tets at x < -0.05 reaches
     half a box past them: that piece and the one whose tets it covers fall back; the parts
     of a plane cut at x = -0.05 do not."""
-    from taichi_frac.geometry.piece_parts import overreaching_pieces
+    from taichi_frac.surfaces.parts import overreaching_pieces
 
     model, report, _ = box
     render = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)
@@ -452,7 +453,7 @@ def test_a_part_joining_two_pieces_is_divided_by_their_tets(box):
     piece gets all the material nearer its tet centroids: the box beyond a face within a
     cell (1.5 spacings) of x = -0.05; the two shares are closed, fill the box and reach no
     farther than the check allows."""
-    from taichi_frac.geometry.piece_parts import divide_joined_parts, overreaching_pieces
+    from taichi_frac.surfaces.parts import divide_joined_parts, overreaching_pieces
 
     model, report, _ = box
     spacing = model.spacing
@@ -474,7 +475,7 @@ def test_a_piece_holding_more_than_its_tets_gets_its_tets_boundary(box):
     than its tets (0.02 m of the box's length, 146 spacings cubed, two spacings past them:
     the reach check lets it be): it and the piece whose tets it holds fall back. A plane cut
     at x = -0.05 gives neither."""
-    from taichi_frac.geometry.piece_parts import overfull_pieces, overreaching_pieces
+    from taichi_frac.surfaces.parts import overfull_pieces, overreaching_pieces
 
     model, report, _ = box
     render = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)

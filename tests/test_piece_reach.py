@@ -1,4 +1,4 @@
-"""A piece's render solid kept within reach of its tets (geometry/piece_reach.py), checked on a
+"""A piece's render solid kept within reach of its tets (surfaces/reach.py), checked on a
 grid of tets whose union is a box: the distance to it has a closed form."""
 
 from types import SimpleNamespace
@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import manifold3d as m3
 import numpy as np
 
-from taichi_frac.geometry.piece_reach import REACH_FACTOR, _ball, distance_to_tets, trim_overreach
+from taichi_frac.surfaces.reach import REACH_FACTOR, _ball, distance_to_tets, trim_overreach
 
 #: The grid: unit cubes over [0, 8] x [0, 4] x [0, 4] [m], six tets each.
 CELLS = (8, 4, 4)
@@ -119,8 +119,8 @@ def test_a_solid_within_reach_and_detail_past_every_tet_stay():
 def test_a_piece_mostly_past_its_tets_is_left_to_the_cuts_checks():
     """A solid lying wholly in the other piece's tets is not a wedge: the trim would take all
     of it, so the piece keeps it (the cut's own checks judge such a piece)."""
-    from taichi_frac.geometry.piece_surface import _trimmed
-    from taichi_frac.geometry.render_solid import RenderSolid
+    from taichi_frac.surfaces.cut import _trimmed
+    from taichi_frac.surfaces.solid import RenderSolid
 
     model, labels = _grid()
     astray = RenderSolid(_box([5.0, 1.0, 1.0], [7.0, 3.0, 3.0]), (), 1.0)

@@ -180,7 +180,7 @@ def test_the_whole_stress_field_is_computed_only_for_the_cache(world, tmp_path, 
 
 def test_the_crack_fit_options_reach_the_cut(world, tmp_path, monkeypatch):
     """The scene's crack-fit settings are the ones each split's render cut is made with."""
-    import taichi_frac.geometry.piece_surface as piece_surface
+    import taichi_frac.surfaces.cut as piece_surface
 
     seen = []
     real = piece_surface.cut_render_solid

@@ -8,7 +8,7 @@ import trimesh
 from taichi_frac.geometry import primitives
 from taichi_frac.geometry.prepare import prepare_body
 from taichi_frac.geometry.surface_attributes import boundary_corner_attributes
-from taichi_frac.io.fragment_mesh import fragment_surface, surface_corner_attributes
+from taichi_frac.surfaces.mesh import fragment_surface, surface_corner_attributes
 from taichi_frac.model import build_body_model
 from taichi_frac.options import ParticleOptions
 

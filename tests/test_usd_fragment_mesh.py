@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from taichi_frac.io import fragment_surface
+from taichi_frac.surfaces.mesh import fragment_surface
 from taichi_frac.model import build_body_model
 
 # Kuhn split of a cube into 6 tets sharing the diagonal 0-6 (conforming across cubes).

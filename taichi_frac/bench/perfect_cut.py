@@ -6,7 +6,7 @@ page's distance and volume columns.
 
 Per body: halves (one plane through a random particle) and wedges (a second plane at 30-90°
 to it, placed so the wedge holds a set number of tets), each measured with
-geometry/piece_checks.py as the live pieces are.
+surfaces/checks.py as the live pieces are.
 """
 
 from __future__ import annotations
@@ -41,8 +41,8 @@ def perfect_cut(model, solid, planes) -> Cut | None:
     them, against the tets whose centroids lie there. Render parts holding none of those
     centroids (a sliver where a plane grazes the surface) are left out. None when no tet or
     no render lies there."""
-    from ..geometry.piece_checks import inside, outside_distance, signed_volume
-    from ..geometry.render_solid import solid_arrays
+    from ..surfaces.checks import inside, outside_distance, signed_volume
+    from ..surfaces.solid import solid_arrays
     from ..geometry.topology import boundary_faces
 
     centroids = model.particle_position

@@ -1,9 +1,9 @@
-"""Piece geometry: the render surfaces the cache gives broken pieces (geometry/piece_surface.py)
+"""Piece geometry: the render surfaces the cache gives broken pieces (surfaces/cut.py)
 measured on the paper's scenes and a mesh from ../shared/meshes, beside the tets' own
 boundary faces (what a piece looks like without them). Writes ``benchmarks/piece-geometry.md``.
 
 Per scene: the live pieces at the end of a run that writes a cache, each measured by
-geometry/piece_checks.py (open / non-manifold / misoriented edges, shells, crack faces' RMS
+surfaces/checks.py (open / non-manifold / misoriented edges, shells, crack faces' RMS
 distance from their cracks, volume against the tets', render-to-tets distance), and the
 cost of cutting the render solid per split. The timed rows of the tables part write no
 cache, so they build no render solid and this cost is not in them.
@@ -78,25 +78,25 @@ def tet_height(model) -> float:
     return float(np.mean(np.max(heights, axis=0)) / model.spacing)
 
 
-def measure_pieces(records) -> dict:
-    """Totals over pieces (BodyRecords with a model, root and render solid) of the render
+def measure_pieces(pieces) -> dict:
+    """Totals over pieces ((model, root model, render solid or None) each) of the render
     surfaces' and the tets' boundary faces' measures."""
-    from ..geometry.piece_checks import edge_counts, piece_quality
-    from ..geometry.piece_surface import piece_mesh
-    from ..io.fragment_mesh import fragment_surface
+    from ..surfaces.checks import edge_counts, piece_quality
+    from ..surfaces.cut import piece_mesh
+    from ..surfaces.mesh import fragment_surface
 
     rows, before = [], []
-    for rec in records:
-        _, tet_faces, _ = fragment_surface(rec.model, rec.root)
+    for model, root, render in pieces:
+        _, tet_faces, _ = fragment_surface(model, root)
         before.append(edge_counts(tet_faces))
-        if rec.render is not None:
-            rows.append((rec.model.tet_count, piece_quality(piece_mesh(rec.render), rec.model)))
+        if render is not None:
+            rows.append((model.tet_count, piece_quality(piece_mesh(render), model)))
     quality = [q for _, q in rows]
     large = [q for n, q in rows if n >= LARGE_PIECE_TETS]
     mid = np.array([q["volume_error"] for n, q in rows if SMALL_FIT_TETS <= n < LARGE_PIECE_TETS])
     volume = np.array([q["volume_error"] for q in quality]) if quality else np.zeros(1)
     large_volume = np.array([q["volume_error"] for q in large]) if large else np.full(1, np.nan)
-    roots = {id(rec.root): rec.root for rec in records}
+    roots = {id(root): root for _, root, _ in pieces}
     return dict(
         tet_height=float(np.mean([tet_height(root) for root in roots.values()])) if roots else float("nan"),
         pieces=len(before), rendered=len(quality), fallback=len(before) - len(quality),
@@ -144,11 +144,10 @@ def _mesh_case(ctx: BenchContext, fit_rounds: int | None = None):
     (model, render solid) of the whole body."""
     from ..fracture.cracks import analyze_impact
     from ..fracture.fragments import make_fragments, split_body
-    from ..geometry.piece_surface import cut_render_solid
-    from ..geometry.render_solid import render_solid_from_surface
+    from ..surfaces.cut import cut_render_solid
+    from ..surfaces.solid import render_solid_from_surface
     from ..geometry.prepare import prepare_body
     from ..options import FractureOptions, ParticleOptions, material_preset
-    from ..fracture.stage import BodyRecord
 
     material = material_preset("porcelain")
     particles = ParticleOptions(target_particles=3000 if ctx.quick else 5000)
@@ -170,14 +169,12 @@ def _mesh_case(ctx: BenchContext, fit_rounds: int | None = None):
                                        [p.model.com_in_source for p in pieces], fit_rounds=options.crack_fit_rounds)
     seconds = time.perf_counter() - t
     counts = dict(counts, volume=model.volume)
-    records = [BodyRecord(name="spot", model=p.model, root=model, material=material, fracture=options,
-                          particles=particles, breakable=True, render=r) for p, r in zip(pieces, renders)]
-    return measure_pieces(records), [seconds], len(report.surface.faces), counts, (model, render.solid)
+    return measure_pieces([(p.model, model, r) for p, r in zip(pieces, renders)]), [seconds], len(report.surface.faces), counts, (model, render.solid)
 
 
 def _scene_solid(path: Path, name: str):
     """(BodyModel, render solid) of the object ``name`` of the scene at ``path``."""
-    from ..geometry.render_solid import render_solid_from_surface
+    from ..surfaces.solid import render_solid_from_surface
     from ..scenes import load_scene
 
     obj = next(o for o in load_scene(path).objects if o.name == name)
@@ -186,10 +183,10 @@ def _scene_solid(path: Path, name: str):
 
 
 def run(ctx: BenchContext) -> Section:
-    from ..geometry.piece_parts import (FOREIGN_DEPTH_FACTOR, GAINED_VOLUME_FACTOR, GAINED_VOLUME_SHARE,
+    from ..surfaces.parts import (FOREIGN_DEPTH_FACTOR, GAINED_VOLUME_FACTOR, GAINED_VOLUME_SHARE,
                                         LOST_VOLUME_SHARE, OVERREACH_FACTOR)
-    from ..geometry.piece_reach import BALL_BOUND, REACH_FACTOR
-    from ..geometry.crack_offsets import (FITTED_PIECE_TETS, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR,
+    from ..surfaces.reach import BALL_BOUND, REACH_FACTOR
+    from ..surfaces.crack_fit import (FITTED_PIECE_TETS, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR,
                                           SMALL_PIECE_WEIGHT, VOLUME_TOLERANCE)
     from ..options import FractureOptions
     from .perfect_cut import FLOOR_HEADER, PLANES, WEDGE_TETS, floor_rows, perfect_cuts
@@ -201,7 +198,8 @@ def run(ctx: BenchContext) -> Section:
         for label, scene, frames in _scene_cases(ctx.quick):
             sim, summary, _ = run_scene(ctx, scene, label, frames=frames, output=Path(folder) / "cache.usdc")
             records = [sim.records[b] for b in sim.world.body_ids if sim.records[b].generation > 0]
-            m = measure_pieces(records)
+            m = measure_pieces([(rec.model, rec.root, sim.surfaces.render_of(b))
+                                for b in sim.world.body_ids if (rec := sim.records[b]).generation > 0])
             cuts = [s for s, _ in sim.render_cuts]
             rows.append((label, m))
             split_ms = 1e3 * sum(cuts) / max(summary.frames, 1)

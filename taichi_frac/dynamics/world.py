@@ -20,7 +20,8 @@ from .. import runtime
 from ..collision import broadphase, narrowphase
 from ..collision.grid import body_grid
 from ..kinematics.quaternion import quaternion_matrix
-from ..model import BodyModel, patches_of
+from ..geometry.contact_patches import patches_of
+from ..model import BodyModel
 from . import body_fields, checkpoints, integrate, stages
 from . import impacts as impact_kernels
 from .checkpoints import Checkpoint

@@ -1,21 +1,26 @@
 """A body model's SPH neighbour lists: static model data (the paper's preprocessing).
 
 The lists of a body's physics particles within the smoothing length h are fixed in the body
-frame, so they are built once, when a breakable body is prepared (``geometry/prepare.py``),
-and held by its model (``BodyModel.neighbor_lists``, by h). A fragment's are its root's
-restricted to its particles (``BodyModel.root``, ``source_tet``): the same pairs, the
-distances being the root's, ~1 ms instead of a grid search; they are made on the
-fragment's first analysis, or read row by row from the root's before that
-(:func:`neighbor_rows`).
+frame, so they are built once, when a breakable body is set up (``scene_setup.py``), and
+kept here beside its model, by h, for as long as the model lives: the model itself never
+changes after it is built. A fragment's are its root's restricted to its particles
+(``BodyModel.root``, ``source_tet``): the same pairs, the distances being the root's, instead
+of a grid search; they are made on the fragment's first analysis, or read row by row from the
+root's before that (:func:`neighbor_rows`).
 """
 
 from __future__ import annotations
+
+import weakref
 
 import numpy as np
 
 from ..model import BodyModel
 from ..options import FractureOptions
 from .sph import neighbor_lists
+
+# model -> {h [m]: (offsets, indices)}: the lists of every live model, dropped with it.
+_LISTS: "weakref.WeakKeyDictionary[BodyModel, dict]" = weakref.WeakKeyDictionary()
 
 
 def smoothing_length(model: BodyModel, options: FractureOptions) -> float:
@@ -26,10 +31,9 @@ def smoothing_length(model: BodyModel, options: FractureOptions) -> float:
 
 def model_neighbor_lists(model: BodyModel, h: float):
     """The full-field SPH neighbour lists (CSR offsets int64, indices int32) of a body model's
-    physics particles within ``h`` [m], from the model (built and kept there on first use:
-    9 ms for a 5,550-particle ring, about half of an analysis, so a ring struck again, or
-    several rings built from one model, reuse them)."""
-    per_model = model.neighbor_lists
+    physics particles within ``h`` [m], built on first use and kept while the model lives, so
+    a body struck again, or several bodies built from one model, reuse them."""
+    per_model = _LISTS.setdefault(model, {})
     if h not in per_model:
         if model.root is not None:
             per_model[h] = restrict_neighbor_lists(*model_neighbor_lists(model.root, h), model.source_tet,
@@ -60,7 +64,7 @@ def neighbor_rows(model: BodyModel, h: float, query: np.ndarray):
     of a new piece (a few hundred rows) does not restrict its root's lists over the whole
     piece first (2.5 ms on a ring's big piece)."""
     query = np.asarray(query, dtype=np.int64)
-    if h in model.neighbor_lists or model.root is None:
+    if h in _LISTS.get(model, ()) or model.root is None:
         return _gather_rows(*model_neighbor_lists(model, h), query)
     local = np.full(model.root.tet_count, -1, dtype=np.int32)
     local[model.source_tet] = np.arange(model.tet_count, dtype=np.int32)

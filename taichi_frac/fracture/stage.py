@@ -4,8 +4,9 @@ It reads the World's impact rows, keeps each breakable body's strongest touch pe
 body, analyses them (``cracks.analyze_impact``: the stress near the contacts, the whole
 field only where a split needs it), splits the bodies that crack (``fragments``) and puts
 the pieces in the World in their parent's place, lifted out of the ground. Each split is
-returned as a :class:`Fracture`; what is drawn and written of it is the recorder's job
-(``io/recorder.py``), when to run the stage the simulation's loop (``simulation.py``).
+returned as a :class:`Fracture`; what is drawn and written of it is the job of the stages after it
+(``surfaces/stage.py``, ``io/recorder.py``), when to run the stage the simulation's loop
+(``simulation.py``).
 """
 
 from __future__ import annotations
@@ -22,13 +23,13 @@ from ..options import FractureOptions, Material, ParticleOptions
 from .cracks import analyze_impact
 from .crack_types import ImpactAnalysis
 from .fragments import Fragment, FractureResult, fragment_peak_stress, make_fragments, split_body
+from .peaks import PeakTracker
 
 
 @dataclass
 class BodyRecord:
     """What the simulation knows of a live (or ended) body beyond the World's fields: its
-    model and options (the fracture stage reads them and makes its pieces'), and what the
-    cache draws of it (the recorder's fields: cache_id, root_normals, root_uvs, render)."""
+    model and options (the fracture stage reads them and makes its pieces')."""
 
     name: str
     model: BodyModel
@@ -38,18 +39,10 @@ class BodyRecord:
     particles: ParticleOptions
     breakable: bool
     generation: int = 0
-    cache_id: int | None = None
     parent: int | None = None
     birth_frame: int = 0
     friction: float = 0.5
     restitution: float = 0.2
-    # Shading of the root's boundary faces (aligned with root.surface_faces), shared by
-    # every fragment of it: normals (Fr,3,3), uvs (Fr,3,2) or None.
-    root_normals: np.ndarray | None = None
-    root_uvs: np.ndarray | None = None
-    # What the cache draws (geometry/piece_surface.py), body frame: the artist's surface
-    # cut along the cracks; None when no cache is written.
-    render: object = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,7 +131,8 @@ class FractureStage:
             after every substep when fractures are resimulated).
         times: an object with ``fracture_analysis`` and ``fragment_split`` seconds, added to.
 
-    Counters: ``fracture_events`` (bodies split), ``mass_dropped`` [kg] (the "drop" policy).
+    Counters: ``fracture_events`` (bodies split), ``mass_dropped`` [kg] (the "drop" policy);
+    ``peaks``: each scene body's most stressed impact (``peaks.py``, why a body did not break).
     """
 
     def __init__(self, world, records: dict, *, ground_heights=(), field_stress: bool = False,
@@ -151,6 +145,7 @@ class FractureStage:
         self.times = times
         self.fracture_events = 0
         self.mass_dropped = 0.0
+        self.peaks = PeakTracker()
         # (body, other) -> largest force [N] analysed in this frame without a crack.
         self._analysed: dict | None = {} if skip_repeats else None
 
@@ -176,10 +171,11 @@ class FractureStage:
             return []
         fractures = []
         for body, rows in strongest_per_pair(impacts, breakable).items():
+            self.peaks.touched(self.records[body], impacts, rows)
             rows = self._rows_to_analyse(body, rows, impacts)
             if rows is None:
                 continue
-            found = self._analyse(body, rows, impacts)
+            found = self._analyse(body, rows, impacts, frame)
             if found is None:
                 continue
             analysis, split = found
@@ -211,7 +207,7 @@ class FractureStage:
             p = (body, int(o))
             self._analysed[p] = max(self._analysed.get(p, 0.0), float(size[i]))
 
-    def _analyse(self, body: int, rows: np.ndarray, impacts: dict):
+    def _analyse(self, body: int, rows: np.ndarray, impacts: dict, frame: int):
         """(analysis, split) of ``body``'s touches ``rows`` when they break it in two or
         more, else None. The stress is computed near the contacts only; the whole field
         only when the cracks do split the body and ``field_stress`` asks for it (in the 13
@@ -227,6 +223,8 @@ class FractureStage:
         analysis = analyze_impact(rec.model, points_b, normals_b, force_b, rec.material, rec.fracture,
                                   full_field=False)
         times.fracture_analysis += time.perf_counter() - t
+        self.peaks.analysed(rec, analysis, impacts, rows, frame,
+                            lambda: self.world.body_state([body])["orientation"][0])
         if not analysis.any_crack:
             self._remember_uncracked(body, rows, impacts)
             return None
@@ -275,7 +273,7 @@ class FractureStage:
                 name=f"{rec.name}_{k}", model=piece.model, root=rec.root, material=rec.material,
                 fracture=rec.fracture, particles=rec.particles, breakable=piece.breakable,
                 generation=piece.generation, parent=body, birth_frame=frame, friction=rec.friction,
-                restitution=rec.restitution, root_normals=rec.root_normals, root_uvs=rec.root_uvs,
+                restitution=rec.restitution,
             )
             # The World may hand the parent's freed slot to a piece: the parent's record
             # lives on in the Fracture.

@@ -3,6 +3,7 @@ computed from (``collision/surface.py``), built once per body from its boundary 
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -136,3 +137,27 @@ def _facets(group: np.ndarray, area_normal: np.ndarray) -> np.ndarray:
     length = rows.norm(out.reshape(-1, 3)).reshape(count, MAX_FACETS + 1)
     out /= np.maximum(length, 1e-300)[:, :, None]
     return out[:, :MAX_FACETS]
+
+
+# (model, single) -> ContactPatches: each live model's patches, dropped with the model, so
+# a model stays as built and bodies made from one model share its patches.
+_PATCHES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def patch_groups(model, single: bool):
+    """(model, member offsets, members) of the single-scale layer's patches (``single``: one
+    per surface particle) or the boundary spheres': what ``contact_patches`` takes."""
+    if single:
+        return model, np.arange(len(model.surface_particles) + 1), model.surface_particles
+    return model, model.boundary_member_offsets, model.boundary_members
+
+
+def patches_of(models, single: bool) -> list:
+    """Each ``model.BodyModel``'s patches: its surface particles' (``single``) or its boundary
+    spheres'. Those not computed yet are computed in one ``contact_patches_many`` pass (the
+    same arrays as one call each) and kept while their models live."""
+    missing = list({id(m): m for m in models if single not in _PATCHES.get(m, ())}.values())
+    if missing:
+        for model, patches in zip(missing, contact_patches_many([patch_groups(m, single) for m in missing])):
+            _PATCHES.setdefault(model, {})[single] = patches
+    return [_PATCHES[m][single] for m in models]

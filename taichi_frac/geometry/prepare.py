@@ -280,7 +280,6 @@ def prepare_body(
     use_cache: bool = True,
     time_limit: float | None = DEFAULT_PREPARE_SECONDS,
     simplify: bool = True,
-    smoothing_length_factor: float | None = None,
     surface_contact: bool = False,
 ) -> tuple[BodyModel, PrepareReport]:
     """Build the two-scale model of one solid.
@@ -300,10 +299,6 @@ def prepare_body(
         simplify: mesh a copy of a surface finer than the target's particle spacing,
             decimated to that spacing (``simplify.simplify_for_target``); primitives are
             built at that spacing already and never simplified.
-        smoothing_length_factor: for a breakable body, its ``FractureOptions``' factor: the
-            model's SPH neighbour lists within h = factor x particle spacing are built now
-            and held by the model (``BodyModel.neighbor_lists``; 9 ms for a 5,550-particle
-            ring). None: none are built.
         surface_contact: the body will collide through its true surface: it is grouped by
             ``particles.surface_group_size`` when large enough (``model.group_sizes``).
 
@@ -371,12 +366,6 @@ def prepare_body(
     except ValueError as exc:
         raise MeshError(f"{name!r}: cannot build a particle model from its tets: {exc}") from exc
     timings["model"] = time.perf_counter() - t2
-    if smoothing_length_factor is not None:
-        from ..fracture.neighbors import model_neighbor_lists
-
-        t3 = time.perf_counter()
-        model_neighbor_lists(model, float(smoothing_length_factor) * model.spacing)
-        timings["neighbours"] = time.perf_counter() - t3
     deviation = None
     if surface is not None:
         # Measured on the tets themselves, so a part lost anywhere (decimation, the mesher)

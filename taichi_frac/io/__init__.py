@@ -1,6 +1,5 @@
-"""Output: the USD fracture cache (``CacheWriter``) and fragment render surfaces."""
+"""Output: the USD fracture cache (``CacheWriter``) and the recorder that keeps it in step with a run."""
 
 from .cache import CacheWriter
-from .fragment_mesh import fragment_surface
 
-__all__ = ["CacheWriter", "fragment_surface"]
+__all__ = ["CacheWriter"]

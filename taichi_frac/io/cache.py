@@ -256,7 +256,7 @@ class CacheWriter:
         Crack faces, and outer faces without input normals, get their flat face normal; faces
         without input UVs get a box projection of the body-frame position [m].
         shade_inner: the normals and UVs given are the crack faces' too (a cut render solid's,
-        geometry/piece_surface.py, which projects UVs along each crack).
+        surfaces/cut.py, which projects UVs along each crack).
         look: the body's two materials (``options.LOOKS``); a fragment with a parent and no
         look shares its parent's materials, one without either gets the plaster look.
         """

@@ -193,7 +193,6 @@ class SceneObject:
 
         return prepare_body(self.source, scale=self.scale, units=self.units, material=self.material,
                             particles=self.particles, repair=self.repair, backend=backend, use_cache=use_cache,
-                            smoothing_length_factor=self.fracture.smoothing_length_factor if self.breakable else None,
                             surface_contact=surface_contact)
 
 

@@ -78,14 +78,14 @@ def outside_distance(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray
     return distance * ~inside(points, vertices[faces])
 
 
-def distance_to_tets(vertices: np.ndarray, model) -> float:
+def farthest_outside_tets(vertices: np.ndarray, model) -> float:
     """[m] the largest distance from a render-surface vertex to the piece's tets' union (0
     inside it): one side of the Hausdorff distance between the render solid and the tets."""
     distance = outside_distance(vertices, model.vertices, model.surface_faces)
     return float(distance.max()) if len(distance) else 0.0
 
 
-def distance_from_tets(vertices: np.ndarray, faces: np.ndarray, model) -> float:
+def farthest_outside_render(vertices: np.ndarray, faces: np.ndarray, model) -> float:
     """[m] the largest distance from a vertex of the piece's tets' boundary to its render
     solid (``vertices``, ``faces``; 0 inside it): the other side of the Hausdorff distance.
     A tet straddling a flat crack face with its centroid on the piece's side reaches past the
@@ -114,8 +114,8 @@ def piece_quality(mesh, model) -> dict:
                                            mesh.cracks) / spacing,
         volume_error=volume / model.volume - 1.0,
         inner_area_fraction=_area_fraction(mesh.vertices, mesh.faces, mesh.face_is_inner),
-        distance_to_tets_spacings=distance_to_tets(mesh.vertices, model) / spacing,
-        distance_from_tets_spacings=distance_from_tets(mesh.vertices, mesh.faces, model) / spacing,
+        distance_to_tets_spacings=farthest_outside_tets(mesh.vertices, model) / spacing,
+        distance_from_tets_spacings=farthest_outside_render(mesh.vertices, mesh.faces, model) / spacing,
     )
 
 

@@ -26,6 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..fracture.crack_types import CrackPlane
+
 #: Largest shift [particle spacings] of a crack plane at its pivot, or of a ring crack's radius:
 #: about a quarter of a tet's height, well inside the staircase the same cut bonds allow.
 MAX_OFFSET_FACTOR = 0.5
@@ -98,8 +100,7 @@ class TiltFrame:
 def tilt_frames(cracks, crossings, spacing: float) -> list:
     """For each crack, its TiltFrame (a plane crack with crossings) or None: ``crossings`` a
     list of (N,3) [m] points where the bonds it cuts between pieces cross it (or None)."""
-    from ..fracture.crack_types import CrackPlane
-    from .render_solid import tangent_frame
+    from .solid import tangent_frame
 
     frames = []
     for crack, sites in zip(cracks, crossings):
@@ -121,8 +122,7 @@ def moved_crack(crack, frame: TiltFrame | None, move: np.ndarray):
     """The CrackSurface of ``crack`` (CrackPlane / RingCrack) moved by ``move`` (MOVES,) [m]:
     a plane shifted by move[0] at ``frame``'s pivot and tilted so that it is shifted by
     move[1] (move[2]) more at the reach along e1 (e2); a sphere's radius grown by move[0]."""
-    from ..fracture.crack_types import CrackPlane
-    from .render_solid import CrackSurface
+    from .solid import CrackSurface
 
     move = np.asarray(move, dtype=np.float64)
     if not isinstance(crack, CrackPlane):
@@ -142,7 +142,6 @@ def crack_face_moves(solid, origin, index_of: np.ndarray, cracks, frames) -> np.
     shift each move makes under the face's centroid; 0 for the others. ``origin`` (3,) [m]:
     the solid's frame origin in the body's (where ``frames`` are). The faces of a slit inside
     the piece, one of each side, cancel."""
-    from ..fracture.crack_types import CrackPlane
 
     crack, area_vector, centroid = _crack_faces(solid, origin)
     moves = np.zeros((len(index_of), MOVES))
@@ -169,10 +168,11 @@ def _crack_faces(solid, origin) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``solid``'s faces: (crack (F,) the crack index all three corners carry, -1 where they
     differ; outward area vectors (F,3) [m^2]; centroids (F,3) [m]), in the body's frame
     (``origin`` (3,) [m] the solid's frame origin there)."""
-    from .render_solid import _CRACK, solid_arrays
+    from .layout import CRACK
+    from .solid import solid_arrays
 
     props, tri = solid_arrays(solid)
-    crack = np.rint(np.nan_to_num(props[tri, _CRACK], nan=-1.0)).astype(np.int64)  # (F,3)
+    crack = np.rint(np.nan_to_num(props[tri, CRACK], nan=-1.0)).astype(np.int64)  # (F,3)
     crack = np.where((crack == crack[:, :1]).all(axis=1), crack[:, 0], -1)
     corners = props[tri, :3] + np.asarray(origin, dtype=np.float64)
     area_vector = 0.5 * np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
@@ -199,7 +199,6 @@ def volume_offsets(solids, index_of: np.ndarray, cracks, targets: np.ndarray, fr
     Returns (change, predicted): change (C, MOVES) [m] the further moves (all 0 when every
     error is within VOLUME_TOLERANCE), predicted the ``volume_misfit`` the linear model
     expects after it. Cracks without a slab stay."""
-    from ..fracture.crack_types import CrackPlane
 
     errors = volume_errors(solids, targets, fragment_tets, min_tets)
     now = float(np.nansum(errors**2))

@@ -18,7 +18,7 @@ they hold. So:
   normals (interpolated where a triangle is cut); inner faces get a planar projection along
   their crack as UVs and their own flat normal;
 - the tip of a wedge a piece's flat faces run past its tets, into a neighbour's, is cut
-  away at ``piece_reach.REACH_FACTOR`` spacings from its tets (``piece_reach.py``);
+  away at ``piece_reach.REACH_FACTOR`` spacings from its tets (``reach.py``);
 - every piece is closed, manifold and outward wound (the boolean library guarantees it);
 - a piece that breaks again cuts its own render solid.
 
@@ -41,7 +41,7 @@ their tets leave open) is divided by the tets' nearest-centroid cells
 solid nearest the piece's tets: a piece left with under half its tets' volume, one whose
 render solid reaches more than ``piece_parts.OVERREACH_FACTOR`` spacings past its tets or
 holds well over their volume (it holds a neighbour's material), and the neighbour that lost
-it (``geometry/piece_parts.py``) get the solid nearer their tet centroids than those of the
+it (``surfaces/parts.py``) get the solid nearer their tet centroids than those of the
 other pieces so failed, less what the other pieces hold: the artist's surface outside, the
 other pieces' crack faces against them, faces between nearest-centroid cells between them.
 A piece's crumbs are dropped and its other stray shells bridged to the main shell they lie
@@ -60,16 +60,17 @@ from typing import NamedTuple
 import manifold3d as m3
 import numpy as np
 
-from .crack_offsets import (FITTED_PIECE_TETS, MOVES, crack_segments, moved_crack, piece_target_volumes,
-                            segment_shifts, tilt_frames, volume_errors, volume_misfit, volume_offsets)
-from .crack_slabs import SLAB_PAST_FACTOR, plane_slab, segment_slabs, sphere_shell
-from .piece_parts import (assign_parts, carve_lost_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
-                          overfull_pieces, overreaching_pieces)
-from .piece_shells import join_stray_shells, without_crumbs
-from .piece_reach import KEPT_SHARE, trim_overreach
-from .render_solid import (_CRACK, _NORMAL, _UV, DUST_VOLUME_FACTOR, HULL_FACE, SPHERE_SAGITTA_FACTOR,
-                           WELD_REACH_FACTOR, WELD_THICKNESS_FACTOR, PieceMesh, RenderSolid, tangent_frame,
-                           with_crack_index, without_dust)
+from ..fracture.crack_types import CrackPlane, RingCrack
+from .crack_fit import (FITTED_PIECE_TETS, MOVES, crack_segments, moved_crack, piece_target_volumes,
+                        segment_shifts, tilt_frames, volume_errors, volume_misfit, volume_offsets)
+from .layout import CRACK, HULL_FACE, NORMAL, UV
+from .parts import (assign_parts, carve_lost_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
+                    overfull_pieces, overreaching_pieces)
+from .reach import KEPT_SHARE, trim_overreach
+from .shells import join_stray_shells, without_crumbs
+from .slabs import SLAB_PAST_FACTOR, plane_slab, segment_slabs, sphere_shell
+from .solid import (DUST_VOLUME_FACTOR, SPHERE_SAGITTA_FACTOR, WELD_REACH_FACTOR, WELD_THICKNESS_FACTOR, PieceMesh,
+                    RenderSolid, tangent_frame, with_crack_index, without_dust)
 
 #: The shares of the fitted plane offsets tried in turn until a cut's pieces come nearer their
 #: tets' volumes than the first cut's: a moved plane can hand a small part where cracks meet
@@ -94,7 +95,6 @@ def _separating_cracks(model, bonds, labels, cracks):
     piece that piece (else -1), and the pieces of the bond's two tets (-1: dropped); empty
     when it separates no two pieces (a ring crack: (None, its cuts between pieces, None,
     None))."""
-    from ..fracture.crack_types import CrackPlane, RingCrack
 
     x = model.particle_position
     a, b = x[bonds[:, 0]], x[bonds[:, 1]]
@@ -362,7 +362,6 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
     (S,) [m]. Returns (pieces, stats, index_of, sources): index_of (len(cracks),) each crack's
     (first) index in the pieces' ``cracks`` (-1: it made no slab), sources the crack behind
     each index of the pieces' ``cracks`` (-1: one the body had)."""
-    from ..fracture.crack_types import CrackPlane
 
     spacing = render.spacing
     new_cracks = list(render.cracks)
@@ -527,16 +526,16 @@ def piece_mesh(render: RenderSolid) -> PieceMesh:
     faces = vertex_of.reshape(-1)[tri_verts]
     corner = props[tri_verts]  # (F,3,P)
     tri = positions[faces]
-    corner_crack = np.rint(np.nan_to_num(corner[:, :, _CRACK], nan=-1.0)).astype(np.int64)
+    corner_crack = np.rint(np.nan_to_num(corner[:, :, CRACK], nan=-1.0)).astype(np.int64)
     crack = _face_cracks(corner_crack, tri, render.cracks, render.spacing)
     inner = crack != -1
     flat = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     flat /= np.maximum(np.linalg.norm(flat, axis=1, keepdims=True), 1e-300)
-    normals = corner[:, :, _NORMAL].copy()
+    normals = corner[:, :, NORMAL].copy()
     normals[inner] = flat[inner][:, None, :]
     length = np.linalg.norm(normals, axis=2, keepdims=True)
     normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300), flat[:, None, :])
-    uvs = _outer_uvs(corner[:, :, _UV], tri, crack == -1)
+    uvs = _outer_uvs(corner[:, :, UV], tri, crack == -1)
     uvs[crack == HULL_FACE] = np.nan  # (the cache writer projects them on a box)
     for index in np.unique(crack[crack >= 0]):
         rows = np.nonzero(crack == index)[0]

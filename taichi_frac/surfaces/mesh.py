@@ -81,7 +81,7 @@ def surface_corner_attributes(model: BodyModel, root: BodyModel, root_normals, r
 
 
 def render_surface(render, model: BodyModel, tet_peak_stress=None):
-    """A piece's cut render solid (geometry/piece_surface.py) as the cache writer takes it.
+    """A piece's cut render solid (surfaces/cut.py) as the cache writer takes it.
 
     Returns (vertices (V,3) [m] body frame, faces (F,3) outward, face_is_inner (F,) bool,
     normals (F,3,3), uvs (F,3,2), face_peak_stress (F,) [Pa] or None). A face's peak stress
@@ -90,7 +90,7 @@ def render_surface(render, model: BodyModel, tet_peak_stress=None):
     """
     from scipy.spatial import cKDTree
 
-    from ..geometry.piece_surface import piece_mesh
+    from .cut import piece_mesh
 
     mesh = piece_mesh(render)
     face_peak = None

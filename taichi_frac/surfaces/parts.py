@@ -1,4 +1,4 @@
-"""Which piece each part of a cut render solid goes to (geometry/piece_surface.py cuts it):
+"""Which piece each part of a cut render solid goes to (surfaces/cut.py cuts it):
 a vote of its faces for the nearest tets' piece, dividing a part that holds two pieces'
 material by their tets' nearest-centroid cells, carving a piece no part went to out of the
 part holding its tets, and the checks that send a piece the cut failed back to its tets'
@@ -10,7 +10,7 @@ from __future__ import annotations
 import manifold3d as m3
 import numpy as np
 
-from .render_solid import solid_arrays, with_crack_index
+from .solid import solid_arrays, with_crack_index
 from .tet_cells import LOCAL_DIAGRAM_FACTOR, own_cells, voronoi_cells
 
 #: A part's vote reads at most about this many of its faces (evenly spread over its list).
@@ -54,7 +54,7 @@ NOISE_VOLUME_SHARE = 0.25
 
 def _winding_inside(points: np.ndarray, solid: m3.Manifold) -> np.ndarray:
     """(N,) bool: ``points`` (N,3) inside the closed ``solid``."""
-    from .piece_checks import inside
+    from .checks import inside
 
     props, triangles = solid_arrays(solid)
     return inside(points, props[:, :3][triangles])
@@ -192,7 +192,7 @@ def carve_lost_pieces(parts, owner, model, fragment_tets, labels, spacing, rough
     belongs to the tets around it)."""
     from scipy.spatial import cKDTree
 
-    from .render_solid import without_dust
+    from .solid import without_dust
 
     parts, owner = list(parts), list(owner)
     rendered = _rendered_volumes(parts, owner, len(fragment_tets))
@@ -241,7 +241,7 @@ def _carved(part: m3.Manifold, model, labels, k: int, holders, spacing: float):
     volume (the part holds another piece's material beyond a gap), the cells are drawn
     against every tet instead. Where the diagram is degenerate, the convex hull of ``k``'s
     tets."""
-    from .render_solid import HULL_FACE
+    from .layout import HULL_FACE
 
     mine = np.nonzero(labels == k)[0]
     own = float(model.tet_volume[mine].sum())
@@ -301,7 +301,7 @@ def assign_parts(parts, model, labels, spacing, corners=None) -> list[int]:
 def _tets_inside(model, low, high, triangles) -> np.ndarray:
     """Up to MAX_PROBED_TETS tets (evenly spread over those in the box ``low``..``high``
     (3,) [m]) whose centroids lie inside the closed surface ``triangles`` (F,3,3) [m]."""
-    from .piece_checks import inside
+    from .checks import inside
 
     in_box = np.nonzero(np.all((model.particle_position >= low) & (model.particle_position <= high), axis=1))[0]
     in_box = in_box[:: max(1, len(in_box) // MAX_PROBED_TETS)]
@@ -392,7 +392,8 @@ def _divide_part(part, k, holding, depth, model, labels, spacing, corners, own_t
     nothing changes."""
     from scipy.spatial import cKDTree
 
-    from .render_solid import _CRACK, without_dust
+    from .layout import CRACK
+    from .solid import without_dust
 
     centroids = model.particle_position
     vertices = _vertices(part, corners)
@@ -403,7 +404,7 @@ def _divide_part(part, k, holding, depth, model, labels, spacing, corners, own_t
     # between the two pieces' tets there: their cells' faces are the boundary).
     shallow = np.nonzero(own_tree.query(centroids[near])[0] <= depth * spacing)[0]
     props, tri_verts = solid_arrays(part)
-    crack_faces = tri_verts[(props[tri_verts, _CRACK] >= 0).all(axis=1)]
+    crack_faces = tri_verts[(props[tri_verts, CRACK] >= 0).all(axis=1)]
     if len(shallow) and len(crack_faces):
         import trimesh
 
@@ -494,7 +495,7 @@ def failed_piece_shells(solid: m3.Manifold, model, labels, k: int, failed, parts
     neighbours' parts), left out. Empty where the diagram is degenerate."""
     from scipy.spatial import cKDTree
 
-    from .render_solid import without_dust
+    from .solid import without_dust
 
     share = nearest_cells_share(solid, model, labels, k, failed, spacing)
     if share is None:

@@ -20,7 +20,8 @@ import functools
 import manifold3d as m3
 import numpy as np
 
-from .render_solid import HULL_FACE, solid_arrays, with_crack_index
+from .layout import HULL_FACE
+from .solid import solid_arrays, with_crack_index
 
 #: A piece's render solid keeps what lies within this [particle spacings] of its tets: past the
 #: 1.4 spacings a flat crack face can lie from the staircase of tets it crosses.

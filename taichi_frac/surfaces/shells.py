@@ -39,7 +39,7 @@ def join_stray_shells(shells: dict, spacing: float) -> tuple[dict, int]:
     the other piece's they touch most (MOVED_VOLUME_SHARE). The bridge: prisms over the bit's faces that touch
     that shell (CONTACT_GAP_FACTOR), reaching through the gap into both. Bits that touch no
     main shell stay. Returns (solids, how many bits moved to another piece)."""
-    from .render_solid import without_dust
+    from .solid import without_dust
 
     volume = {id(shell): shell.volume() for mine in shells.values() for shell in mine}  # [m^3]
     shells = {k: sorted(mine, key=lambda shell: -volume[id(shell)]) for k, mine in shells.items()}
@@ -96,7 +96,7 @@ def without_crumbs(mine, spacing: float) -> list:
 def _trimesh(solid: m3.Manifold):
     import trimesh
 
-    from .render_solid import solid_arrays
+    from .solid import solid_arrays
 
     props, triangles = solid_arrays(solid)
     return trimesh.Trimesh(props[:, :3], triangles, process=False)
@@ -139,15 +139,15 @@ def _bridge(mesh, faces: np.ndarray, gap: float) -> m3.Manifold:
     across the gap into the shell it touches. Their faces lie on no crack (HULL_FACE, like a
     carved piece's): in the gap, and where a contact face meets the artist's surface, out of
     it by at most twice ``gap``."""
-    from .render_solid import _CRACK, _PROPERTY_COUNT, HULL_FACE
+    from .layout import CRACK, HULL_FACE, PROPERTY_COUNT
 
     faces = faces[mesh.area_faces[faces] > 0.0]  # (a face of no area has no normal to extrude along)
     normal = mesh.face_normals[faces][:, None, :]
     corners = mesh.triangles[faces]
     points = np.concatenate([corners - gap * normal, corners + 2.0 * gap * normal], axis=1)  # (P,6,3)
-    props = np.zeros((len(points) * 6, _PROPERTY_COUNT))
+    props = np.zeros((len(points) * 6, PROPERTY_COUNT))
     props[:, :3] = points.reshape(-1, 3)
-    props[:, _CRACK] = HULL_FACE
+    props[:, CRACK] = HULL_FACE
     # Each prism: its inner cap, its outer cap, and two triangles a side (the corners are
     # counter-clockwise about the outward normal, so each side faces away from the prism).
     one = np.array([[0, 2, 1], [3, 4, 5], [0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [2, 0, 3], [2, 3, 5]])
@@ -163,7 +163,7 @@ def _bridge(mesh, faces: np.ndarray, gap: float) -> m3.Manifold:
     if not missing.any():
         return bridge
     props[missing, 3:] = 0.0
-    props[missing, _CRACK] = HULL_FACE
+    props[missing, CRACK] = HULL_FACE
     # (copies: the binding takes no read-only views of the library's own arrays)
     return m3.Manifold(m3.Mesh64(vert_properties=props, tri_verts=np.array(mesh.tri_verts, dtype=np.uint64),
                                  merge_from_vert=np.array(mesh.merge_from_vert, dtype=np.uint64),

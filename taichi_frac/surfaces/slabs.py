@@ -12,8 +12,8 @@ from __future__ import annotations
 import manifold3d as m3
 import numpy as np
 
-from .render_solid import (SLAB_REACH_FACTOR, SLAB_THICKNESS_FACTOR, SPHERE_SAGITTA_FACTOR, CrackSurface,
-                           tangent_frame)
+from .solid import (SLAB_REACH_FACTOR, SLAB_THICKNESS_FACTOR, SPHERE_SAGITTA_FACTOR, CrackSurface,
+                    tangent_frame)
 
 #: How far [particle spacings] a crack's slab runs past the line halfway to the nearest
 #: crossing it did not cut. Where two or three cracks meet about a small piece, slabs that

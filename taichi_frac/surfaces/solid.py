@@ -1,7 +1,7 @@
 """A body's render solid: the artist's closed surface as an exact-arithmetic solid, and the
 records a broken piece's surface carries (its crack surfaces, its mesh for the cache).
 
-``piece_surface.py`` cuts it along the cracks; the constants here say how thin the cuts are
+``cut.py`` cuts it along the cracks; the constants here say how thin the cuts are
 and what is dropped, and the vertex property columns say what each corner carries.
 """
 
@@ -14,7 +14,9 @@ import manifold3d as m3
 import numpy as np
 import trimesh
 
-from .surface_attributes import input_corner_normals
+from ..geometry.surface_attributes import input_corner_normals
+from ..fracture.cracks import tangent_frame as crack_frame
+from .layout import CRACK, NORMAL, PROPERTY_COUNT, UV
 
 #: Slab thickness as a fraction of the particle spacing: the two pieces of a crack are this
 #: far apart and each crack face lies half of it off its plane (1e-4 spacings: far below
@@ -43,14 +45,6 @@ DUST_VOLUME_FACTOR = 1e-2
 #: Largest gap [particle spacings] between a ring crack's sphere and its polygon.
 SPHERE_SAGITTA_FACTOR = 0.02
 
-# Vertex property columns after x, y, z: corner normal (3), UV (2), crack index (-1: the
-# artist's surface).
-_NORMAL = slice(3, 6)
-_UV = slice(6, 8)
-_CRACK = 8
-_PROPERTY_COUNT = 9
-#: The crack index of a carved piece's hull faces (inner faces on no crack).
-HULL_FACE = -2
 
 
 @dataclass(frozen=True)
@@ -138,12 +132,12 @@ def render_solid_from_surface(surface: trimesh.Trimesh, origin, spacing: float) 
     ``origin`` (3,) [m] of the source frame; ``spacing`` [m] the body's particle spacing."""
     vertices = np.asarray(surface.vertices, dtype=np.float64) - np.asarray(origin, dtype=np.float64)
     faces = np.asarray(surface.faces, dtype=np.int64)
-    props = np.zeros((len(faces), 3, _PROPERTY_COUNT - 3))
-    props[:, :, _NORMAL.start - 3:_NORMAL.stop - 3] = input_corner_normals(surface)
+    props = np.zeros((len(faces), 3, PROPERTY_COUNT - 3))
+    props[:, :, NORMAL.start - 3:NORMAL.stop - 3] = input_corner_normals(surface)
     uv = getattr(surface.visual, "uv", None)
     if uv is not None and len(uv) == len(vertices):
-        props[:, :, _UV.start - 3:_UV.stop - 3] = np.asarray(uv, dtype=np.float64)[faces]
-    props[:, :, _CRACK - 3] = -1.0
+        props[:, :, UV.start - 3:UV.stop - 3] = np.asarray(uv, dtype=np.float64)[faces]
+    props[:, :, CRACK - 3] = -1.0
     return RenderSolid(_to_manifold(vertices, faces, props), (), float(spacing))
 
 
@@ -154,9 +148,9 @@ def render_solid_from_tets(model) -> RenderSolid:
     tri = model.vertices[faces]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-    props = np.zeros((len(faces), 3, _PROPERTY_COUNT - 3))
+    props = np.zeros((len(faces), 3, PROPERTY_COUNT - 3))
     props[:, :, 0:3] = normal[:, None, :]
-    props[:, :, _CRACK - 3] = -1.0
+    props[:, :, CRACK - 3] = -1.0
     return RenderSolid(_to_manifold(model.vertices, faces, props), (), float(model.spacing))
 
 
@@ -169,8 +163,6 @@ def tangent_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _tangent_frame_of(x: float, y: float, z: float) -> tuple[np.ndarray, np.ndarray]:
     # Kept per normal: every piece's mesh asks again for each crack it inherited, and a
     # scene's few hundred cracks repeat thousands of times (numpy's small-array overhead).
-    from ..fracture.cracks import tangent_frame as crack_frame
-
     e1, e2 = crack_frame(np.array([x, y, z]))
     e1.flags.writeable = e2.flags.writeable = False
     return e1, e2
@@ -195,8 +187,8 @@ def with_crack_index(slab: m3.Manifold, index: int) -> m3.Manifold:
     zero: the piece's inner faces get theirs in ``piece_mesh``)."""
     mesh = slab.to_mesh64()
     positions = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3]
-    props = np.zeros((len(positions), _PROPERTY_COUNT))
+    props = np.zeros((len(positions), PROPERTY_COUNT))
     props[:, :3] = positions
-    props[:, _CRACK] = index
+    props[:, CRACK] = index
     return m3.Manifold(m3.Mesh64(vert_properties=props,
                                  tri_verts=np.array(mesh.tri_verts, dtype=np.uint64)))

@@ -23,7 +23,7 @@ def voronoi_cells(points: np.ndarray, spacing: float):
     (its faces HULL_FACE), or None where qhull's diagram is degenerate there."""
     from scipy.spatial import Voronoi
 
-    from .render_solid import _PROPERTY_COUNT, _CRACK, HULL_FACE
+    from .layout import CRACK, HULL_FACE, PROPERTY_COUNT
 
     low, high = points.min(axis=0) - 20 * spacing, points.max(axis=0) + 20 * spacing
     fence = np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1]) for z in (low[2], high[2])])
@@ -88,9 +88,9 @@ def voronoi_cells(points: np.ndarray, spacing: float):
             fan = np.stack([first, first + step, first + step + 1], axis=1)
             triangles = corner[fan]
             used, faces = np.unique(triangles, return_inverse=True)
-            props = np.zeros((len(used), _PROPERTY_COUNT))
+            props = np.zeros((len(used), PROPERTY_COUNT))
             props[:, :3] = diagram.vertices[used]
-            props[:, _CRACK] = HULL_FACE
+            props[:, CRACK] = HULL_FACE
             solid = m3.Manifold(m3.Mesh64(vert_properties=props,
                                           tri_verts=np.ascontiguousarray(faces.reshape(-1, 3), dtype=np.uint64)))
             return solid if solid.status() == m3.Error.NoError and not solid.is_empty() else None

@@ -8,8 +8,8 @@ import numpy as np
 import trimesh
 
 from taichi_frac.fracture.fragments import make_fragments, split_body
-from taichi_frac.geometry.piece_checks import edge_counts, signed_volume
-from taichi_frac.geometry.piece_surface import cut_render_solid
+from taichi_frac.surfaces.checks import edge_counts, signed_volume
+from taichi_frac.surfaces.cut import cut_render_solid
 from taichi_frac.geometry.prepare import prepare_body
 from taichi_frac.options import FractureOptions, ParticleOptions
 

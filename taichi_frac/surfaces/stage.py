@@ -1,0 +1,153 @@
+"""The piece-surface stage: what the cache draws of every body, cut anew at each split.
+
+A scene object's surface is the artist's own (its render solid, ``solid.py``) with the
+shading of its source surface; a split cuts the parent's render solid along the cracks
+(``cut.cut_render_solid``) into one closed surface per piece. The frame loop
+(``simulation.py``) calls :meth:`SurfaceStage.add_body` for each scene object and
+:meth:`SurfaceStage.cut` after each split; the recorder (``io/recorder.py``) writes the
+:class:`BodySurface` it is handed.
+"""
+
+from __future__ import annotations
+
+import time
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model import BodyModel
+from . import cut as _cut
+from .mesh import fragment_surface, render_surface, root_faces_of, surface_corner_attributes
+from .solid import render_solid_from_surface, render_solid_from_tets
+
+# The shading attributes of a prepared model's boundary faces, kept while the model lives: a
+# process that runs many variants of one scene reuses its models (a sweep's worker), and
+# finding them (closest points on the source surface) is most of such a run's set-up.
+_CORNER_ATTRIBUTES: "weakref.WeakKeyDictionary[BodyModel, tuple]" = weakref.WeakKeyDictionary()
+
+
+@dataclass(frozen=True, eq=False)
+class BodySurface:
+    """One body's render mesh as the cache writer takes it, in the body frame. F faces, V vertices.
+
+    Attributes:
+        vertices: (V,3) [m]; unused vertices are allowed (the writer drops them).
+        faces: (F,3) vertex indices, outward winding.
+        inner: (F,) bool, crack faces.
+        normals: (F,3,3) per-corner normals (NaN: the face's flat normal), or None.
+        uvs: (F,3,2) per-corner UVs (NaN on crack faces), or None.
+        face_peak: (F,) [Pa] the largest principal stress the material under each face has
+            seen at a split, or None (a body that never broke).
+        shade_inner: the crack faces carry their own shading (a cut render solid's do).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    inner: np.ndarray
+    normals: np.ndarray | None = None
+    uvs: np.ndarray | None = None
+    face_peak: np.ndarray | None = None
+    shade_inner: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class PieceSurfaces:
+    """The surfaces of one split's pieces.
+
+    Attributes:
+        surfaces: one BodySurface per piece, in the order of ``Fracture.children``.
+        seconds: [s] wall time of the render solid's cut (0 without one).
+        counts: the cut's counts (``cut.cut_render_solid``), empty without one.
+    """
+
+    surfaces: list
+    seconds: float = 0.0
+    counts: dict | None = None
+
+
+def root_corner_attributes(model: BodyModel, surface) -> tuple:
+    """(normals (Fr,3,3), uvs (Fr,3,2) or None) of ``model``'s boundary faces from its source
+    surface (a trimesh.Trimesh in the model's source frame)."""
+    if model not in _CORNER_ATTRIBUTES:
+        from ..geometry.surface_attributes import boundary_corner_attributes
+
+        corners = model.vertices[model.surface_faces] + model.com_in_source
+        _CORNER_ATTRIBUTES[model] = boundary_corner_attributes(surface, corners)
+    return _CORNER_ATTRIBUTES[model]
+
+
+class SurfaceStage:
+    """Holds each live body's render solid and shading, and cuts them when a body breaks.
+
+    Per body id: its render solid (``solid.RenderSolid``, None for a piece the cut gave no
+    part to: it shows its tets' boundary), its root's boundary shading and the peak stress
+    each of its tets has seen at a split. ``cuts``: per split that cut a render solid,
+    (seconds, the cut's counts).
+    """
+
+    def __init__(self):
+        self._render: dict[int, object] = {}
+        self._shading: dict[int, tuple] = {}
+        self._tet_peak: dict[int, np.ndarray] = {}
+        self.cuts: list[tuple[float, dict]] = []
+
+    def add_body(self, body: int, model: BodyModel, report) -> BodySurface:
+        """A scene object's surface (``report``: its ``geometry.prepare.PrepareReport``; an
+        object given as tets has no source surface and shows its tets' boundary)."""
+        if report.surface is None:
+            self._shading[body] = (None, None)
+            self._render[body] = render_solid_from_tets(model)
+        else:
+            self._shading[body] = root_corner_attributes(model, report.surface)
+            self._render[body] = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)
+        return self._surface(body, model, model)
+
+    def render_of(self, body: int):
+        """The render solid of a live body (``solid.RenderSolid``) or None."""
+        return self._render.get(body)
+
+    def cut(self, fracture) -> PieceSurfaces:
+        """The pieces' surfaces of a ``fracture.stage.Fracture``: the parent's render solid cut
+        along its cracks, each piece carrying the peak stress its tets have seen."""
+        rec, analysis, split = fracture.parent_record, fracture.analysis, fracture.split
+        parent = fracture.parent
+        peak_parent = np.maximum(self._tet_peak.pop(parent, np.zeros(rec.model.tet_count)),
+                                 analysis.particle_principal_stress)
+        render = self._render.pop(parent, None)
+        shading = self._shading.pop(parent, (None, None))
+        renders, seconds, counts = [None] * len(fracture.pieces), 0.0, {}
+        if render is not None:
+            options = rec.fracture
+            t = time.perf_counter()
+            renders, counts = _cut.cut_render_solid(
+                render, rec.model, split.fragment_tets, analysis.cracks,
+                [p.model.com_in_source for p in fracture.pieces], roughness=options.crack_roughness,
+                roughness_scale=options.crack_roughness_scale, seed=options.seed,
+                fit_rounds=options.crack_fit_rounds, fit_min_tets=options.crack_fit_min_tets)
+            seconds = time.perf_counter() - t
+            self.cuts.append((seconds, counts))
+        surfaces = []
+        for piece, child, child_rec, piece_render in zip(fracture.pieces, fracture.children,
+                                                         fracture.children_records, renders):
+            self._render[child] = piece_render
+            self._shading[child] = shading
+            self._tet_peak[child] = peak_parent[piece.parent_tets]
+            surfaces.append(self._surface(child, child_rec.model, child_rec.root))
+        return PieceSurfaces(surfaces, seconds, counts)
+
+    def _surface(self, body: int, model: BodyModel, root: BodyModel) -> BodySurface:
+        tet_peak = self._tet_peak.get(body)
+        render = self._render.get(body)
+        if render is not None:
+            vertices, faces, inner, normals, uvs, face_peak = render_surface(render, model, tet_peak)
+            return BodySurface(vertices, faces, inner, normals, uvs, face_peak, shade_inner=True)
+        # A piece the render solid gave no part to: its tets' boundary.
+        face_peak = None if tet_peak is None else tet_peak[model.surface_face_tet]
+        root_faces = root_faces_of(model, root)  # (both calls below need it)
+        vertices, faces, inner = fragment_surface(model, root, root_faces)
+        normals = uvs = None
+        root_normals, root_uvs = self._shading.get(body, (None, None))
+        if root_normals is not None:
+            normals, uvs = surface_corner_attributes(model, root, root_normals, root_uvs, root_faces)
+        return BodySurface(vertices, faces, inner, normals, uvs, face_peak)
