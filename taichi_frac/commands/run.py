@@ -123,6 +123,26 @@ def print_summary(summary, file=None) -> None:
         print(f"{k:<{width}}  {v}", file=file)
 
 
+def unbroken_bodies(sim, frame_dt: float) -> list[dict]:
+    """Why each breakable scene body that never broke did not (``fracture.peaks.diagnose``)."""
+    from ..fracture.peaks import diagnose
+
+    live = [sim.records[b] for b in sim.world.body_ids]
+    names = [r.name for r in live if r.breakable and r.generation == 0]
+    stage = sim.fracture_stage
+    return diagnose(None if stage is None else stage.peaks, names, frame_dt) if stage is not None else []
+
+
+def print_unbroken(unbroken: list[dict], file=None) -> None:
+    """One line per breakable body that did not break: why, and what would break it."""
+    file = sys.stdout if file is None else file
+    for entry in unbroken:
+        print(f"did not break: {entry['name']}: {entry['note']}", file=file)
+        if "point_world" in entry:
+            point = ", ".join(f"{v:.4g}" for v in entry["point_world"])
+            print(f"  peak at t = {entry['time']:.4g} s, world ({point}) m", file=file)
+
+
 def main(args) -> int:
     """Every check of the command line, the scene, the output paths and the meshes comes
     before the first frame; problems raise the package's errors (``cli`` prints them, and
@@ -152,10 +172,13 @@ def main(args) -> int:
     finally:
         if bar is not None:
             bar.stop()
+    unbroken = unbroken_bodies(sim, scene.simulation.frame_dt)
     print_summary(summary)
+    print_unbroken(unbroken)
     if args.stats_json:
         try:
-            Path(args.stats_json).write_text(summary.to_json())
+            Path(args.stats_json).write_text(json.dumps(json.loads(summary.to_json()) | {"unbroken": unbroken},
+                                                        indent=2))
         except OSError as exc:
             raise OutputError(f"--stats-json {args.stats_json!r}: {exc.strerror or exc}") from None
     return 130 if summary.interrupted else 0
