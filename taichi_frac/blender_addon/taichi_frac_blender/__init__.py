@@ -1,10 +1,13 @@
-"""taichi-frac fracture cache importer (Blender extension ``taichi_frac_blender``).
+"""taichi-frac for Blender (extension ``taichi_frac_blender``): simulate the objects the
+artist marks, and import fracture caches (USD).
 
 Pure Python: ``reader`` reads the USD cache with the pxr Blender bundles (no bpy), ``retime``
 chooses the frames and maps them onto the scene's (no bpy), ``build`` makes or updates the
 Blender data, ``materials`` the materials and the stress heat map, ``ui`` the sidebar panel;
-this module holds the import operator, menu entry and drag-and-drop handler. Nothing here
-simulates: the cache is computed outside Blender.
+``sim_properties``, ``export``, ``scene_toml``, ``runner``, ``simulate`` and ``sim_ui`` author a
+simulation, write its scene file and run ``taichi-frac run`` in a separate process (never in
+Blender's: the simulator is not even imported, so a Blender without taichi-frac imports caches
+all the same); this module holds the import operator, menu entry and drag-and-drop handler.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ImportHelper
 
-from . import properties, schema, ui
+from . import properties, schema, sim_properties, sim_ui, simulate, ui
 
 
 def ensure_pxr() -> None:
@@ -181,7 +184,10 @@ _classes = (IMPORT_SCENE_OT_taichi_frac, IMPORT_SCENE_FH_taichi_frac)
 
 def register():
     properties.register()
+    sim_properties.register()
+    simulate.register()
     ui.register()
+    sim_ui.register()
     for cls in _classes:
         bpy.utils.register_class(cls)
     bpy.types.TOPBAR_MT_file_import.append(menu_func_import)
@@ -191,5 +197,8 @@ def unregister():
     bpy.types.TOPBAR_MT_file_import.remove(menu_func_import)
     for cls in reversed(_classes):
         bpy.utils.unregister_class(cls)
+    sim_ui.unregister()
     ui.unregister()
+    simulate.unregister()
+    sim_properties.unregister()
     properties.unregister()

@@ -1,0 +1,241 @@
+"""Runs INSIDE Blender (.venv-blender/bin/python, bpy 5.0): install the add-on zip, author a
+scene with ``Object.taichi_frac_sim`` / ``Scene.taichi_frac_sim`` and simulate it with the
+real ``taichi-frac run`` (TAICHI_FRAC_EXECUTABLE names it). Prints each failure and exits 1
+if there is any; writes what the caller checks further to REPORT.json.
+
+    .venv-blender/bin/python tests/blender/check_simulate.py ADDON.zip SECTION WORKDIR
+
+SECTION: ``simulate`` (a porcelain cube at 12 m/s onto the ground beside a rigid sphere,
+simulated with wait=True, then again: updated in place), ``offline`` (no run: a missing
+executable, velocity from animation), ``cancel`` (a long run stopped after its first frames).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+failures: list[str] = []
+report: dict = {}
+
+
+def check(condition, message):
+    if not condition:
+        failures.append(message)
+    return condition
+
+
+def install(zip_path):
+    result = bpy.ops.extensions.package_install_files(filepath=str(zip_path), repo="user_default",
+                                                      enable_on_install=True)
+    check(result == {"FINISHED"}, f"extension install returned {result}")
+    check(hasattr(bpy.ops.taichi_frac, "simulate"), "operator taichi_frac.simulate not registered")
+
+
+def addon():
+    """The installed add-on's package (its modules are used for the cancel section)."""
+    name = next(m for m in sys.modules if m.endswith(".taichi_frac_blender") and m.startswith("bl_ext."))
+    return sys.modules[name]
+
+
+def empty_scene(workdir: Path, fps=24, frames=12):
+    for obj in list(bpy.data.objects):
+        bpy.data.objects.remove(obj)
+    scene = bpy.context.scene
+    scene.render.fps, scene.render.fps_base = fps, 1.0
+    scene.frame_start, scene.frame_end = 1, 1 + frames
+    scene.taichi_frac_sim.cache_path = str(workdir / "cache" / "shot.usdc")
+    scene.taichi_frac_sim.particles = 400
+    scene.taichi_frac_sim.ground = True
+    return scene
+
+
+def cube_and_sphere(scene):
+    bpy.ops.mesh.primitive_cube_add(size=0.2, location=(0.0, 0.0, 0.3),
+                                    rotation=(math.radians(45.0), math.radians(35.0), 0.0))
+    cube = bpy.context.active_object
+    cube.name = "Cube"
+    sim = cube.taichi_frac_sim
+    sim.role = "BREAKABLE"
+    sim.material = "porcelain"
+    # At 12 m/s the corner's peak stress is about 17 MPa at this resolution (the run's
+    # diagnosis says so): a weakened porcelain breaks there.
+    sim.strength_override = 10.0e6
+    sim.crack_count = 3
+    sim.crack_length = 0.4
+    sim.linear_velocity = (0.0, 0.0, -12.0)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.1, location=(0.6, 0.0, 0.3), segments=16, ring_count=8)
+    sphere = bpy.context.active_object
+    sphere.name = "Sphere"
+    sphere.taichi_frac_sim.role = "RIGID"
+    sphere.taichi_frac_sim.material = "concrete"
+    return cube, sphere
+
+
+def cube_world_corners(cube):
+    return np.array([tuple(cube.matrix_world @ v.co) for v in cube.data.vertices])
+
+
+def pieces_of(scene, cache_path):
+    return [o for o in scene.objects if o.taichi_frac.prim_path and os.path.samefile(o.taichi_frac.cache_path,
+                                                                                    cache_path)]
+
+
+def section_simulate(workdir: Path):
+    scene = empty_scene(workdir)
+    cube, sphere = cube_and_sphere(scene)
+    corners = cube_world_corners(cube)
+    start = time.perf_counter()
+    result = bpy.ops.taichi_frac.simulate(wait=True)
+    report["first_run_seconds"] = time.perf_counter() - start
+    check(result == {"FINISHED"}, f"simulate returned {result}")
+    cache = scene.taichi_frac_sim.cache_path
+    check(os.path.exists(cache), f"no cache at {cache}")
+    pieces = pieces_of(scene, cache)
+    broken = [o for o in pieces if o.taichi_frac.generation >= 1]
+    check(len(broken) >= 2, f"{len(broken)} broken pieces came back (expected 2 or more)")
+    check(cube.hide_viewport and cube.hide_render, "the authored cube is not hidden in viewport and renders")
+    check(not sphere.hide_viewport and not sphere.hide_render, "the rigid sphere was hidden")
+    check(cube.taichi_frac_sim.result_state == "BROKE", f"cube result {cube.taichi_frac_sim.result_state}")
+    # The cube's cache body at the start frame is where the authored cube was: its mesh's
+    # world corners match the authored corners (the export placed the centre of mass).
+    root = [o for o in pieces if o.taichi_frac.generation == 0 and o.taichi_frac.prim_path.split("/")[-1]
+            .lower().startswith("cube")]
+    if check(len(root) == 1, f"cube's generation-0 object: {[o.name for o in root]}"):
+        scene.frame_set(scene.frame_start)
+        got = np.array([tuple(root[0].matrix_world @ v.co) for v in root[0].data.vertices])
+        far = max(np.min(np.linalg.norm(got - c, axis=1)) for c in corners)
+        check(far < 1e-4, f"the simulated cube's corners lie up to {far:.2e} m from the authored cube's")
+    # Pieces show at the end (keyed visibility), the sphere's cache object too.
+    scene.frame_set(scene.frame_end)
+    visible = [o for o in broken if not o.hide_render]
+    check(len(visible) >= 2, f"{len(visible)} pieces visible in renders at the end frame")
+    report["pieces"] = sorted(o.taichi_frac.prim_path for o in broken)
+    report["scene_path"] = os.path.splitext(cache)[0] + ".toml"
+    report["cache"] = cache
+    # Simulating again updates in place and keeps the artist's edits: a renamed piece keeps
+    # its name and object, a new count of objects is not made.
+    renamed = broken[0]
+    renamed.name = "my piece"
+    count = len(pieces)
+    result = bpy.ops.taichi_frac.simulate(wait=True)
+    check(result == {"FINISHED"}, f"second simulate returned {result}")
+    again = pieces_of(scene, cache)
+    check(len(again) == count, f"simulating again gave {len(again)} objects, first {count}")
+    check(any(o.name == "my piece" for o in again), "the renamed piece lost its name or its object")
+    check(cube.hide_viewport and cube.hide_render, "the cube shows again after the second run")
+    report["second_pieces"] = sorted(o.taichi_frac.prim_path for o in again if o.taichi_frac.generation >= 1)
+
+
+def section_offline(workdir: Path):
+    scene = empty_scene(workdir)
+    cube, _ = cube_and_sphere(scene)
+    # A missing executable: one line, naming where to set it.
+    os.environ["TAICHI_FRAC_EXECUTABLE"] = str(workdir / "no-such-taichi-frac")
+    try:
+        bpy.ops.taichi_frac.simulate(wait=True)
+        check(False, "simulate with a missing executable did not fail")
+    except RuntimeError as exc:
+        message = str(exc).strip()
+        report["missing_message"] = message
+        check("no-such-taichi-frac" in message and "\n" not in message.split("Error: ", 1)[-1],
+              f"missing-executable message: {message!r}")
+    os.environ.pop("TAICHI_FRAC_EXECUTABLE")
+    path = os.environ.get("PATH", "")
+    os.environ["PATH"] = str(workdir)  # (no taichi-frac there)
+    try:
+        bpy.ops.taichi_frac.simulate(wait=True)
+        check(False, "simulate without taichi-frac on the PATH did not fail")
+    except RuntimeError as exc:
+        report["not_found_message"] = str(exc).strip()
+        check("TAICHI_FRAC_EXECUTABLE" in str(exc), f"not-found message: {exc}")
+    os.environ["PATH"] = path
+    check(not cube.hide_viewport, "a failed run hid the cube")
+    # Velocity from animation: linear keys, the slope is the keys' difference over their time.
+    fps = 24.0
+    obj = cube
+    sim = obj.taichi_frac_sim
+    sim.velocity_source = "ANIMATION"
+    obj.rotation_euler = (0.0, 0.0, 0.0)
+    obj.location = (0.0, 0.0, 1.0)
+    obj.keyframe_insert("location", frame=1)
+    obj.keyframe_insert("rotation_euler", frame=1)
+    obj.location = (1.0, 0.5, 0.6)
+    obj.rotation_euler = (0.0, 0.0, math.radians(90.0))
+    obj.keyframe_insert("location", frame=11)
+    obj.keyframe_insert("rotation_euler", frame=11)
+    for curve in _fcurves(obj):
+        for key in curve.keyframe_points:
+            key.interpolation = "LINEAR"
+    scene.frame_set(1)
+    addon().export.export_scene(bpy.context)
+    exported = tomllib.loads(Path(os.path.splitext(scene.taichi_frac_sim.cache_path)[0] + ".toml").read_text())
+    entry = next(o for o in exported["objects"] if o["name"] == "Cube")
+    seconds = 10.0 / fps
+    expected = np.array([1.0, 0.5, -0.4]) / seconds
+    spin = np.array([0.0, 0.0, math.radians(90.0) / seconds])
+    report["animated_velocity"] = entry["linear_velocity"]
+    report["animated_spin"] = entry["angular_velocity"]
+    check(np.allclose(entry["linear_velocity"], expected, rtol=1e-3, atol=1e-3),
+          f"velocity from animation {entry['linear_velocity']}, keys' slope {expected.tolist()}")
+    check(np.allclose(entry["angular_velocity"], spin, rtol=1e-3, atol=1e-3),
+          f"spin from animation {entry['angular_velocity']}, keys' slope {spin.tolist()}")
+    check(np.allclose(entry["position"], [0.0, 0.0, 1.0], atol=1e-6), f"position at the start {entry['position']}")
+
+
+def _fcurves(obj):
+    action = obj.animation_data.action
+    if hasattr(action, "fcurves") and len(action.fcurves):  # (legacy actions)
+        return list(action.fcurves)
+    slot = obj.animation_data.action_slot
+    return [c for layer in action.layers for strip in layer.strips for c in strip.channelbag(slot).fcurves]
+
+
+def section_cancel(workdir: Path):
+    scene = empty_scene(workdir, frames=2400)
+    cube_and_sphere(scene)
+    module = addon()
+    job = module.simulate.Job(bpy.context)
+    job.start(bpy.context)
+    deadline = time.monotonic() + 240.0
+    while job.run.progress.frame < 3 and job.run.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    job.run.cancel()  # what Esc does in the modal operator
+    code = job.run.wait(timeout=120)
+    report["cancel_exit"] = code
+    report["cancel_frame"] = job.run.progress.frame
+    check(code == 130, f"the cancelled run exited with {code}: {job.run.error_line()}")
+    level, message = job.finish(bpy.context)
+    report["cancel_message"] = message
+    check(level in ("INFO", "WARNING"), f"finish after cancel: {level} {message}")
+    from pxr import Usd  # (the add-on made Blender's USD importable)
+
+    stage = Usd.Stage.Open(job.exported.cache_path)
+    data = stage.GetRootLayer().customLayerData.get("taichiFrac", {})
+    report["cancel_layer"] = {k: (v if isinstance(v, (int, float, str, bool)) else str(v)) for k, v in data.items()}
+    pieces = pieces_of(scene, job.exported.cache_path)
+    check(len(pieces) >= 2, f"{len(pieces)} objects imported from the cancelled run's cache")
+
+
+def main():
+    zip_path, section, workdir = sys.argv[-3:]
+    workdir = Path(workdir)
+    install(zip_path)
+    {"simulate": section_simulate, "offline": section_offline, "cancel": section_cancel}[section](workdir)
+    (workdir / "REPORT.json").write_text(json.dumps(report, indent=2))
+    for failure in failures:
+        print("FAIL:", failure)
+    print(f"{len(failures)} failures")
+    sys.exit(1 if failures else 0)
+
+
+if __name__ == "__main__":
+    main()
