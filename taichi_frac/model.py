@@ -203,20 +203,16 @@ def build_body_model(
 
 
 #: A body grouped by its ``coarse_group_size`` keeps at least this many spheres: one of
-#: fewer surface particles keeps the finer n. A few large spheres over a small block fold
-#: their patches round its edges and corners, where the patches lose the facets pair
-#: contacts are measured along (a 60-tet cube slid off another at n = 12).
+#: fewer surface particles keeps the finer n, since a few large spheres over a small block
+#: fold their patches round its edges and corners, where the patches lose their facets.
 COARSE_MIN_SPHERES = 32
 
 
 #: A body (``build_body_model``) keeps the coarse n only where at least this fraction of
 #: its patches lie in a few planes (``ContactPatches.facets``), as the finer grouping's
-#: all do; else it and its pieces keep the finer n. A 3,023-tet torus of 12 sections round
-#: its tube (the tests') keeps facets on 53 % of its patches at n = 12 (92 % at 8, all at
-#: 4), pairs of its patches fall back to sphere contacts, and five of them stacked rest
-#: 79 mm too high; the 13 rings' finer tori keep 95 %, a 4,822-tet cube all. Pieces are
-#: not tested: the patches along their cracks (tet faces in steps) fold at any n (a
-#: quarter to a half of a ring piece's patches at n = 4).
+#: all do; else it and its pieces keep the finer n: patches without facets fall back to
+#: sphere contacts, which rest coarse bodies too high. Pieces are not tested: the patches
+#: along their cracks (tet faces in steps) fold at any n.
 COARSE_MIN_FACETED = 0.9
 
 

@@ -106,8 +106,7 @@ def init(arch: str | None = None, *, debug: bool = False) -> str:
 
 
 # Loops over bodies, contacts and buckets run serially on the CPU backend: there a
-# parallel-for task costs 25-60 us to dispatch (measured, Taichi 1.7.4, 2 cores), more
-# than a serial pass over a few thousand items. Read by kernels at compile time
+# parallel-for task costs more to dispatch than a serial pass over a few thousand items. Read by kernels at compile time
 # (``ti.loop_config(serialize=runtime.SERIAL_SMALL_LOOPS)``), set by init().
 SERIAL_SMALL_LOOPS = True
 

@@ -88,9 +88,8 @@ def world_capacity(scene, prepared: list[PreparedObject], *, single_scale: bool 
     return WorldCapacity(
         max_bodies=max(64, len(prepared) + 256 * len(breakable)),
         max_boundary_particles=max(1024, particles_now + extra),
-        # 4 per particle of that room: the scenes peak far below it (13 rings with fracture:
-        # 5,693 contacts against 205k), and each contact slot costs ~220 B (the 1M-particle
-        # scaling case peaked at 3.2 GB with 8 per particle).
+        # 4 per particle of that room: the shipped scenes peak far below it, and each
+        # contact slot costs memory on every particle of the largest scenes.
         max_contacts=max(65536, 4 * (particles_now + extra)),
         max_static_boxes=max(4, sum(c.type == "box" for c in scene.colliders)),
     )

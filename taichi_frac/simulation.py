@@ -385,8 +385,8 @@ class Simulation:
             stage_seconds=self.times.as_dict() | {"prepare": round(self.prepare_seconds, 6)},
             dynamics_stage_seconds={k: round(v, 6) for k, v in dynamics_seconds.items()},
             # first: in a new process, the frame that launches the dynamics kernels for the
-            # first time (Taichi's front end runs then, ~1-2 s even with the offline cache
-            # warm); the first impact's frame does the same for the fracture kernels.
+            # first time (Taichi's front end runs then, even with the offline cache warm);
+            # the first impact's frame does the same for the fracture kernels.
             ms_per_frame=dict(mean=float(ms.mean()), max=float(ms.max()), median=float(np.median(ms)),
                               first=float(ms[0]), mean_after_first=float(ms[1:].mean()) if len(ms) > 1 else None,
                               max_after_first=float(ms[1:].max()) if len(ms) > 1 else None),

@@ -16,12 +16,9 @@ vec3 = ti.math.vec3
 #: each one pass over both patches' points. The support gap along a direction never exceeds
 #: the hulls' true separation, so more directions only bring the gap closer to it. The
 #: search resumes from the pair's simplex of the last substep and stops once converged
-#: (``HULL_TOLERANCE``): 1.3 steps a search on average in the unbroken 13 rings, where
-#: restarting each substep from the last normal took all of four. Tilted rings resting on
-#: each other read their hulls' distance to 0.003 mm at the 90th percentile and 0.12 mm at
-#: worst (``test_contact_surface``'s four tori, dropped eight ways); capped at four steps,
-#: 0.48 mm at worst over three of those drops (a resumed simplex far from the new closest
-#: features).
+#: (``HULL_TOLERANCE``), so most searches take one or two steps; the cap bounds the rare
+#: search whose resumed simplex lies far from the new closest features
+#: (``test_contact_surface``'s tilted tori check the distances).
 HULL_ITERATIONS = 6
 
 #: The search runs on the hulls moved apart along the first direction by their overlap
@@ -51,10 +48,10 @@ HULL_CONE = 0.5
 #: closing is gravity's |g| dt^2 alone, a tenth of a radius) and at a slow landing the
 #: hulls decide; a pair that meets on its spheres at speed settles onto its surfaces as it
 #: slows. A patch may stand out of its sphere (``Particles.overhang``; half a radius in the
-#: median for the 13 rings' pieces), so two patches can touch while their spheres are
-#: still apart; between bodies the spheres are tested without the overhangs (with them,
-#: so many more pairs were tested that the unbroken 13 rings took three times as long),
-#: except a pair whose contact carried load in the last substep (``narrowphase._test_pair``).
+#: median for broken pieces), so two patches can touch while their spheres are still
+#: apart; between bodies the spheres are tested without the overhangs (with them, far more
+#: pairs are tested), except a pair whose contact carried load in the last substep
+#: (``narrowphase._test_pair``).
 HULL_APPROACH = 0.5
 
 #: The gap [m] ``hull_pair`` reports for two patches side by side (``HULL_CONE``): too

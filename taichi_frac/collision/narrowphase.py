@@ -438,9 +438,9 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
             level = point.dot(n)
             mu = ti.sqrt(bodies.friction[a] * statics.box_friction[k])
             e = ti.max(bodies.restitution[a], statics.box_restitution[k])
-        # A patch may stand out of its sphere (``Particles.overhang``): a chip's corner 3 mm
-        # past it touched the floor, its contact made or not as the motion bound varied,
-        # and the chip rocked on it for good.
+        # A patch may stand out of its sphere (``Particles.overhang``): a chip's corner past
+        # it touches the floor, and without the overhang its contact comes and goes as the
+        # motion bound varies, so the chip rocks on it for good.
         over = 0.0
         if ti.static(patches):
             over = particles.overhang[i]

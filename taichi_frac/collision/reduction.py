@@ -42,8 +42,8 @@ DIRECTIONS = 8
 
 #: Contacts whose gap lies within this fraction of their sphere's radius of the deepest gap
 #: touch (``_layer``). A dropped contact lies inside the outline kept, which holds it only
-#: to within the spread of the layer's gaps: a curved chip whose outline stood 0.6-0.9 mm
-#: up (a tenth of a radius) lost the three contacts it stood on and rocked for seconds.
+#: to within the spread of the layer's gaps, so a wide band lets a curved chip lose the
+#: contacts it stands on and rock.
 TOUCHING_BAND = 0.02
 
 #: ``contacts.reduce_mark`` values.

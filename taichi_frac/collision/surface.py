@@ -49,26 +49,19 @@ SUPPORT_BAND = 0.1
 #: the other patch at full depth (``pair``): where the two patches lie farther apart than
 #: this along the line between their spheres' centres, the gap is at least that distance
 #: less this reach. Within it, a chip resting on a body over a patch that no sphere of its
-#: own is tested against (a one-tet chip's corners stand 1.4 radii out of its sphere) is
-#: held by the neighbouring patch's plane: chips dropped at 10 m/s onto a slab, at its
-#: middle or its edges, stay under 1.2 mm deep (at a quarter of a radius, one of 40 went
-#: 2.3 mm in). Without a bound, a chip wedged between two ring pieces read 1.8 mm into the
-#: plane of a face whose patch lay 11 mm from the other's; its contacts' depths changed by
-#: up to 1.5 mm from one substep to the next while the bodies all but stood still, and
-#: such chips kept 41 and 51 pieces awake at the end of two of the 13 rings' eight seed
-#: sets (``taichi-frac bench dynamics --contact-only``).
+#: own is tested against (a one-tet chip's corners stand out of its sphere) is held by
+#: the neighbouring patch's plane. Without a bound, a chip wedged between two pieces reads
+#: deep into the plane of a face far from the other patch, its contacts' depths jump from
+#: one substep to the next, and it keeps its neighbours awake.
 PLANE_REACH = 0.5
 
 #: A landing patch (``against``'s ``landing``: approaching a static collider faster than
 #: the restitution threshold) touches at the mean of its points level with its lowest to
 #: within this fraction of the sphere's radius: its lowest vertex, or the middle of a face
-#: or edge lying level. That is where a rigid body struck at one point is struck: a tilted
-#: ring landing without friction then takes the closed-form impulse to 0.2-0.4 % at every
-#: tilt and every grouping n (``bench.bodies.tilted_landing``; the contact page). At the
-#: middle of the points within ``SPOT_BAND`` (a contact area's middle) the spot lay up to
-#: 5 mm nearer the ring's centre: the impulse came out up to 12 % over. Single-scale's
-#: spheres, centred on tets' centroids inside the surface, are up to 6 % off either way,
-#: and the boundary spheres up to 15 %.
+#: or edge lying level. That is where a rigid body struck at one point is struck, so a
+#: tilted ring landing without friction takes the closed-form impulse at every tilt and
+#: grouping n (the contact page measures it); the middle of a contact area would lie nearer
+#: the body's centre and overstate the impulse.
 LANDING_BAND = 0.001
 
 #: A patch of a body of many spheres resting on a static collider (one contact a patch,
@@ -82,8 +75,8 @@ SPOT_BAND = 0.14
 #: Contacts a patch makes at most with one static collider: its manifold, spread over the
 #: points within ``SUPPORT_BAND`` of its deepest (``manifold``). One contact at the
 #: band's mean left a one-sphere chip lying on a face balanced on one point under its
-#: middle: it rocked from corner to corner and never slept (22 of 36 one-tet chips awake
-#: after 3 s); three or four corners hold it like a face.
+#: middle: it rocked from corner to corner and never slept; three or four corners hold it
+#: like a face.
 MANIFOLD_POINTS = 4
 
 #: Bodies of more collision spheres than this make one contact per patch with a static

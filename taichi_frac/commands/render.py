@@ -59,7 +59,7 @@ def write_movie(frames: list[Path], path: Path, fps: float) -> None:
     if path.suffix.lower() == ".gif":
         images = [Image.open(f).convert("RGB") for f in frames]
         # One palette of GIF_COLORS for every frame, from four frames across the movie, and
-        # no dithering: Cycles' noise dithered per frame compresses to about 3.5x the size.
+        # no dithering: Cycles' noise dithered anew each frame compresses poorly.
         width, height = images[0].size
         samples = [images[round(k * (len(images) - 1) / 3)] for k in range(4)]
         sheet = Image.new("RGB", (width, height * len(samples)))

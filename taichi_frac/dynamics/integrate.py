@@ -61,8 +61,7 @@ def _integrate_position(bodies: ti.template(), gravity, b, dt, max_rotation, sle
         # The split impulse's push-out, held to max_correction_speed at every point of the
         # body: each contact asks for at most that speed, but a body overlapped from all
         # sides (a fracture's piece inside its sibling's collision spheres) has push-outs
-        # that fight, and solving them pumped its pseudo velocity to ~4 m/s (a chip driven
-        # 17 mm into the floor in one 4 ms substep).
+        # that fight, and solving them can pump its pseudo velocity far past that speed.
         v_pseudo = bodies.pseudo_linear_velocity[b]
         w_pseudo = bodies.pseudo_angular_velocity[b]
         fastest = v_pseudo.norm() + w_pseudo.norm() * bodies.bounding_radius[b]
@@ -85,7 +84,7 @@ def _integrate_position(bodies: ti.template(), gravity, b, dt, max_rotation, sle
         h = dt / pieces
         for _ in range(pieces):
             # Trapezoidal rotation: predict the end-of-piece w from L, rotate with the mean
-            # (first-order rotation with the start w drifts energy by ~1 % per 1,000 steps).
+            # (first-order rotation with the start w drifts the energy steadily).
             rot_end = quat_to_matrix(quat_integrate(q, w + w_pseudo, h))
             w_end = rot_end @ (bodies.inverse_inertia_body[b] @ (rot_end.transpose() @ momentum))
             q = quat_integrate(q, 0.5 * (w + w_end) + w_pseudo, h)
@@ -97,11 +96,11 @@ def _integrate_position(bodies: ti.template(), gravity, b, dt, max_rotation, sle
         # (2 cm fragment at 0.1 rad/s: 2 mm/s) sleeps like a large one.
         # (whether it sleeps is decided with the bodies it touches: sleep_together)
         # A substep a little over the sleep speeds (a jolt in a settling heap) costs the timer a
-        # few substeps, not all it has: resetting it kept whole heaps awake for one chip's jolts.
+        # few substeps, not all it has: resetting it keeps whole heaps awake for one chip's jolts.
         # A body that stays within STILL_FRACTION of a particle radius of its anchor counts
         # as slow however fast it jitters: a resting contact made one substep and lost the
-        # next drops a piece by one substep of free fall (~9 cm/s) and lifts it back, and
-        # such jolts kept a fifth of the 13 rings' pieces awake to the end.
+        # next drops a piece by one substep of free fall and lifts it back, and such jolts
+        # would keep settled pieces awake to the end.
         spin = w.norm()
         speed = fastest_point_speed(bodies, b)
         still = anchor_drift(bodies, b) < STILL_FRACTION * bodies.mean_particle_radius[b]

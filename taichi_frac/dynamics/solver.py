@@ -283,11 +283,8 @@ def _solve_contact(bodies: ti.template(), contacts: ti.template(), c, dt, positi
     # ground plane it also holds the pseudo-velocity to the gap (no deeper than now), so
     # other bodies' push-outs may not drive a body into the floor: a chip born inside a
     # heavy sibling's spheres, pushed out of them at max_correction_speed, went from
-    # touching the floor to 1.8 physics-particle radii into it in one substep (13 rings,
-    # 150 frames, worst depth 1.81 -> 0.39 radii; with rolling resistance 0.82 -> 0.20).
-    # Not against static boxes: 64 blocks dropped into a box of four walls slept less with
-    # the walls holding too (16 drops, mean 59.3 of 64 asleep against 61.0 without the
-    # hold and 61.3 with the ground's only; two drops at 33 and 43).
+    # touching the floor to well into it in one substep. Not against static boxes: blocks
+    # dropped into a box of four walls settle less well with the walls holding too.
     depth = -gap - allowed_penetration * contacts.radius[c]
     if depth > 0.0 or b == GROUND:
         vp = (_pseudo_velocity_at(bodies, a, arm_a) - _pseudo_velocity_at(bodies, b, arm_b)).dot(n)

@@ -16,9 +16,8 @@ vec3 = ti.math.vec3
 vec4 = ti.math.vec4
 mat3 = ti.math.mat3
 #: Contacts remembered per particle for warm starting. A particle's patch touches the
-#: ground at up to four points and its neighbours' patches besides; with four slots the
-#: contacts past them started cold every substep, and a heap of chips never converged:
-#: 80 of 144 chips asleep 3 s after a drop, against 144 by 2 s with eight.
+#: ground at up to four points and its neighbours' patches besides; contacts past the
+#: slots start cold every substep, and a heap of chips then never settles.
 CACHE_SLOTS = 8
 # Hull searches remembered per particle (``Particles.hull_direction``): a ring's sphere
 # resting on another ring searches with two to five of its spheres.

@@ -137,7 +137,7 @@ def _merge_small(labels: np.ndarray, bonds: np.ndarray, cut: np.ndarray, min_siz
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     adjacent: dict[int, dict[int, int]] = {p: {} for p in sizes}
     if len(pairs):
-        # (pairs as one integer key: np.unique over rows sorts a structured view, ~10x slower)
+        # (pairs as one integer key: np.unique over rows sorts a structured view, far slower)
         span = int(labels.max()) + 1
         keys, counts = np.unique(np.concatenate([pairs[:, 0] * span + pairs[:, 1], pairs[:, 1] * span + pairs[:, 0]]),
                                  return_counts=True)

@@ -119,7 +119,7 @@ def _walk_neighbors(
             begin = offsets[i]
         slot = begin
         # Plain loops over the 27 cells, not ti.static: unrolled, the 27 copies cost
-        # Taichi's front end ~0.25 s per kernel in every new process.
+        # Taichi's front end time in every new process.
         for dz, dy, dx in ti.ndrange((-1, 2), (-1, 2), (-1, 2)):
             cx = cell_of[i, 0] + dx
             cy = cell_of[i, 1] + dy
@@ -234,7 +234,7 @@ def gradient_at(points: ti.template(), volumes: ti.template(), i, begin, end, in
         # so grad u = (sum V (u_j - u_i) (x) grad W) L^T = G M^-1, exact for linear u.
         # M is symmetric PSD (grad W is parallel to x_j - x_i); its eigenvalue ratio
         # guards the inverse (f64 cofactor formula). The extreme eigenvalues in closed
-        # form: Jacobi sweeps for them took half the corrected kernel's time.
+        # form: Jacobi sweeps for them would cost as much as the rest of the kernel.
         scale = moment.trace()
         fallback = 1
         if scale > 0.0:

@@ -216,8 +216,8 @@ class FractureStage:
         rec = self.records[body]
         times = self.times
         t = time.perf_counter()
-        # In the body's frame at the impact's substep: the body may move far by the frame's
-        # end (a struck glass wall, 17 mm).
+        # In the body's frame at the impact's substep: a struck body may move far by the
+        # frame's end.
         points_b, normals_b = impacts["point_body"][rows], impacts["normal_body"][rows]
         force_b = impacts["force_body"][rows]
         analysis = analyze_impact(rec.model, points_b, normals_b, force_b, rec.material, rec.fracture,

@@ -40,8 +40,8 @@ def tet_mass_properties(vertices: np.ndarray, tets: np.ndarray, density, volumes
     q = p - com  # about the centre of mass: no large parallel-axis cancellation
     s = corner_sum(q)
     w = m / 20.0
-    # sum_t w_t (sum_i q_ti q_ti^T + s_t s_t^T) as two (3,N) @ (N,3) products (BLAS; the
-    # per-tet einsum took a third of a fragment's model build).
+    # sum_t w_t (sum_i q_ti q_ti^T + s_t s_t^T) as two (3,N) @ (N,3) products: BLAS, far
+    # cheaper than a per-tet einsum in a fragment's model build.
     flat = q.reshape(-1, 3)
     c = (flat * np.repeat(w, 4)[:, None]).T @ flat + (s * w[:, None]).T @ s
     inertia = np.trace(c) * np.eye(3) - c

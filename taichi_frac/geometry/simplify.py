@@ -143,7 +143,7 @@ def relax_tangentially(mesh: trimesh.Trimesh, iterations: int = 4, step: float =
     sharp = mesh.face_adjacency_angles > np.radians(crease_deg)
     movable[np.unique(mesh.face_adjacency_edges[sharp])] = False
     # The copy's outermost vertex on each axis stays too: sliding off a tip (an ear, a horn)
-    # shrank the cow's width by 1.5 %.
+    # would shrink the body's extents.
     movable[np.concatenate([mesh.vertices.argmin(axis=0), mesh.vertices.argmax(axis=0)])] = False
     cos_turn = np.cos(np.radians(max_turn_deg))
     surface = reference or mesh

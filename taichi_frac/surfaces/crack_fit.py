@@ -46,8 +46,8 @@ FITTED_PIECE_TETS = 100
 
 #: Where smaller pieces are fitted too (``cut_render_solid``'s ``fit_min_tets``), a piece of
 #: fewer than FITTED_PIECE_TETS tets counts this much of a larger one's relative volume error:
-#: the larger pieces keep their bound first (counted alike, the stretches shifted for pieces
-#: of 30-99 tets left a glass-wall piece of over 100 tets 4.6 % off its tets' volume).
+#: the larger pieces keep their bound first (counted alike, stretches shifted for the small
+#: pieces can push a large neighbour past its bound).
 SMALL_PIECE_WEIGHT = 0.1
 
 #: No second cut when every fitted piece is already within this share of its tets' volume.

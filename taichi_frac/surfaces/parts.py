@@ -46,9 +46,8 @@ OVERREACH_FACTOR = 5.0
 GAINED_VOLUME_SHARE = 0.25
 GAINED_VOLUME_FACTOR = 10.0
 #: Rough crack faces move a piece's volume by their noise's mean over its faces: at most
-#: this share of the amplitude times its surface area is not counted as gained (measured
-#: 0.17 of it over the crack faces alone on the test box's quarters). Without it, a piece
-#: of 14 tets where rough cracks meet read as overfull and failed three neighbours with it.
+#: this share of the amplitude times its surface area is not counted as gained, so a small
+#: piece where rough cracks meet does not read as overfull and fail its neighbours.
 NOISE_VOLUME_SHARE = 0.25
 
 
