@@ -80,6 +80,17 @@ def cube_and_sphere(scene):
     return cube, sphere
 
 
+def statue(scene):
+    """A porcelain block landing flat at 4.43 m/s (a 1 m drop), which holds."""
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(-0.6, 0.0, 0.2))
+    block = bpy.context.active_object
+    block.name = "Statue"
+    block.scale = (0.1, 0.1, 0.15)
+    block.taichi_frac_sim.role = "BREAKABLE"
+    block.taichi_frac_sim.linear_velocity = (0.0, 0.0, -4.43)
+    return block
+
+
 def cube_world_corners(cube):
     return np.array([tuple(cube.matrix_world @ v.co) for v in cube.data.vertices])
 
@@ -92,6 +103,7 @@ def pieces_of(scene, cache_path):
 def section_simulate(workdir: Path):
     scene = empty_scene(workdir)
     cube, sphere = cube_and_sphere(scene)
+    block = statue(scene)
     corners = cube_world_corners(cube)
     start = time.perf_counter()
     result = bpy.ops.taichi_frac.simulate(wait=True)
@@ -103,8 +115,24 @@ def section_simulate(workdir: Path):
     broken = [o for o in pieces if o.taichi_frac.generation >= 1]
     check(len(broken) >= 2, f"{len(broken)} broken pieces came back (expected 2 or more)")
     check(cube.hide_viewport and cube.hide_render, "the authored cube is not hidden in viewport and renders")
-    check(not sphere.hide_viewport and not sphere.hide_render, "the rigid sphere was hidden")
+    # The rigid sphere and the block that held are in the cache too (moving): hidden as well.
+    check(sphere.hide_viewport and sphere.hide_render, "the authored rigid sphere shows beside its cache copy")
     check(cube.taichi_frac_sim.result_state == "BROKE", f"cube result {cube.taichi_frac_sim.result_state}")
+    # The block that held: the panel's numbers, from the run's stats file.
+    held = block.taichi_frac_sim
+    check(held.result_state == "UNBROKEN", f"statue result {held.result_state}")
+    check(block.hide_viewport and block.hide_render, "the authored statue shows beside its cache copy")
+    check(0.0 < held.result_peak_stress < held.result_strength == 35.0e6,
+          f"statue peak {held.result_peak_stress} strength {held.result_strength}")
+    check(held.result_frame >= scene.frame_start, f"statue peak frame {held.result_frame}")
+    check(held.result_break_speed > held.result_impact_speed > 4.0,
+          f"statue speeds {held.result_impact_speed} -> {held.result_break_speed}")
+    check(abs(held.result_point[2]) < 0.12 and "MPa" in held.result_note, f"statue point {tuple(held.result_point)}")
+    stats = json.loads(Path(os.path.splitext(scene.taichi_frac_sim.cache_path)[0] + ".stats.json").read_text())
+    entry = next(e for e in stats["unbroken"] if e["name"] == "Statue")
+    check(abs(entry["peak_stress"] - held.result_peak_stress) <= 1e-6 * entry["peak_stress"],
+          "the panel's peak differs from the stats file's")
+    report["statue"] = entry
     # The cube's cache body at the start frame is where the authored cube was: its mesh's
     # world corners match the authored corners (the export placed the centre of mass).
     root = [o for o in pieces if o.taichi_frac.generation == 0 and o.taichi_frac.prim_path.split("/")[-1]

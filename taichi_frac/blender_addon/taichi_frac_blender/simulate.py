@@ -1,6 +1,6 @@
 """Simulate from Blender: export the authored scene, run ``taichi-frac run`` in its own
-process, import its cache back (or update it in place) and hide the authored breakable
-objects while their pieces show.
+process, import its cache back (or update it in place) and hide the authored breakable and
+rigid objects while the cache shows them (their pieces, or themselves moving).
 
 ``bpy.ops.taichi_frac.simulate()`` from the panel is modal: the status bar shows the frame
 and the pieces so far, Esc stops the run (the command keeps a valid cache of the frames
@@ -89,9 +89,11 @@ class Job:
         return ("WARNING" if result.warnings and code != 130 else "INFO"), message
 
     def _hide_authored(self) -> None:
-        for name in self.exported.breakable:
+        """Hide the authored bodies: the cache holds each of them (its pieces, or the body
+        itself moving), which shows instead. Static colliders stay."""
+        for name in self.exported.names.values():
             obj = self.scene.objects.get(name)
-            if obj is not None:
+            if obj is not None and obj.taichi_frac_sim.role in ("BREAKABLE", "RIGID"):
                 obj.hide_viewport = True
                 obj.hide_render = True
                 obj.taichi_frac_sim.hidden_by_simulation = True
