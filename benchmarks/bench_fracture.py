@@ -43,12 +43,12 @@ def main() -> None:
     args = parser.parse_args()
     runtime.init(args.arch)
 
-    from taichi_frac.bench.fracture_ring import ring_model
+    from tests.support.fracture_ring import struck_ring_model
     from taichi_frac.fracture.cracks import analyze_impact
     from taichi_frac.fracture.fragments import make_fragments, split_body
     from taichi_frac.options import FractureOptions, Material, ParticleOptions
 
-    model = ring_model()
+    model = struck_ring_model()
     material = Material(name="ring", density=2400.0, young_modulus=70e9, poisson_ratio=0.2, tensile_strength=1e6)
     print(f"ring: {model.tet_count} physics particles, {model.surface_particle_count} surface, "
           f"{model.boundary_particle_count} boundary, {len(model.bonds)} bonds; arch {args.arch}")

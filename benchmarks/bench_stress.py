@@ -1,5 +1,5 @@
 """Speed vs error of the contact stress analysis: the command-line front of
-``taichi_frac.bench.sph`` (its docstring describes the block, the load and the error).
+``benchmarks.sph`` (its docstring describes the block, the load and the error).
 
     .venv/bin/python benchmarks/bench_stress.py [--arch cpu] [--repeat 3] [--sizes 10,17,27,43] [--no-tets]
 
@@ -10,7 +10,7 @@ import os
 
 os.environ.setdefault("TI_LOG_LEVEL", "error")
 
-from taichi_frac.bench.sph import main  # noqa: E402
+from benchmarks.sph import main  # noqa: E402
 
 if __name__ == "__main__":
     main()

@@ -1,4 +1,4 @@
-"""The pybullet reference of ``bench dynamics`` (taichi_frac/bench/pybullet_ref.py).
+"""The pybullet reference of ``bench dynamics`` (benchmarks/pybullet_ref.py).
 
 - without pybullet: our scene description -> pybullet bodies (masses, inertia, poses,
   quaternion order, coefficients, the fragment pile) against closed forms and hand values;
@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from taichi_frac.bench import pybullet_ref
-from taichi_frac.bench.common import SCENES
+from benchmarks import pybullet_ref
+from benchmarks.common import SCENES
 from taichi_frac.scenes import load_scene
 
 RING_MAJOR, RING_MINOR = 0.1, 0.025  # m, scenes/thirteen_rings.toml's torus

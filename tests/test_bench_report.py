@@ -1,4 +1,4 @@
-"""The benchmark report's machinery on tiny inputs (taichi_frac.bench): the markdown tables
+"""The benchmark report's machinery on tiny inputs (benchmarks/): the markdown tables
 and PNG plots are written, and their numbers come from the run (particle counts equal the
 models'), never typed in. No wall-clock time is asserted.
 
@@ -14,8 +14,8 @@ import re
 import numpy as np
 import pytest
 
-from taichi_frac.bench import grouping, report, scaling, sph, stability, tables
-from taichi_frac.bench.common import BenchContext, Progress
+from benchmarks import grouping, report, scaling, sph, stability, tables
+from benchmarks.common import BenchContext, Progress
 from taichi_frac.options import FractureOptions, ParticleOptions
 from taichi_frac.scenes import Collider, Scene, SceneObject, SimulationOptions
 from support.dynamics import fresh_world

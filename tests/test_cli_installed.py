@@ -52,10 +52,31 @@ def installed(tmp_path_factory):
     return site, work, env
 
 
-def test_bench_help_runs_outside_a_checkout(installed):
+def test_the_installed_package_holds_no_benchmarks(installed):
+    """What the wheel installs (``[tool.setuptools.packages.find]``) is the simulator alone:
+    the benchmark report stays in the checkout's benchmarks/ folder."""
+    from setuptools import find_packages
+
+    site, work, env = installed
+    find = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]["find"]
+    packages = find_packages(str(ROOT), include=find["include"])
+    assert "taichi_frac" in packages and not [p for p in packages if "bench" in p], packages
+    assert not list(site.rglob("*bench*.py")) or all("commands" in p.parts for p in site.rglob("*bench*.py"))
+
+
+def test_bench_outside_a_checkout_says_where_the_benchmarks_are(installed):
     site, work, env = installed
     done = subprocess.run([str(ENTRY), "bench", "dynamics", "--help"], cwd=work, env=env, capture_output=True,
                           text=True, timeout=300)
+    assert done.returncode == 2
+    assert "source checkout" in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr
+
+
+def test_bench_in_the_checkout_finds_its_targets():
+    if not ENTRY.exists():
+        pytest.skip(f"no taichi-frac entry point beside {sys.executable} (pip install -e . makes it)")
+    done = subprocess.run([str(ENTRY), "bench", "dynamics", "--help"], cwd=ROOT, capture_output=True, text=True,
+                          timeout=300)
     assert done.returncode == 0, done.stderr
     assert "--scene" in done.stdout and "thirteen_rings" in done.stdout
 

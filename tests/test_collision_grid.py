@@ -8,7 +8,7 @@ import taichi as ti
 from taichi_frac.collision import broadphase
 from taichi_frac.collision.grid import CELLS_PER_SPHERE, body_grid
 from taichi_frac.dynamics import stages
-from taichi_frac.bench.bodies import single_tet_model
+from support.bodies import single_tet_model
 from support.dynamics import fresh_world, with_spheres
 
 

@@ -19,11 +19,11 @@ from taichi_frac.geometry.contact_patches import patches_of
 from taichi_frac.model import build_body_model
 from taichi_frac.scenes import BUILTIN_SCENE_DIR, euler_deg_to_quaternion, load_scene
 from taichi_frac.simulation import Simulation
-from taichi_frac.bench.tables import other_seeds
-from taichi_frac.bench.bodies import (DENSITY, box_model, drop_heap, heap_asleep, ring_chips, ring_model,
+from benchmarks.tables import other_seeds
+from support.bodies import (DENSITY, box_model, drop_heap, heap_asleep, ring_chips, torus_model,
                                       settle_and_hold, single_tet_model, stack_cubes, stack_rings, tilted_landing,
                                       tilted_rebound)
-from taichi_frac.bench import rigid_drop
+from support import rigid_drop
 from support.dynamics import fresh_world, rotation
 
 #: Rest heights within this of exact [m] (the bound surface contact is held to).
@@ -74,7 +74,7 @@ def test_cube_on_its_edge_rests_at_half_the_face_diagonal():
 
 
 def test_torus_rests_flat_at_its_minor_radius():
-    model = ring_model()
+    model = torus_model()
     assert -model.vertices[:, 2].min() == pytest.approx(0.025, abs=1e-9)  # (a vertex on the true bottom)
     state = _settle(model, (0, 0, 0.05), (1, 0, 0, 0), 1.5, restitution=0.2)
     assert state["position"][0][2] == pytest.approx(0.025, abs=REST_TOLERANCE)
@@ -95,7 +95,7 @@ def test_a_tilted_ring_lands_with_the_closed_form_impulse(group):
     (a spot at the middle of the points within 0.14 of the sphere's radius of the
     lowest read 12 % over at 20 degrees, with n = 4 and with n = 12). The approach speed
     it reads is free fall's."""
-    ring = ring_model()
+    ring = torus_model()
     model = build_body_model(ring.vertices, ring.tets, DENSITY, boundary_group_size=group)
     for degrees in (20.0, 30.0):
         world = fresh_world(surface_contact=True)
@@ -137,7 +137,7 @@ def test_a_tilted_ring_rebounds_as_the_event_driven_reference(degrees):
     contacts' rebound is the event-driven rigid body's (``tilted_rebound``) within 2 %
     (+0.3 / +0.7 % measured; sphere contacts, whose spheres stick out of the surface, read
     +12 / +39 %). Rolling resistance is off: it takes a further 1-2 % of this rebound."""
-    ring = ring_model()
+    ring = torus_model()
     model = build_body_model(ring.vertices, ring.tets, DENSITY)
     world = fresh_world(surface_contact=True, rolling_resistance=0.0)
     rebound, reference = tilted_rebound(world, model, math.radians(degrees), substep=1e-4)
@@ -176,7 +176,7 @@ def test_a_body_whose_coarse_patches_fold_keeps_the_finer_grouping():
     meshed cube's patches stay flat and it takes the coarse n."""
     from taichi_frac.model import COARSE_MIN_FACETED
 
-    ring = ring_model()
+    ring = torus_model()
     uniform = build_body_model(ring.vertices, ring.tets, DENSITY, boundary_group_size=12)
     faceted = np.mean(np.any(np.linalg.norm(uniform.boundary_patches.facets, axis=2) > 0.5, axis=1))
     assert faceted < COARSE_MIN_FACETED - 0.3
@@ -291,7 +291,7 @@ def test_a_resting_ring_stands_on_a_few_contacts_that_carry_its_weight():
     m g dt per substep, within 2 %: static equilibrium) and hold it at its rest height."""
     from taichi_frac.collision import reduction
 
-    model = ring_model()
+    model = torus_model()
     world = fresh_world(surface_contact=True, sleep_time=100.0)
     world.add_ground(0.0, restitution=0.0)
     body = world.add_body(model, (0, 0, 0.0255), restitution=0.0)
@@ -327,7 +327,7 @@ def test_a_ring_resting_on_a_ring_stands_on_a_few_contacts_that_carry_its_weight
     within 2 %: static equilibrium) and hold it one tube diameter up (within 1 mm)."""
     from taichi_frac.collision import reduction
 
-    model = ring_model()
+    model = torus_model()
     world = fresh_world(surface_contact=True, sleep_time=100.0)
     lower, upper = stack_rings(world, model, 2)
     for _ in range(50):
@@ -354,7 +354,7 @@ def test_rings_stacked_flat_rest_on_their_tubes():
     hulls' distance (``hulls.hull_pair``). On their spheres each ring stands about 5 mm
     higher than the one below."""
     world = fresh_world(surface_contact=True)
-    rings = stack_rings(world, ring_model(), 3)
+    rings = stack_rings(world, torus_model(), 3)
     settled, state = settle_and_hold(world, rings, 50, 25)
     for k in range(3):
         assert state["position"][k][2] == pytest.approx(0.025 + 0.05 * k, abs=(k + 1) * REST_TOLERANCE)
@@ -397,7 +397,7 @@ def test_contacts_between_resting_rings_are_their_patches_hull_distance():
     they did not touch)."""
     world = fresh_world(surface_contact=True)
     world.add_ground(0.0, restitution=0.0)
-    ring = ring_model()
+    ring = torus_model()
     for position, euler_deg in (((0, 0, 0.03), (0, 0, 0)), ((0.06, 0, 0.10), (0, 25, 0)),
                                 ((-0.03, 0.05, 0.17), (34, 10, 0)), ((0.02, -0.05, 0.24), (7, 13, 0))):
         world.add_body(ring, position, euler_deg_to_quaternion(euler_deg), restitution=0.0)
@@ -441,7 +441,7 @@ def test_ring_rests_on_a_slab_at_its_minor_radius():
     at the slab's top plus its minor radius, within 0.5 mm."""
     mesh = tetrahedralize(trimesh.creation.box((0.4, 0.4, 0.05)), target_tets=1500)
     slab = build_body_model(mesh.vertices, mesh.tets, 2400.0)
-    model = ring_model()
+    model = torus_model()
     world = fresh_world(surface_contact=True)
     world.add_ground(0.0, restitution=0.0)
     world.add_body(slab, (0, 0, 0.025), restitution=0.0)
@@ -539,7 +539,7 @@ def test_patches_of_several_bodies_at_once_are_each_bodys_own():
     patches side by side, and ``patches_of`` keeps them as the models' own patches."""
     mesh = tetrahedralize(trimesh.creation.box((0.1, 0.1, 0.1)), target_tets=60)
     models = [box_model(0.1, 0.1, 0.1), build_body_model(mesh.vertices, mesh.tets, 2400.0), single_tet_model(),
-              ring_model()]
+              torus_model()]
     together = contact_patches_many([(m, m.boundary_member_offsets, m.boundary_members) for m in models])
     for model, got in zip(models, together):
         alone = contact_patches(model, model.boundary_member_offsets, model.boundary_members)

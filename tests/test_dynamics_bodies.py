@@ -7,7 +7,7 @@ import pytest
 
 from taichi_frac.dynamics import CapacityError
 from taichi_frac.dynamics.state import MAX_CLUSTERS
-from taichi_frac.bench.bodies import single_tet_model
+from support.bodies import single_tet_model
 from support.dynamics import fresh_world, with_spheres
 
 

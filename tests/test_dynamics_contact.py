@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from taichi_frac.bench.bodies import box_model, ring_model, single_tet_model, sphere_model
+from support.bodies import box_model, torus_model, single_tet_model, sphere_model
 from support.dynamics import fresh_world, kinetic_energy, lowest_point, with_spheres
 
 G = 9.81
@@ -76,7 +76,7 @@ def test_rolling_sphere_slows_as_rolling_resistance_says(rolling):
 
 def test_ring_dropped_on_ground_comes_to_rest():
     world = fresh_world()
-    model = ring_model()
+    model = torus_model()
     world.add_ground(0.0, friction=0.5, restitution=0.2)
     tilt = (math.cos(0.15), math.sin(0.15), 0.0, 0.0)
     body = world.add_body(model, (0, 0, 0.4), tilt, (0.3, 0, 0), (0, 0, 1.0))
@@ -168,7 +168,7 @@ def test_struck_resting_body_is_not_driven_into_the_ground():
 
 def test_five_stacked_rings_stay_stacked():
     world = fresh_world()
-    model = ring_model()
+    model = torus_model()
     world.add_ground(0.0)
     thickness = -2 * lowest_point(model)
     bodies = [world.add_body(model, (0, 0, (k + 0.5) * thickness + 0.002 * (k + 1))) for k in range(5)]

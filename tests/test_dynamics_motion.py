@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from taichi_frac.bench.bodies import box_model, sphere_model
+from support.bodies import box_model, sphere_model
 from support.dynamics import fresh_world, rotation
 
 G = 9.81

@@ -4,7 +4,7 @@ ring's fragment counts against crack_count."""
 import numpy as np
 import pytest
 
-from taichi_frac.bench.fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL, ring_model
+from support.fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL, struck_ring_model
 from taichi_frac.fracture.cracks import (CrackPlane, RingCrack, analyze_impact, cut_bonds, group_neighbors,
                                         tangent_frame)
 from taichi_frac.fracture.fragments import split_body
@@ -53,9 +53,9 @@ def test_many_planes_cut_what_each_cuts_alone(plane_count):
     """cut_bonds with many crack planes at once (their sides packed as the bits of one
     integer per particle up to 62 planes, compared plane by plane above) cuts exactly the
     union of what each plane cuts alone, on the ring's bonds."""
-    from taichi_frac.bench.fracture_ring import ring_model
+    from support.fracture_ring import struck_ring_model
 
-    model = ring_model()
+    model = struck_ring_model()
     rng = np.random.default_rng(plane_count)
     planes = []
     for _ in range(plane_count):
@@ -83,7 +83,7 @@ def test_ring_crack_cuts_the_bonds_across_its_sphere():
     assert cut_bonds(model, [RingCrack(point=top, radius=0.3, peak_stress=1.0)]).tolist() == [True]
     assert cut_bonds(model, [RingCrack(point=top, radius=0.6, peak_stress=1.0)]).tolist() == [False]  # both in
     assert cut_bonds(model, [RingCrack(point=top + 5.0, radius=0.6, peak_stress=1.0)]).tolist() == [False]
-    ring = ring_model()
+    ring = struck_ring_model()
     centre, radius = np.array([0.1, 0.0, 0.0]), 0.03
     split = split_body(ring, [RingCrack(point=centre, radius=radius, peak_stress=1.0)],
                        FractureOptions(min_fragment_particles=1))
@@ -102,7 +102,7 @@ def test_ring_cracks_cut_the_wedges_into_rings():
     """ring_crack_count = m adds m spheres about each cracking contact's analysis point,
     radii crack_length x j / (m + 1), after its n planes; they cut the planar cracks'
     pieces further, and 0 (the default) changes nothing."""
-    model = ring_model()
+    model = struck_ring_model()
     counts = {}
     for rings in (0, 2):
         opts = FractureOptions(crack_count=3, crack_length=0.3, seed=0, ring_crack_count=rings, stress_model="sph")
@@ -121,7 +121,7 @@ def test_ring_cracks_cut_the_wedges_into_rings():
 
 
 def test_rankine_and_one_group_is_the_physical_answer():
-    model = ring_model()
+    model = struck_ring_model()
     strong = Material(name="strong", density=2400.0, young_modulus=70e9, poisson_ratio=0.2, tensile_strength=1e9)
     none = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, strong, FractureOptions(crack_count=3))
     assert not none.any_crack and none.peak_principal_stress < 1e9
@@ -146,7 +146,7 @@ def test_rankine_and_one_group_is_the_physical_answer():
 def test_group_gradient_uses_only_its_sector():
     """A group's stress equals an independent plain-sum gradient over that sector's
     neighbours (recomputed here from the neighbour list and the sector rule)."""
-    model = ring_model()
+    model = struck_ring_model()
     opts = FractureOptions(crack_count=3, seed=4)
     a = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, RING_MATERIAL, opts)
     i = int(a.analysis_particle[0])
@@ -164,7 +164,7 @@ def test_group_gradient_uses_only_its_sector():
 
 
 def test_several_contacts_analysed_together_give_the_union():
-    model = ring_model()
+    model = struck_ring_model()
     second = np.array([-0.125, 0.0, 0.0])
     opts = FractureOptions(crack_count=2, crack_length=0.05)
     both = analyze_impact(model, np.stack([RING_CONTACT, second]), np.stack([RING_NORMAL, -RING_NORMAL]),
@@ -180,7 +180,7 @@ def test_several_contacts_analysed_together_give_the_union():
 
 
 def ring_counts(crack_counts, seed=0):
-    model = ring_model()
+    model = struck_ring_model()
     counts = []
     for n in crack_counts:
         opts = FractureOptions(crack_count=n, crack_length=0.3, seed=seed, stress_model="sph")
@@ -201,7 +201,7 @@ def test_local_analysis_of_a_crack_of_given_length_needs_no_full_field():
     """With crack_length given, a cracking impact's analysis stays local: the crack planes
     (origin, normal, extent) are those of the full field, the stress is NaN away from the
     contact; the simulation computes the whole field only when the cracks split the body."""
-    model = ring_model()
+    model = struck_ring_model()
     material = Material(name="m", density=2400.0, young_modulus=70e9, poisson_ratio=0.2, tensile_strength=1.0e6)
     options = FractureOptions(crack_count=3, seed=4, crack_length=0.04)
     full = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, material, options)
@@ -221,7 +221,7 @@ def test_local_first_analysis_matches_the_full_field(strength):
     the particles within reach of the contact: the same analysis point, Rankine decision,
     cracks and stress there as the full field; the whole field, and the sector stresses of
     step 9, only when it cracks."""
-    model = ring_model()
+    model = struck_ring_model()
     material = Material(name="m", density=2400.0, young_modulus=70e9, poisson_ratio=0.2, tensile_strength=strength)
     options = FractureOptions(crack_count=3, seed=4)
     full = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, material, options)
@@ -256,7 +256,7 @@ def test_neighbor_rows_of_a_piece_are_its_restricted_lists_rows():
                                                 smoothing_length)
     from taichi_frac.model import build_fragment_model
 
-    root = ring_model()
+    root = struck_ring_model()
     options = FractureOptions(crack_count=3, seed=4, crack_length=0.04)
     h = smoothing_length(root, options)
     piece = build_fragment_model(root, np.arange(300, root.tet_count, dtype=np.int64), boundary_group_size=4)
@@ -289,7 +289,7 @@ def test_fused_stress_kernel_equals_the_three_kernels(corrected):
     from taichi_frac.fracture.fused import stress_at
     from taichi_frac.fracture.stress import stress_from_gradient
 
-    model = ring_model()
+    model = struck_ring_model()
     material = RING_MATERIAL
     h = smoothing_length(model, FractureOptions())
     points = np.ascontiguousarray(model.particle_position)

@@ -4,7 +4,7 @@ a one-tet fragment, refracture with composed source_tet."""
 import numpy as np
 import pytest
 
-from taichi_frac.bench.fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL, corner_cracks, ring_model
+from support.fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL, corner_cracks, struck_ring_model
 from taichi_frac.fracture.cracks import CrackPlane, analyze_impact
 from taichi_frac.fracture.fragments import make_fragments, split_body
 from taichi_frac.kinematics.quaternion import quaternion_matrix
@@ -57,7 +57,7 @@ def assert_conserved(parent, frags, pose, dropped_mass=0.0):
 
 @pytest.fixture(scope="module")
 def ring_split():
-    model = ring_model()
+    model = struck_ring_model()
     opts = FractureOptions(crack_count=3, crack_length=0.3, seed=0)
     analysis = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, MATERIAL, opts)
     split = split_body(model, analysis, opts)
@@ -183,7 +183,7 @@ def test_pieces_built_together_are_the_pieces_built_alone(coarse):
 
     from taichi_frac.model import BodyModel, build_body_model, build_fragment_model, build_fragment_models
 
-    model = ring_model()
+    model = struck_ring_model()
     if coarse:
         model = build_body_model(model.vertices, model.tets, model.density, coarse_group_size=coarse)
         assert model.boundary_group_size == coarse
@@ -222,7 +222,7 @@ def test_pieces_are_grouped_by_their_own_size():
     grouped like its parent keeps the parent's groups away from the cracks."""
     from taichi_frac.model import COARSE_MIN_SPHERES, build_body_model, build_fragment_models
 
-    ring = ring_model()
+    ring = struck_ring_model()
     parent = build_body_model(ring.vertices, ring.tets, ring.density, coarse_group_size=12)
     opts = FractureOptions(crack_count=5, crack_length=0.3, seed=0, min_fragment_particles=1)
     analysis = analyze_impact(parent, RING_CONTACT, RING_NORMAL, RING_FORCE, MATERIAL, opts)
@@ -249,7 +249,7 @@ def test_pieces_are_grouped_by_their_own_size():
 
 @pytest.mark.parametrize("policy", ["merge", "debris", "drop"])
 def test_small_fragment_policies(policy):
-    model = ring_model()
+    model = struck_ring_model()
     tet = int(model.surface_particles[0])
     cracks = corner_cracks(model, tet)
     opts = FractureOptions(min_fragment_particles=8, small_fragment_policy=policy)
@@ -274,7 +274,7 @@ def test_small_fragment_policies(policy):
 
 
 def test_one_tet_fragment_is_a_valid_body():
-    model = ring_model()
+    model = struck_ring_model()
     tet = int(model.surface_particles[0])
     opts = FractureOptions(min_fragment_particles=1)
     split = split_body(model, corner_cracks(model, tet), opts)
@@ -300,7 +300,7 @@ def test_big_piece_mass_by_subtraction_matches_integration(generations):
     generation's parent is itself a subtracted piece)."""
     from taichi_frac.model import build_fragment_model
 
-    model = ring_model()
+    model = struck_ring_model()
     piece = model
     for g in range(generations):
         keep = np.arange(40, piece.tet_count)  # a chip of 40 tets off the front
@@ -325,7 +325,7 @@ def test_connected_tets_match_scipy(cut_fraction):
 
     from taichi_frac.geometry.components import connected_tets
 
-    model = ring_model()
+    model = struck_ring_model()
     cut = np.random.default_rng(int(100 * cut_fraction)).random(len(model.bonds)) < cut_fraction
     kept = model.bonds[~cut]
     graph = sp.coo_matrix((np.ones(len(kept)), (kept[:, 0], kept[:, 1])), shape=(model.tet_count,) * 2)

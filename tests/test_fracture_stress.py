@@ -3,7 +3,7 @@ contact_field chain against the exact stress of the same displacement field."""
 
 import numpy as np
 import pytest
-from taichi_frac.bench.fracture_ring import jittered_block
+from support.fracture_ring import jittered_block
 
 from taichi_frac.fracture import (
     contact_field,

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from taichi_frac.bench.meshes import overlapping_shells, shared_meshes_dir
+from benchmarks.meshes import overlapping_shells, shared_meshes_dir
 from taichi_frac.geometry import prepare as prepare_module
 from taichi_frac.geometry import repair as repair_module
 from taichi_frac.geometry import simplify as simplify_module
@@ -362,7 +362,7 @@ def test_cow_keeps_its_tail():
     path = SHARED / "cow.obj"
     if not path.exists():
         pytest.skip(f"{path} is not there (the public test meshes live beside the checkout)")
-    from taichi_frac.bench.meshes import _scale_for
+    from benchmarks.meshes import _scale_for
     from taichi_frac.geometry.meshio_in import read_surface
 
     scale = _scale_for(str(path))
@@ -385,7 +385,7 @@ def test_teapot_meets_the_particle_target():
     path = SHARED / "teapot.obj"
     if not path.exists():
         pytest.skip(f"{path} is not there (the public test meshes live beside the checkout)")
-    from taichi_frac.bench.meshes import _scale_for
+    from benchmarks.meshes import _scale_for
 
     _, report = prepare_body(str(path), scale=_scale_for(str(path)), repair=True,
                              particles=ParticleOptions(target_particles=5000), use_cache=False, time_limit=120)
@@ -428,7 +428,7 @@ def test_cache_read_back_sees_the_whole_shape_then_every_piece(tmp_path):
     """The bench's render check on a hand-built cache: a 0.2 x 0.1 x 0.05 m box (Y-up stage in
     centimetres) breaks at frame 3 into two halves; the box at the first frame and the halves'
     volume at the last are the box's, a piece that ends (is hidden) no longer counts."""
-    from taichi_frac.bench.meshes import _read_back
+    from benchmarks.meshes import _read_back
     from taichi_frac.io import CacheWriter
 
     whole = trimesh.creation.box((0.2, 0.1, 0.05))

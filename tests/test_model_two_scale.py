@@ -247,7 +247,7 @@ def test_collision_centres_kernel_matches_numpy(ring):
     """The collision centres' kernel (geometry.collision_centres) against the formula in
     numpy: on the ring's every group, and on the pieces of a split built together (each
     piece's inward rays may cross only its own faces) against each piece alone."""
-    from taichi_frac.bench.fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL
+    from support.fracture_ring import RING_CONTACT, RING_FORCE, RING_NORMAL
     from taichi_frac.fracture.cracks import analyze_impact
     from taichi_frac.fracture.fragments import split_body
     from taichi_frac.geometry.collision_centres import contact_sphere_centres

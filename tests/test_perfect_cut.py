@@ -4,7 +4,7 @@ flat cut of a body's tets (bench/perfect_cut.py), against closed forms on a box.
 import numpy as np
 import trimesh
 
-from taichi_frac.bench.perfect_cut import perfect_cut
+from benchmarks.perfect_cut import perfect_cut
 from taichi_frac.surfaces.checks import outside_distance, signed_volume
 from taichi_frac.surfaces.solid import render_solid_from_surface
 from taichi_frac.geometry.topology import boundary_faces

@@ -192,9 +192,9 @@ def test_every_model_cracks_the_ring_with_the_asked_crack_count(model):
     from taichi_frac.fracture.cracks import CrackPlane, analyze_impact
     from taichi_frac.options import Material
 
-    from taichi_frac.bench import fracture_ring as ring
+    from support import fracture_ring as ring
 
-    body = ring.ring_model()
+    body = ring.struck_ring_model()
     material = Material(density=2400.0, young_modulus=E, poisson_ratio=NU, tensile_strength=1e6)
     planes = {}
     for count in (1, 3):
@@ -214,10 +214,10 @@ def test_the_fem_model_factorises_a_body_once():
     from taichi_frac.fracture.fem import elastic_body_of
     from taichi_frac.options import Material
 
-    from taichi_frac.bench import fracture_ring as ring
+    from support import fracture_ring as ring
 
     material = Material(density=2400.0, young_modulus=E, poisson_ratio=NU, tensile_strength=1e6)
-    body = ring.ring_model()
+    body = ring.struck_ring_model()
     assert elastic_body_of(body, material) is elastic_body_of(body, material)
 
 

@@ -185,8 +185,12 @@ def _simulation(Simulation, scene, cache, task, progress):
 def _write_histogram(path: Path, volumes: np.ndarray, task: VariantTask) -> None:
     """The fragments' volumes [cm^3] on logarithmic bins (a piece's size spans decades).
     Fixed margins and plain tick labels: matplotlib's tight layout and its mathtext
-    exponents cost more than the rest of the plot."""
-    import matplotlib
+    exponents cost more than the rest of the plot. Without matplotlib (the ``plots`` extra)
+    no histogram is drawn; the stats hold the volumes all the same."""
+    try:
+        import matplotlib
+    except ModuleNotFoundError:
+        return
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -2,7 +2,7 @@
 
 One World for the whole session: its kernels compile once (Taichi compilation dominates the
 run time); each test calls ``fresh_world()`` which clears bodies and statics and restores
-the options. The bodies come from ``taichi_frac.bench.bodies``, which the report's
+the options. The bodies come from ``support.bodies``, which the report's
 stability table simulates too.
 """
 

@@ -103,17 +103,17 @@ def _cases(quick: bool):
 
 
 def _scale_for(source) -> float:
-    from ..geometry.meshio_in import read_surface
+    from taichi_frac.geometry.meshio_in import read_surface
 
     mesh = source if isinstance(source, trimesh.Trimesh) else read_surface(source)
     return DIAGONAL / float(np.linalg.norm(mesh.extents))
 
 
 def _prepare_row(name, source, target: int, out: Path):
-    from ..geometry.meshio_in import read_surface
-    from ..geometry.prepare import prepare_body
-    from ..geometry.validate import MeshError
-    from ..options import ParticleOptions
+    from taichi_frac.geometry.meshio_in import read_surface
+    from taichi_frac.geometry.prepare import prepare_body
+    from taichi_frac.geometry.validate import MeshError
+    from taichi_frac.options import ParticleOptions
 
     faces_in = len((source if isinstance(source, trimesh.Trimesh) else read_surface(source)).faces)
     scale = _scale_for(source)
@@ -139,7 +139,7 @@ def _prepare_row(name, source, target: int, out: Path):
         path.parent.mkdir(parents=True, exist_ok=True)
         source.export(str(path))
     extents = np.array(report.tet_extents) / np.array(report.input_extents)
-    from ..geometry.simplify import tet_edge
+    from taichi_frac.geometry.simplify import tet_edge
 
     spacing = tet_edge(report.surface_volume, target)
     row = dict(deviation=report.surface_deviation / spacing, name=name, faces=faces_in, tet_faces=report.tet_surface_triangles, particles=report.physics_particles,
@@ -154,9 +154,9 @@ def _prepare_row(name, source, target: int, out: Path):
 
 
 def _drop(ctx: BenchContext, name: str, path, scale: float, target: int, cache_dir: Path):
-    from ..options import FractureOptions, ParticleOptions
-    from ..scenes import Collider, Scene, SceneObject, SimulationOptions
-    from ..simulation import Simulation
+    from taichi_frac.options import FractureOptions, ParticleOptions
+    from taichi_frac.scenes import Collider, Scene, SceneObject, SimulationOptions
+    from taichi_frac.simulation import Simulation
 
     fps = 50
     height = 0.5 * DIAGONAL + 0.01
@@ -185,7 +185,7 @@ def _read_back(cache: Path) -> dict:
     visible at the last frame: every piece's render surface)."""
     from pxr import Usd, UsdGeom
 
-    from ..io.cache import check_cache
+    from taichi_frac.io.cache import check_cache
 
     stage = Usd.Stage.Open(str(cache))
     metres = UsdGeom.GetStageMetersPerUnit(stage)
@@ -220,8 +220,8 @@ def _rendered(row: dict, drop: dict) -> str:
 
 
 def _validation_timing(quick: bool):
-    from ..geometry.intersections import crossing_face_pairs
-    from ..geometry.validate import validate_surface
+    from taichi_frac.geometry.intersections import crossing_face_pairs
+    from taichi_frac.geometry.validate import validate_surface
 
     sphere = noisy_sphere(6 if quick else 8)
     crossing_face_pairs(sphere.vertices[:6], np.array([[0, 1, 2], [3, 4, 5]]))  # compile outside the timing
@@ -235,7 +235,7 @@ def _validation_timing(quick: bool):
 
 
 def run(ctx: BenchContext) -> Section:
-    from ..geometry.validate import MeshError
+    from taichi_frac.geometry.validate import MeshError
 
     target = QUICK_TARGET if ctx.quick else TARGET
     out = ctx.markdown_dir / "meshes_inputs"

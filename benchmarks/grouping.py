@@ -31,8 +31,8 @@ TILT = 0.1  # rad about x: lands almost flat, on one side first
 def drop_scene(group_size: int, particles: int = 5000, seconds: float = 3.0, coarse: int | None = None):
     """The single-ring drop, built with the scene API. ``coarse``: the ring's
     ``surface_group_size`` (None: the default; read only with surface contacts)."""
-    from ..options import ParticleOptions
-    from ..scenes import Collider, Scene, SceneObject, SimulationOptions
+    from taichi_frac.options import ParticleOptions
+    from taichi_frac.scenes import Collider, Scene, SceneObject, SimulationOptions
 
     ring = SceneObject(
         name="ring", primitive=f"torus:major=0.1,minor={MINOR_RADIUS}", material="porcelain", breakable=False,
@@ -60,7 +60,7 @@ class DropResult:
 
 def surface_depth(model, state) -> float:
     """[m] deepest vertex of ``model``'s surface below z = 0 at the pose in ``state`` (row 0)."""
-    from ..kinematics.quaternion import quaternion_matrix
+    from taichi_frac.kinematics.quaternion import quaternion_matrix
 
     z = (model.vertices @ quaternion_matrix(state["orientation"][0]).T + state["position"][0])[:, 2]
     return max(0.0, -float(z.min()))
@@ -70,7 +70,7 @@ def measure_drop(ctx: BenchContext, scene) -> DropResult:
     """Run the drop frame by frame and measure rest height, rebound, first impulse, the
     deepest collision sphere and the deepest surface vertex below the ground (sampled at
     every frame end)."""
-    from ..simulation import Simulation
+    from taichi_frac.simulation import Simulation
 
     sim = Simulation(scene, output=False, world=ctx.world())
     body = sim.world.body_ids[0]
@@ -106,7 +106,7 @@ def rings_scene(group_size: int):
     """scenes/thirteen_rings.toml with every ring built with boundary_group_size n."""
     import tomllib
 
-    from ..scenes import load_scene
+    from taichi_frac.scenes import load_scene
 
     names = [o["name"] for o in tomllib.loads((SCENES / "thirteen_rings.toml").read_text())["objects"]]
     return load_scene(SCENES / "thirteen_rings.toml", [f"{name}.particles.boundary_group_size={group_size}"

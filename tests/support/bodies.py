@@ -6,7 +6,7 @@ import functools
 
 import numpy as np
 
-from ..model import build_body_model
+from taichi_frac.model import build_body_model
 
 DENSITY = 2400.0
 
@@ -44,7 +44,7 @@ def sphere_model(radius: float, subdivisions: int = 2, pieces: int = 300, densit
 
 
 @functools.lru_cache(maxsize=None)
-def ring_model(pieces: int = 1500, major: float = 0.1, minor: float = 0.025):
+def torus_model(pieces: int = 1500, major: float = 0.1, minor: float = 0.025):
     """A torus of radii ``major`` and ``minor`` [m], 40 sections round and 12 round its
     tube, tets of at most 1/``pieces`` of its volume (3,023 at 1500)."""
     import trimesh
@@ -61,11 +61,11 @@ def single_tet_model(edge: float = 0.05):
 
 @functools.lru_cache(maxsize=None)
 def ring_chips(count: int = 36, seed: int = 0, pieces: int = 700, reach: float = 0.02) -> tuple:
-    """``count`` chips cut from a porcelain ring (``ring_model(pieces)``: 1,330 tets at the
+    """``count`` chips cut from a porcelain ring (``torus_model(pieces)``: 1,330 tets at the
     default): each the tets whose centroids lie within 0.6-1.4 ``reach`` [m] of a random
     point of its surface (3-47 tets, 1-11 collision spheres at the defaults: the jagged
     pieces a fracture makes). Chips of no tet are left out."""
-    ring = ring_model(pieces=pieces)
+    ring = torus_model(pieces=pieces)
     centroids = ring.vertices[ring.tets].mean(axis=1)
     surface = np.unique(np.asarray(ring.surface_faces))
     rng = np.random.default_rng(seed)
@@ -84,7 +84,7 @@ def drop_heap(world, chips, seed: int = 0, spacing: float = 0.035) -> list[int]:
     a heap: columns on a 3 x 3 grid ``spacing`` [m] apart, 4 cm between layers, each chip
     turned at random (``seed``) and let go 1 cm above the ground or the layer below.
     Returns their body ids."""
-    from ..kinematics.quaternion import quaternion_matrix
+    from taichi_frac.kinematics.quaternion import quaternion_matrix
 
     world.add_ground(0.0, restitution=0.1)
     rng = np.random.default_rng(seed)
@@ -150,7 +150,7 @@ def _tilted(world, model, tilt: float, restitution: float, drop: float):
     """Add a frictionless ground at z = 0 and ``model`` turned ``tilt`` [rad] about x, its
     lowest vertex ``drop`` [m] above the ground, at rest: (body id, rotation matrix,
     centre-of-mass position)."""
-    from ..kinematics.quaternion import quaternion_matrix
+    from taichi_frac.kinematics.quaternion import quaternion_matrix
 
     q = (np.cos(tilt / 2), np.sin(tilt / 2), 0.0, 0.0)
     rot = quaternion_matrix(np.array(q))

@@ -82,7 +82,7 @@ def other_seeds(scene, shift: int) -> list[str]:
 
 
 def default_cases() -> list[SceneCase]:
-    from ..scenes import load_scene
+    from taichi_frac.scenes import load_scene
 
     ring, glass, rings = SCENES / "single_ring.toml", SCENES / "glass_walls.toml", SCENES / "thirteen_rings.toml"
     glass_scene, rings_scene = load_scene(glass), load_scene(rings)
@@ -106,7 +106,7 @@ def run_scene(ctx: BenchContext, scene, label: str, *, fracture: bool = True, si
     counts are Table 1's particle counts summed over the scene's bodies at the start
     (every body, breakable or not, so a fracture-off run is counted the same way).
     ``output``: a cache path to write (default: none, as the timed rows)."""
-    from ..simulation import Simulation
+    from taichi_frac.simulation import Simulation
 
     mode = ("fracture on" if fracture else "fracture off") + (", single-scale" if single_scale else "")
     mode += ", USD cache written" if output else ""

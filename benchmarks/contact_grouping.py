@@ -39,8 +39,8 @@ def _label(n) -> str:
     """A ``GROUPINGS`` entry as the table names it."""
     if n != DEFAULT:
         return str(n)
-    from ..model import COARSE_MIN_SPHERES
-    from ..options import ParticleOptions
+    from taichi_frac.model import COARSE_MIN_SPHERES
+    from taichi_frac.options import ParticleOptions
 
     coarse = ParticleOptions().surface_group_size
     return (f"4, and {coarse} for bodies of {COARSE_MIN_SPHERES * coarse}+ surface particles whose patches keep their "

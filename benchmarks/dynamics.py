@@ -37,7 +37,7 @@ def _fragment_model():
     import tetgen
     import trimesh
 
-    from ..model import build_body_model
+    from taichi_frac.model import build_body_model
     from .pile import FRAGMENT_DENSITY, FRAGMENT_RADIUS
 
     mesh = trimesh.creation.icosphere(subdivisions=1, radius=FRAGMENT_RADIUS)
@@ -83,7 +83,7 @@ def _rings_row(label: str, r: dict) -> list:
 def _fragment_pile(ctx: BenchContext, scene, count: int, seconds: float) -> dict:
     """``count`` small fragments dropped into a 0.44 m box from a loose cube lattice
     (``bench/pile.py``, the layout pybullet's pile uses too)."""
-    from ..dynamics import DynamicsOptions
+    from taichi_frac.dynamics import DynamicsOptions
     from . import pile
 
     sim = scene.simulation
@@ -113,7 +113,7 @@ def _fragment_pile(ctx: BenchContext, scene, count: int, seconds: float) -> dict
 
 def run_dynamics(args) -> int:
     """Print the rigid-body tables (see the module docstring)."""
-    from ..scenes import load_scene
+    from taichi_frac.scenes import load_scene
     from . import grouping
     from .common import Progress, warm_up
 

@@ -32,7 +32,7 @@ PAPER_FRAGMENTS = {1: 2, 3: 5, 5: 10}
 
 
 def _sweep(ctx: BenchContext, vary, out: Path, workers: int, frames: int):
-    from ..sweep import sweep
+    from taichi_frac.sweep import sweep
 
     shutil.rmtree(out, ignore_errors=True)
     started = time.perf_counter()

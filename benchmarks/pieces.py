@@ -31,7 +31,7 @@ VOLUME_BOUND = 0.02
 def _scene_cases(quick: bool):
     """(label, scene, frames) per case: each paper scene as it is, and with the rendered crack
     planes left where the analysis put them (``crack_fit_rounds`` 0), the same physics."""
-    from ..scenes import load_scene
+    from taichi_frac.scenes import load_scene
 
     frames = 40 if quick else None
     cases = []
@@ -81,9 +81,9 @@ def tet_height(model) -> float:
 def measure_pieces(pieces) -> dict:
     """Totals over pieces ((model, root model, render solid or None) each) of the render
     surfaces' and the tets' boundary faces' measures."""
-    from ..surfaces.checks import edge_counts, piece_quality
-    from ..surfaces.cut import piece_mesh
-    from ..surfaces.mesh import fragment_surface
+    from taichi_frac.surfaces.checks import edge_counts, piece_quality
+    from taichi_frac.surfaces.cut import piece_mesh
+    from taichi_frac.surfaces.mesh import fragment_surface
 
     rows, before = [], []
     for model, root, render in pieces:
@@ -142,12 +142,12 @@ def _mesh_case(ctx: BenchContext, fit_rounds: int | None = None):
     crack planes fitted ``fit_rounds`` times; None: FractureOptions' default). Returns the
     pieces' measures, the cut's time [s], the surface's triangle count, the cut's counts and
     (model, render solid) of the whole body."""
-    from ..fracture.cracks import analyze_impact
-    from ..fracture.fragments import make_fragments, split_body
-    from ..surfaces.cut import cut_render_solid
-    from ..surfaces.solid import render_solid_from_surface
-    from ..geometry.prepare import prepare_body
-    from ..options import FractureOptions, ParticleOptions, material_preset
+    from taichi_frac.fracture.cracks import analyze_impact
+    from taichi_frac.fracture.fragments import make_fragments, split_body
+    from taichi_frac.surfaces.cut import cut_render_solid
+    from taichi_frac.surfaces.solid import render_solid_from_surface
+    from taichi_frac.geometry.prepare import prepare_body
+    from taichi_frac.options import FractureOptions, ParticleOptions, material_preset
 
     material = material_preset("porcelain")
     particles = ParticleOptions(target_particles=3000 if ctx.quick else 5000)
@@ -174,8 +174,8 @@ def _mesh_case(ctx: BenchContext, fit_rounds: int | None = None):
 
 def _scene_solid(path: Path, name: str):
     """(BodyModel, render solid) of the object ``name`` of the scene at ``path``."""
-    from ..surfaces.solid import render_solid_from_surface
-    from ..scenes import load_scene
+    from taichi_frac.surfaces.solid import render_solid_from_surface
+    from taichi_frac.scenes import load_scene
 
     obj = next(o for o in load_scene(path).objects if o.name == name)
     model, report = obj.prepare()
@@ -183,12 +183,12 @@ def _scene_solid(path: Path, name: str):
 
 
 def run(ctx: BenchContext) -> Section:
-    from ..surfaces.parts import (FOREIGN_DEPTH_FACTOR, GAINED_VOLUME_FACTOR, GAINED_VOLUME_SHARE,
+    from taichi_frac.surfaces.parts import (FOREIGN_DEPTH_FACTOR, GAINED_VOLUME_FACTOR, GAINED_VOLUME_SHARE,
                                         LOST_VOLUME_SHARE, OVERREACH_FACTOR)
-    from ..surfaces.reach import BALL_BOUND, REACH_FACTOR
-    from ..surfaces.crack_fit import (FITTED_PIECE_TETS, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR,
+    from taichi_frac.surfaces.reach import BALL_BOUND, REACH_FACTOR
+    from taichi_frac.surfaces.crack_fit import (FITTED_PIECE_TETS, MAX_OFFSET_FACTOR, MAX_TILT_FACTOR,
                                           SMALL_PIECE_WEIGHT, VOLUME_TOLERANCE)
-    from ..options import FractureOptions
+    from taichi_frac.options import FractureOptions
     from .perfect_cut import FLOOR_HEADER, PLANES, WEDGE_TETS, floor_rows, perfect_cuts
     from .tables import run_scene
 

@@ -6,7 +6,7 @@ particles; one ring of ~1,000 for the smallest size) laid out on a square grid 0
 each tilted at random and starting 1.5 cm or more above the ground at 4.4 m/s downwards (as if
 dropped from 1 m, like scenes/single_ring.toml), so every ring hits the ground in the first frames and, with fracture
 on, breaks there (crack controls as in the 13-ring scene). Each size runs in its own
-process (``python -m taichi_frac.bench.scaling --child ...``), so the peak resident memory
+process (``python -m benchmarks.scaling --child ...``), so the peak resident memory
 it reports (``ru_maxrss``) is that size's alone, everything included: Taichi, the World's
 fields (sized by ``Simulation`` for the fragments to come), every ring's model.
 
@@ -39,8 +39,8 @@ MARKER = "SCALING_RESULT "
 def ring_layout_scene(rings: int, ring_particles: int = RING_PARTICLES, frames: int = 10, fracture: bool = True,
                       seed: int = 0):
     """``rings`` porcelain rings on a square grid, tilted at random, falling onto the ground."""
-    from ..options import FractureOptions, Material, ParticleOptions
-    from ..scenes import Collider, Scene, SceneObject, SimulationOptions
+    from taichi_frac.options import FractureOptions, Material, ParticleOptions
+    from taichi_frac.scenes import Collider, Scene, SceneObject, SimulationOptions
 
     rng = np.random.default_rng(seed)
     side = math.ceil(math.sqrt(rings))
@@ -85,7 +85,7 @@ def _peak_rss_mb() -> float:
 
 def measure_scene(scene, world, frames: int, fracture: bool) -> dict:
     """Time ``scene`` on ``world`` (kernels already compiled): per-frame ms, stages, counts."""
-    from ..simulation import Simulation
+    from taichi_frac.simulation import Simulation
 
     sim = Simulation(scene, output=False, world=world, frames=frames, fracture=fracture)
     models = [r.model for r in sim.records.values()]
@@ -110,8 +110,8 @@ def child(rings: int, ring_particles: int, frames: int, fracture: bool, arch: st
     (``run_peak_rss_mb``: the peak mark reset after compiling)."""
     import gc
 
-    from .. import runtime
-    from ..simulation import Simulation
+    from taichi_frac import runtime
+    from taichi_frac.simulation import Simulation
 
     runtime.init(arch)
     t0 = time.perf_counter()
@@ -146,7 +146,7 @@ def in_process_runner(ctx: BenchContext):
 def run_size(rings: int, ring_particles: int, frames: int, fracture: bool, arch: str = "cpu",
              timeout: float | None = None) -> dict:
     """One size in a subprocess; returns the child's result (peak RSS included)."""
-    cmd = [sys.executable, "-m", "taichi_frac.bench.scaling", "--child", "--rings", str(rings),
+    cmd = [sys.executable, "-m", "benchmarks.scaling", "--child", "--rings", str(rings),
            "--ring-particles", str(ring_particles), "--frames", str(frames), "--arch", arch]
     if not fracture:
         cmd.append("--no-fracture")

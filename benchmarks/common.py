@@ -15,12 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..scenes import BUILTIN_SCENE_DIR as SCENES
+from taichi_frac.scenes import BUILTIN_SCENE_DIR as SCENES
 
-_PACKAGE_PARENT = Path(__file__).resolve().parents[2]
-#: Where the report's files go by default: the checkout (its docs/ and out/) when the package
-#: runs from one, else the current folder (an installed package).
-REPO = _PACKAGE_PARENT if (_PACKAGE_PARENT / "pyproject.toml").is_file() else Path.cwd()
+#: The checkout the benchmarks run from: the report's files go to its docs/ and out/.
+REPO = Path(__file__).resolve().parents[1]
 
 #: Capacities of the report's one World: the largest scene of Tables 1-2 (13 breakable
 #: rings: up to 13 + 256 x 13 bodies, ~50,000 collision particles with room for fragments)
@@ -88,8 +86,8 @@ class BenchContext:
     def world(self):
         """The report's one World (kernels compile once, ~8 s, then every run reuses them)."""
         if self.world_instance is None:
-            from .. import runtime
-            from ..dynamics import World, WorldCapacity
+            from taichi_frac import runtime
+            from taichi_frac.dynamics import World, WorldCapacity
 
             runtime.init(self.arch)
             self.world_instance = World(WorldCapacity(**REPORT_WORLD), arch=self.arch)
@@ -143,8 +141,8 @@ def ms_pair(avg: float, peak: float) -> str:
 def warm_up(ctx: BenchContext) -> None:
     """Compile the dynamics kernels of the report's World and the fracture kernels (a short
     ring drop that breaks, run twice) so no timed run pays for compilation."""
-    from ..scenes import load_scene
-    from ..simulation import Simulation
+    from taichi_frac.scenes import load_scene
+    from taichi_frac.simulation import Simulation
 
     t0 = time.perf_counter()
     world = ctx.world()

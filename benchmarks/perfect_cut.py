@@ -41,9 +41,9 @@ def perfect_cut(model, solid, planes) -> Cut | None:
     them, against the tets whose centroids lie there. Render parts holding none of those
     centroids (a sliver where a plane grazes the surface) are left out. None when no tet or
     no render lies there."""
-    from ..surfaces.checks import inside, outside_distance, signed_volume
-    from ..surfaces.solid import solid_arrays
-    from ..geometry.topology import boundary_faces
+    from taichi_frac.surfaces.checks import inside, outside_distance, signed_volume
+    from taichi_frac.surfaces.solid import solid_arrays
+    from taichi_frac.geometry.topology import boundary_faces
 
     centroids = model.particle_position
     mask = np.all([centroids @ np.asarray(n) >= d for n, d in planes], axis=0)

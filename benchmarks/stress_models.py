@@ -40,12 +40,12 @@ def _l1(a, b):
 
 def cube_rows(side, target, models=MODELS, repeat=2):
     """Rows (model, side [m], tets, stress L1, principal L1, ms per analysis, factor ms)."""
-    from ..fracture import body_stress
-    from ..fracture.fem import elastic_body, fem_response
-    from ..fracture.field import point_load_gradient_reference
-    from ..fracture.stress import largest_principal_stress, stress_from_gradient
-    from ..geometry.primitives import box
-    from ..geometry.tetra import tetrahedralize
+    from taichi_frac.fracture import body_stress
+    from taichi_frac.fracture.fem import elastic_body, fem_response
+    from taichi_frac.fracture.field import point_load_gradient_reference
+    from taichi_frac.fracture.stress import largest_principal_stress, stress_from_gradient
+    from taichi_frac.geometry.primitives import box
+    from taichi_frac.geometry.tetra import tetrahedralize
 
     mesh = tetrahedralize(box((side, side, side)), target_tets=target)
     vertices = mesh.vertices - mesh.vertices.mean(axis=0)
@@ -81,10 +81,10 @@ def cube_rows(side, target, models=MODELS, repeat=2):
     return rows
 
 
-def ring_model(target):
+def scene_ring(target):
     """The single ring's BodyModel at about ``target`` tets, and its world orientation (3,3)."""
-    from ..kinematics.quaternion import quaternion_matrix
-    from ..scenes import load_scene
+    from taichi_frac.kinematics.quaternion import quaternion_matrix
+    from taichi_frac.scenes import load_scene
     from .common import SCENES
 
     scene = load_scene(SCENES / "single_ring.toml", [f"ring.particles.target_particles={target}"])
@@ -105,14 +105,14 @@ def landing_load(model, rotation):
 def ring_rows(targets=(5000, 20000), reference_factor=8, repeat=2, progress=None):
     """Rows (model, tets, principal L1 vs reference, peak distance [m], ms per analysis,
     factor ms) and the reference's tet count, plus the 5k ring's fields for the picture."""
-    from ..fracture.cracks import analyze_impact
-    from ..fracture.fem import elastic_body_of, fem_response
-    from ..fracture.stress import largest_principal_stress
-    from ..options import FractureOptions, Material
+    from taichi_frac.fracture.cracks import analyze_impact
+    from taichi_frac.fracture.fem import elastic_body_of, fem_response
+    from taichi_frac.fracture.stress import largest_principal_stress
+    from taichi_frac.options import FractureOptions, Material
     from scipy.spatial import cKDTree
 
     material = Material(density=2400.0, young_modulus=E, poisson_ratio=NU, tensile_strength=1e12)
-    ref_model, rotation, _ = ring_model(reference_factor * targets[0])
+    ref_model, rotation, _ = scene_ring(reference_factor * targets[0])
     point, normal, force = landing_load(ref_model, rotation)
     t0 = time.perf_counter()
     ref_body = elastic_body_of(ref_model, material)
@@ -126,7 +126,7 @@ def ring_rows(targets=(5000, 20000), reference_factor=8, repeat=2, progress=None
     tree = cKDTree(ref_model.particle_position)
     rows, pictures = [], {}
     for target in targets:
-        model, rotation, _ = ring_model(target)
+        model, rotation, _ = scene_ring(target)
         point, normal, force = landing_load(model, rotation)
         if target == targets[0]:
             pictures["rotation"] = rotation
@@ -154,11 +154,11 @@ def ring_rows(targets=(5000, 20000), reference_factor=8, repeat=2, progress=None
 def scene_rows(ctx: BenchContext, frames=None, rings=True):
     """Rows (scene, model, fragments, ms per frame mean) for the single ring's controls and
     the 13 rings, every breakable object switched to each model."""
-    from ..scenes import load_scene
+    from taichi_frac.scenes import load_scene
     from .common import SCENES
     from .tables import run_scene
 
-    from ..simulation import Simulation
+    from taichi_frac.simulation import Simulation
 
     for kind in MODELS:  # compile each model's kernels outside the timed runs
         scene = load_scene(SCENES / "single_ring.toml", ["simulation.duration=0.8", "ring.fracture.crack_count=2",
@@ -183,7 +183,7 @@ def scene_rows(ctx: BenchContext, frames=None, rings=True):
 
 
 def run(ctx: BenchContext, scenes: bool = True) -> Section:
-    from .. import runtime
+    from taichi_frac import runtime
 
     runtime.init(ctx.arch)
     t0 = time.perf_counter()

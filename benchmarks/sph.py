@@ -27,9 +27,9 @@ import time
 
 import numpy as np
 
-from . import fracture_ring
+from tests.support import fracture_ring
 from .common import BenchContext, Section, md_table, pyplot
-from .fracture_ring import jittered_block
+from tests.support.fracture_ring import jittered_block
 
 E, NU = 70.0e9, 0.2
 FORCE = np.array([2e4, -1e4, -1e5])
@@ -40,7 +40,7 @@ TET_TARGETS = (5000, 20000)
 
 
 def tet_particles(mesh, target):
-    from ..geometry.tetra import tetrahedralize
+    from taichi_frac.geometry.tetra import tetrahedralize
 
     tm = tetrahedralize(mesh, target_tets=target)
     corners = tm.vertices[tm.tets]
@@ -51,7 +51,7 @@ def tet_particles(mesh, target):
 
 
 def tet_block(target):
-    from ..geometry.primitives import box
+    from taichi_frac.geometry.primitives import box
 
     pts, vol = tet_particles(box((1.0, 1.0, 1.0)), target)
     lo, hi = pts.min(0), pts.max(0)
@@ -76,9 +76,9 @@ def best_time(fn, repeat):
 def block_rows(label, pts, vol, repeat):
     """Rows (label, particles, neighbours per particle, gradient kind, errors dict, field s,
     neighbours s, gradient s, stress+principal s, total s), plain then corrected."""
-    from ..fracture import (contact_field, default_smoothing_length, displacement_gradient, neighbor_lists,
+    from taichi_frac.fracture import (contact_field, default_smoothing_length, displacement_gradient, neighbor_lists,
                             point_load_displacement, principal_stresses, stress_from_gradient)
-    from ..fracture.field import point_load_gradient_reference
+    from taichi_frac.fracture.field import point_load_gradient_reference
 
     h = default_smoothing_length(vol)
     field = contact_field(pts, vol, TOP, DOWN, FORCE, E, NU)  # warm-up, default radius
@@ -118,9 +118,9 @@ def measure(sizes=LATTICE_SIZES, tet_targets=TET_TARGETS, repeat=3, progress=Non
 def ring_impact(repeat=3):
     """One impact's contact_field on the fracture tests' ring: (particles, seconds, peak
     principal stress [Pa], correction fallbacks)."""
-    from ..fracture import contact_field
+    from taichi_frac.fracture import contact_field
 
-    model = fracture_ring.ring_model()
+    model = fracture_ring.struck_ring_model()
     pts, vol = model.particle_position, model.tet_volume
     args = (pts, vol, fracture_ring.RING_CONTACT, fracture_ring.RING_NORMAL, fracture_ring.RING_FORCE, E, NU)
     contact_field(*args)  # warm-up
@@ -139,7 +139,7 @@ def table(rows) -> str:
 
 
 def run(ctx: BenchContext, sizes=None, tet_targets=None, repeat=None, ring=True) -> Section:
-    from .. import runtime
+    from taichi_frac import runtime
 
     runtime.init(ctx.arch)
     t0 = time.perf_counter()
@@ -153,7 +153,7 @@ def run(ctx: BenchContext, sizes=None, tet_targets=None, repeat=None, ring=True)
         f"nu = {NU}. Error: relative L2 error of the SPH stress against the exact stress of the same "
         "displacement field (its complex-step gradient), over the **interior** (>= 2h from the load, >= h from "
         "every face), **+surface** (>= 2h from the load) and **far** (>= 0.25 m from the load) particles. "
-        "Lattice: `jittered_block` of `taichi_frac/bench/fracture_ring.py` (the stress test's block); tets: tetgen "
+        "Lattice: `jittered_block` of `tests/support/fracture_ring.py` (the stress test's block); tets: tetgen "
         f"centroids. Times: best of {repeat} after a warm-up.",
         "",
         table(rows),
@@ -204,7 +204,7 @@ def main(argv=None) -> None:
     """``benchmarks/bench_stress.py``: print the table."""
     import argparse
 
-    from .. import runtime
+    from taichi_frac import runtime
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--arch", default="cpu")

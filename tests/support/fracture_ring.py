@@ -8,9 +8,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..fracture.cracks import CrackPlane
-from ..geometry.topology import TET_FACES
-from ..model import build_body_model
+from taichi_frac.fracture.cracks import CrackPlane
+from taichi_frac.geometry.topology import TET_FACES
+from taichi_frac.model import build_body_model
 
 # The documented controllability settings (docs/guide/fracture-controls.md): impact on the outer
 # equator, pushing toward the ring's centre.
@@ -20,7 +20,7 @@ RING_FORCE = 1.0e4 * RING_NORMAL  # [N]
 
 
 @lru_cache(maxsize=1)
-def ring_model(density: float = 2400.0):
+def struck_ring_model(density: float = 2400.0):
     """The ring's BodyModel (density [kg/m^3]); built once per process."""
     import tetgen
     import trimesh

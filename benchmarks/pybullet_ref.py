@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from ..kinematics.quaternion import quaternion_matrix
+from taichi_frac.kinematics.quaternion import quaternion_matrix
 
 #: pybullet's default time step [s]; a frame is split into steps no longer than this.
 PYBULLET_DEFAULT_TIME_STEP = 1.0 / 240.0
@@ -202,10 +202,10 @@ def object_surface(obj) -> trimesh.Trimesh:
     """The closed surface [m] of scene object ``obj`` that ``prepare_body`` meshes (the same
     facets for a primitive: the same edge length from its particle target), moved so its
     centre of mass is the origin (our body frame)."""
-    from ..geometry.bounded import StepClock
-    from ..geometry.meshio_in import unit_scale
-    from ..geometry.prepare import PRIMITIVE_EDGE_FACTOR, _surface_from_source
-    from ..geometry.tetra import regular_tet_edge
+    from taichi_frac.geometry.bounded import StepClock
+    from taichi_frac.geometry.meshio_in import unit_scale
+    from taichi_frac.geometry.prepare import PRIMITIVE_EDGE_FACTOR, _surface_from_source
+    from taichi_frac.geometry.tetra import regular_tet_edge
 
     target = obj.particles.target_particles
 
@@ -524,7 +524,7 @@ def comparison_table(scene, spheres, *, rings_ms: tuple[float, float], pile_ms: 
     return "\n".join([
         f"pybullet {pybullet_version()} on the same scenes (DIRECT client; the frame cut into whole steps of at "
         "most its default 1/240 s, its solver defaults, no damping, friction and restitution combined as ours: "
-        "see taichi_frac/bench/pybullet_ref.py). Ours: the two-scale rows above"
+        "see benchmarks/pybullet_ref.py). Ours: the two-scale rows above"
         f"{' (' + rings_note + ')' if rings_note else ''}. A ratio over 1: pybullet is slower. At rest: every "
         f"point slower than {1e3 * REST_SPEED:g} mm/s at the end.",
         "",

@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..kinematics.quaternion import quaternion_matrix
-from . import fracture_ring as ring
-from .bodies import box_model, single_tet_model, sphere_model
+from taichi_frac.kinematics.quaternion import quaternion_matrix
+from tests.support import fracture_ring as ring
+from tests.support.bodies import box_model, single_tet_model, sphere_model
 from .common import BenchContext, Section, md_table
 
 G = 9.81
@@ -109,7 +109,7 @@ class CaseResult:
 
 
 def _world(ctx, **options):
-    from ..dynamics import DynamicsOptions
+    from taichi_frac.dynamics import DynamicsOptions
 
     world = ctx.world()
     world.clear()
@@ -228,7 +228,7 @@ def case_fast_sphere(ctx):
 # ------------------------------------------------------------------ fracture
 
 def _ring_material(poisson_ratio=0.2):
-    from ..options import Material
+    from taichi_frac.options import Material
 
     return Material(name="ring", density=2400.0, young_modulus=70e9, poisson_ratio=poisson_ratio,
                     tensile_strength=1.0e6)
@@ -248,9 +248,9 @@ def _drop_pieces(ctx, pieces_or_models, frames):
 
 def _fracture_case(ctx, name, model, points, normals, forces, material, options, frames, own_check=None,
                    pose_height=0.3, parent_generation=0):
-    from ..fracture.cracks import analyze_impact
-    from ..fracture.fragments import make_fragments, split_body
-    from ..options import ParticleOptions
+    from taichi_frac.fracture.cracks import analyze_impact
+    from taichi_frac.fracture.fragments import make_fragments, split_body
+    from taichi_frac.options import ParticleOptions
 
     analysis = analyze_impact(model, points, normals, forces, material, options)
     stress_nan = not (np.all(np.isfinite(analysis.particle_stress)) and np.all(np.isfinite(analysis.particle_principal_stress)))
@@ -275,11 +275,11 @@ def _fracture_case(ctx, name, model, points, normals, forces, material, options,
 
 def fracture_cases(ctx, frames=50, model=None):
     """The fracture's hard cases on ``model`` (default: the fracture tests' ~5,000-tet ring)."""
-    from ..fracture.cracks import analyze_impact
-    from ..fracture.fragments import split_body
-    from ..options import FractureOptions
+    from taichi_frac.fracture.cracks import analyze_impact
+    from taichi_frac.fracture.fragments import split_body
+    from taichi_frac.options import FractureOptions
 
-    model = model if model is not None else ring.ring_model()
+    model = model if model is not None else ring.struck_ring_model()
     contact, normal, force = ring.RING_CONTACT, ring.RING_NORMAL, ring.RING_FORCE
     unit = normal
     material = _ring_material()
@@ -305,8 +305,8 @@ def fracture_cases(ctx, frames=50, model=None):
     tet = int(model.surface_particles[0])
     one_opts = FractureOptions(min_fragment_particles=1)
     split = split_body(model, ring.corner_cracks(model, tet), one_opts)
-    from ..fracture.fragments import make_fragments
-    from ..options import ParticleOptions
+    from taichi_frac.fracture.fragments import make_fragments
+    from taichi_frac.options import ParticleOptions
 
     pieces = make_fragments(model, split, np.array([0, 0, 0.3]), np.array([1.0, 0, 0, 0]), np.zeros(3),
                             np.array([0, 0, 1.0]), material, ParticleOptions(), options=one_opts)

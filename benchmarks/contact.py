@@ -27,7 +27,7 @@ def print_contact(ctx: BenchContext, scene, args, t0: float) -> int:
     """The surface-contact table, printed and written to ``args.contact_out``."""
     from pathlib import Path
 
-    from ..scenes import load_scene
+    from taichi_frac.scenes import load_scene
     from .contact_grouping import GROUPING_SEED_SHIFTS, grouping_section
     from .tables import other_seeds
 
@@ -84,7 +84,7 @@ def _with_contact(scene, single: bool, surface: bool):
 
 def _world(ctx: BenchContext, single: bool, surface: bool):
     """The report's one World, emptied and set to a contact mode."""
-    from ..dynamics import DynamicsOptions
+    from taichi_frac.dynamics import DynamicsOptions
 
     world = ctx.world()
     world.clear()
@@ -97,8 +97,8 @@ def _model(vertices, tets, single: bool, surface: bool, group: int = 4, coarse: 
     """The BodyModel a contact mode collides with: single-scale n = 1; two-scale n =
     ``group``, and with surface contacts the coarse n of large bodies (``coarse``, default
     ``ParticleOptions().surface_group_size``, as a scene builds it; 0: ``group`` for all)."""
-    from ..model import build_body_model
-    from ..options import ParticleOptions
+    from taichi_frac.model import build_body_model
+    from taichi_frac.options import ParticleOptions
 
     if coarse is None:
         coarse = ParticleOptions().surface_group_size
@@ -124,14 +124,14 @@ LANDING_TILTS = (10, 20, 25, 30)
 
 
 def _landing(ctx: BenchContext, single: bool, surface: bool, group: int = 4, coarse: int | None = None) -> list[float]:
-    """The torus of the dynamics tests (``bodies.ring_model``) landing without friction at
+    """The torus of the dynamics tests (``bodies.torus_model``) landing without friction at
     each of ``LANDING_TILTS`` (``bodies.tilted_landing``, e = 0.5, from 0.1 m): the first
     impact's normal impulse relative to the closed form, less 1."""
     import math
 
-    from . import bodies
+    from tests.support import bodies
 
-    ring = bodies.ring_model()
+    ring = bodies.torus_model()
     model = _model(ring.vertices, ring.tets, single, surface, group, coarse, bodies.DENSITY)
     errors = []
     for degrees in LANDING_TILTS:
@@ -167,9 +167,9 @@ def _rebound(ctx: BenchContext, single: bool, surface: bool, references: dict) -
     properties)."""
     import math
 
-    from . import bodies
+    from tests.support import bodies
 
-    ring = bodies.ring_model()
+    ring = bodies.torus_model()
     model = _model(ring.vertices, ring.tets, single, surface, density=bodies.DENSITY)
     errors = {}
     for substep in REBOUND_SUBSTEPS:
@@ -223,7 +223,7 @@ def _cube_rest(ctx: BenchContext, single: bool, surface: bool, on_edge: bool) ->
 
     import trimesh
 
-    from ..geometry.tetra import tetrahedralize
+    from taichi_frac.geometry.tetra import tetrahedralize
     from . import grouping
 
     mesh = tetrahedralize(trimesh.creation.box((0.1, 0.1, 0.1)), target_tets=5000)
@@ -255,8 +255,8 @@ def _cube_on_cube(ctx: BenchContext, single: bool, surface: bool, tets: int, gro
     ``_model``."""
     import trimesh
 
-    from ..geometry.tetra import tetrahedralize
-    from .bodies import stack_cubes
+    from taichi_frac.geometry.tetra import tetrahedralize
+    from tests.support.bodies import stack_cubes
 
     mesh = tetrahedralize(trimesh.creation.box((0.1, 0.1, 0.1)), target_tets=tets)
     model = _model(mesh.vertices, mesh.tets, single, surface, group, coarse)
@@ -277,10 +277,10 @@ def _ring_stack(ctx: BenchContext, single: bool, surface: bool) -> dict:
     down 0.5 mm above the one below, restitution 0, for 2 s: the top ring's centre-of-mass
     height against exact (one tube diameter a ring), how far any ring moved in the last
     second, and whether all sleep."""
-    from .bodies import ring_model, settle_and_hold, stack_rings
+    from tests.support.bodies import torus_model, settle_and_hold, stack_rings
 
     world = _world(ctx, single, surface)
-    ring = ring_model()
+    ring = torus_model()
     rings = stack_rings(world, _model(ring.vertices, ring.tets, single, surface, density=ring.density), STACK_RINGS)
     settled, state = settle_and_hold(world, rings, 50, 50)
     return dict(top=float(state["position"][-1][2]) - (0.025 + 0.05 * (STACK_RINGS - 1)),
@@ -297,7 +297,7 @@ HEAP_TIMES = (1.0, 2.0, 3.0)
 def _chip_heaps(ctx: BenchContext, single: bool, surface: bool) -> list:
     """Chips asleep at each of ``HEAP_TIMES``, summed over the ``HEAPS`` heaps
     (``bodies.heap_asleep``), and the chips in all."""
-    from .bodies import heap_asleep
+    from tests.support.bodies import heap_asleep
 
     asleep = [0] * len(HEAP_TIMES)
     chips = 0
