@@ -37,6 +37,29 @@ _Z_TO_Y_UP_MATRIX = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]
 _DEFAULT_LOOK = LOOKS["plaster"]
 
 
+def _corner_shading(tri: np.ndarray, inner: np.ndarray, corner_normals, corner_uvs, shade_inner: bool):
+    """Per-corner normals (3F,3) and UVs (3F,2) of the triangles ``tri`` (F,3,3): those given
+    (``None``: none) where they are finite, on outer faces (and inner ones with
+    ``shade_inner``); elsewhere the face's flat normal and a box projection of the position."""
+    face_normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    face_normal /= np.maximum(np.linalg.norm(face_normal, axis=1, keepdims=True), 1e-300)
+    flat = np.repeat(face_normal, 3, axis=0)
+    corner_inner = np.repeat(inner, 3) & (not shade_inner)
+    if corner_normals is None:
+        corner_normals = flat
+    else:
+        missing = corner_inner | ~np.all(np.isfinite(corner_normals), axis=1)
+        corner_normals = np.where(missing[:, None], flat, corner_normals)
+        corner_normals /= np.maximum(np.linalg.norm(corner_normals, axis=1, keepdims=True), 1e-300)
+    projected = _box_projection(tri.reshape(-1, 3), flat)
+    if corner_uvs is None:
+        corner_uvs = projected
+    else:
+        missing = corner_inner | ~np.all(np.isfinite(corner_uvs), axis=1)
+        corner_uvs = np.where(missing[:, None], projected, corner_uvs)
+    return corner_normals, corner_uvs
+
+
 def _per_corner(values: np.ndarray | None, faces: np.ndarray, vertex_count: int, width: int, what: str):
     """(F*3, width) per face corner from per-vertex (V, width) or per-corner (F, 3, width) data;
     None when absent. NaN rows mean 'no value for this corner'."""
@@ -261,53 +284,17 @@ class CacheWriter:
         look shares its parent's materials, one without either gets the plaster look.
         """
         self._check_open()
-        vertices = np.asarray(vertices, dtype=np.float64)
-        faces = np.asarray(faces, dtype=np.int64)
-        inner = np.asarray(face_is_inner, dtype=bool)
-        if vertices.ndim != 2 or vertices.shape[1] != 3:
-            raise ValueError(f"vertices must be (V, 3), got {vertices.shape}")
-        if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
-            raise ValueError(f"faces must be a non-empty (F, 3) array, got {faces.shape}")
-        if faces.min() < 0 or faces.max() >= len(vertices):
-            raise ValueError("faces index vertices out of range")
-        if inner.shape != (len(faces),):
-            raise ValueError(f"face_is_inner must be ({len(faces)},), got {inner.shape}")
-        _check_finite(f"fragment {name!r}: vertices", vertices / self.meters_per_unit, float32=True)
-        if parent is not None and not 0 <= int(parent) < len(self._fragments):
-            raise ValueError(f"unknown parent fragment id {parent}")
-        face_stress = np.zeros(len(faces)) if face_peak_stress is None else np.asarray(face_peak_stress, np.float64)
-        if face_stress.shape != (len(faces),):
-            raise ValueError(f"face_peak_stress must be ({len(faces)},), got {face_stress.shape}")
-        _check_finite(f"fragment {name!r}: peak stress", face_stress, float32=True)
-        _check_finite(f"fragment {name!r}: peak stress", float(peak_principal_stress))
+        vertices, faces, inner, face_stress = self._checked_surface(name, vertices, faces, face_is_inner, parent,
+                                                                    face_peak_stress, peak_principal_stress)
         corner_normals = _per_corner(normals, faces, len(vertices), 3, "normals")
         corner_uvs = _per_corner(uvs, faces, len(vertices), 2, "uvs")
-
         # Keep only the vertices the surface uses (a tet mesh's interior ones are not drawn).
         used, faces = np.unique(faces.reshape(-1), return_inverse=True)
         faces = faces.reshape(-1, 3)
         points = vertices[used]
-
-        tri = points[faces]
-        face_normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        face_normal /= np.maximum(np.linalg.norm(face_normal, axis=1, keepdims=True), 1e-300)
-        flat = np.repeat(face_normal, 3, axis=0)
-        corner_inner = np.repeat(inner, 3) & (not shade_inner)
-        if corner_normals is None:
-            corner_normals = flat
-        else:
-            missing = corner_inner | ~np.all(np.isfinite(corner_normals), axis=1)
-            corner_normals = np.where(missing[:, None], flat, corner_normals)
-            corner_normals /= np.maximum(np.linalg.norm(corner_normals, axis=1, keepdims=True), 1e-300)
-        projected = _box_projection(tri.reshape(-1, 3), flat)
-        if corner_uvs is None:
-            corner_uvs = projected
-        else:
-            missing = corner_inner | ~np.all(np.isfinite(corner_uvs), axis=1)
-            corner_uvs = np.where(missing[:, None], projected, corner_uvs)
+        corner_normals, corner_uvs = _corner_shading(points[faces], inner, corner_normals, corner_uvs, shade_inner)
 
         prim_path = Sdf.Path(f"{schema.FRAGMENTS_SCOPE}/{self._unique_prim_name(name)}")
-        scale = 1.0 / self.meters_per_unit
         impact_fields = None
         if impact is not None:
             point, force = _impact_fields(impact)
@@ -319,39 +306,13 @@ class CacheWriter:
             materials = self._material_paths[int(parent)]
         else:
             materials = self._define_materials(prim_path.name, look or _DEFAULT_LOOK)
+        birth_frame = int(birth_frame)
         # The layer's specs written directly: what UsdGeom.Mesh, PrimvarsAPI and
         # MaterialBindingAPI author (tests/test_usd_cache.py compares the two), with no
         # stage recomposing each edit.
         with Sdf.ChangeBlock():
-            mesh = _prim_spec(self._layer, prim_path, "Mesh")
-            _attribute(mesh, "points", Sdf.ValueTypeNames.Point3fArray,
-                       Vt.Vec3fArray.FromNumpy((points * scale).astype(np.float32)))
-            _attribute(mesh, "faceVertexCounts", Sdf.ValueTypeNames.IntArray,
-                       Vt.IntArray.FromNumpy(np.full(len(faces), 3, dtype=np.int32)))
-            _attribute(mesh, "faceVertexIndices", Sdf.ValueTypeNames.IntArray,
-                       Vt.IntArray.FromNumpy(faces.reshape(-1).astype(np.int32)))
-            _attribute(mesh, "extent", Sdf.ValueTypeNames.Float3Array,
-                       Vt.Vec3fArray.FromNumpy((np.stack([points.min(0), points.max(0)]) * scale).astype(np.float32)))
-            _attribute(mesh, "subdivisionScheme", Sdf.ValueTypeNames.Token, UsdGeom.Tokens.none, uniform=True)
-            _attribute(mesh, "normals", Sdf.ValueTypeNames.Normal3fArray,
-                       Vt.Vec3fArray.FromNumpy(corner_normals.astype(np.float32)), interpolation="faceVarying")
-            _attribute(mesh, f"primvars:{schema.PRIMVAR_UV}", Sdf.ValueTypeNames.TexCoord2fArray,
-                       Vt.Vec2fArray.FromNumpy(corner_uvs.astype(np.float32)), interpolation="faceVarying")
-            _attribute(mesh, f"primvars:{schema.PRIMVAR_FACE_STRESS}", Sdf.ValueTypeNames.FloatArray,
-                       Vt.FloatArray.FromNumpy(face_stress.astype(np.float32)), interpolation="uniform")
-            _apply_binding_api(mesh)
-            for subset_name, faces_in in ((schema.OUTER_SUBSET, ~inner), (schema.INNER_SUBSET, inner)):
-                subset = _prim_spec(self._layer, prim_path.AppendChild(subset_name), "GeomSubset")
-                _attribute(subset, "indices", Sdf.ValueTypeNames.IntArray,
-                           Vt.IntArray.FromNumpy(np.nonzero(faces_in)[0].astype(np.int32)))
-                _attribute(subset, "elementType", Sdf.ValueTypeNames.Token, UsdGeom.Tokens.face, uniform=True)
-                _attribute(subset, "familyName", Sdf.ValueTypeNames.Token, "materialBind", uniform=True)
-                _apply_binding_api(subset)
-                binding = Sdf.RelationshipSpec(subset, "material:binding", custom=False)
-                binding.targetPathList.explicitItems = [materials[subset_name]]
-            _attribute(mesh, "subsetFamily:materialBind:familyType", Sdf.ValueTypeNames.Token,
-                       UsdGeom.Tokens.partition, uniform=True)
-            birth_frame = int(birth_frame)
+            mesh = self._mesh_spec(prim_path, points, faces, inner, corner_normals, corner_uvs, face_stress,
+                                   materials)
             _attribute(mesh, schema.ATTR_BIRTH_FRAME, Sdf.ValueTypeNames.Int, birth_frame, custom=True)
             _attribute(mesh, schema.ATTR_DEATH_FRAME, Sdf.ValueTypeNames.Int, -1, custom=True)
             _attribute(mesh, schema.ATTR_PEAK_STRESS, Sdf.ValueTypeNames.Double, float(peak_principal_stress),
@@ -375,6 +336,64 @@ class CacheWriter:
         self._fragments.append(_Fragment(str(prim_path), translate.path, orient.path, visibility.path, birth_frame))
         self._material_paths.append(materials)
         return len(self._fragments) - 1
+
+    def _checked_surface(self, name, vertices, faces, face_is_inner, parent, face_peak_stress, peak):
+        """``add_fragment``'s arrays as arrays of their dtypes, each checked: (vertices (V,3)
+        float64, faces (F,3) int64, inner (F,) bool, face stress (F,) float64 [Pa])."""
+        vertices = np.asarray(vertices, dtype=np.float64)
+        faces = np.asarray(faces, dtype=np.int64)
+        inner = np.asarray(face_is_inner, dtype=bool)
+        if vertices.ndim != 2 or vertices.shape[1] != 3:
+            raise ValueError(f"vertices must be (V, 3), got {vertices.shape}")
+        if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+            raise ValueError(f"faces must be a non-empty (F, 3) array, got {faces.shape}")
+        if faces.min() < 0 or faces.max() >= len(vertices):
+            raise ValueError("faces index vertices out of range")
+        if inner.shape != (len(faces),):
+            raise ValueError(f"face_is_inner must be ({len(faces)},), got {inner.shape}")
+        _check_finite(f"fragment {name!r}: vertices", vertices / self.meters_per_unit, float32=True)
+        if parent is not None and not 0 <= int(parent) < len(self._fragments):
+            raise ValueError(f"unknown parent fragment id {parent}")
+        face_stress = np.zeros(len(faces)) if face_peak_stress is None else np.asarray(face_peak_stress, np.float64)
+        if face_stress.shape != (len(faces),):
+            raise ValueError(f"face_peak_stress must be ({len(faces)},), got {face_stress.shape}")
+        _check_finite(f"fragment {name!r}: peak stress", face_stress, float32=True)
+        _check_finite(f"fragment {name!r}: peak stress", float(peak))
+        return vertices, faces, inner, face_stress
+
+    def _mesh_spec(self, prim_path, points, faces, inner, corner_normals, corner_uvs, face_stress, materials):
+        """The fragment's Mesh prim spec with its geometry, shading, stress and the two face
+        subsets bound to ``materials``; returns the spec."""
+        scale = 1.0 / self.meters_per_unit
+        mesh = _prim_spec(self._layer, prim_path, "Mesh")
+        _attribute(mesh, "points", Sdf.ValueTypeNames.Point3fArray,
+                   Vt.Vec3fArray.FromNumpy((points * scale).astype(np.float32)))
+        _attribute(mesh, "faceVertexCounts", Sdf.ValueTypeNames.IntArray,
+                   Vt.IntArray.FromNumpy(np.full(len(faces), 3, dtype=np.int32)))
+        _attribute(mesh, "faceVertexIndices", Sdf.ValueTypeNames.IntArray,
+                   Vt.IntArray.FromNumpy(faces.reshape(-1).astype(np.int32)))
+        _attribute(mesh, "extent", Sdf.ValueTypeNames.Float3Array,
+                   Vt.Vec3fArray.FromNumpy((np.stack([points.min(0), points.max(0)]) * scale).astype(np.float32)))
+        _attribute(mesh, "subdivisionScheme", Sdf.ValueTypeNames.Token, UsdGeom.Tokens.none, uniform=True)
+        _attribute(mesh, "normals", Sdf.ValueTypeNames.Normal3fArray,
+                   Vt.Vec3fArray.FromNumpy(corner_normals.astype(np.float32)), interpolation="faceVarying")
+        _attribute(mesh, f"primvars:{schema.PRIMVAR_UV}", Sdf.ValueTypeNames.TexCoord2fArray,
+                   Vt.Vec2fArray.FromNumpy(corner_uvs.astype(np.float32)), interpolation="faceVarying")
+        _attribute(mesh, f"primvars:{schema.PRIMVAR_FACE_STRESS}", Sdf.ValueTypeNames.FloatArray,
+                   Vt.FloatArray.FromNumpy(face_stress.astype(np.float32)), interpolation="uniform")
+        _apply_binding_api(mesh)
+        for subset_name, faces_in in ((schema.OUTER_SUBSET, ~inner), (schema.INNER_SUBSET, inner)):
+            subset = _prim_spec(self._layer, prim_path.AppendChild(subset_name), "GeomSubset")
+            _attribute(subset, "indices", Sdf.ValueTypeNames.IntArray,
+                       Vt.IntArray.FromNumpy(np.nonzero(faces_in)[0].astype(np.int32)))
+            _attribute(subset, "elementType", Sdf.ValueTypeNames.Token, UsdGeom.Tokens.face, uniform=True)
+            _attribute(subset, "familyName", Sdf.ValueTypeNames.Token, "materialBind", uniform=True)
+            _apply_binding_api(subset)
+            binding = Sdf.RelationshipSpec(subset, "material:binding", custom=False)
+            binding.targetPathList.explicitItems = [materials[subset_name]]
+        _attribute(mesh, "subsetFamily:materialBind:familyType", Sdf.ValueTypeNames.Token,
+                   UsdGeom.Tokens.partition, uniform=True)
+        return mesh
 
     def _to_stage_vectors(self, points: np.ndarray, vectors: np.ndarray | None = None):
         """World points [m] (K,3) -> stage frame and units; free vectors only turned."""
