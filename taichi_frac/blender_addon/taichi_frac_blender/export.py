@@ -259,7 +259,6 @@ def export_scene(context) -> Export:
     """Write the scene file, its meshes and nothing else; returns what was written. Raises
     ExportError naming the object when one cannot be simulated (not a mesh, not closed)."""
     scene = context.scene
-    settings = scene.taichi_frac_sim
     objects = simulated_objects(scene)
     bodies = [o for o in objects if o.taichi_frac_sim.role in ("BREAKABLE", "RIGID")]
     if not any(o.taichi_frac_sim.role == "BREAKABLE" for o in bodies):
@@ -269,18 +268,27 @@ def export_scene(context) -> Export:
         if obj.taichi_frac_sim.role != "STATIC" and obj.type != "MESH":
             raise ExportError(f"object {obj.name!r} is a {obj.type.lower()}, not a mesh: only meshes can be "
                               f"{obj.taichi_frac_sim.role.lower()}; convert it to a mesh or set its role to Static")
+    if scene.frame_end <= scene.frame_start:
+        raise ExportError(f"the scene's frame range {scene.frame_start}-{scene.frame_end} has no frame to "
+                          "simulate: make the end frame later than the start frame")
     cache = cache_path(scene)
-    stem = os.path.splitext(cache)[0]
-    folder = os.path.dirname(cache)
-    mesh_dir = stem + "_meshes"
+    mesh_dir = os.path.splitext(cache)[0] + "_meshes"
     os.makedirs(mesh_dir, exist_ok=True)
     scale = metres_per_unit(scene)
     fps = scene_fps(scene)
-    frame_start, frame_end = scene.frame_start, scene.frame_end
-    if frame_end <= frame_start:
-        raise ExportError(f"the scene's frame range {frame_start}-{frame_end} has no frame to simulate: "
-                          "make the end frame later than the start frame")
     names = _unique_names(objects)
+    current = scene.frame_current
+    try:
+        return _write(context, scene, objects, bodies, names, cache, mesh_dir, scale, fps)
+    finally:
+        scene.frame_set(current)  # (the artist's frame: the export reads the start frame)
+
+
+def _write(context, scene, objects, bodies, names, cache, mesh_dir, scale, fps) -> Export:
+    """export_scene's writing, at the start frame."""
+    settings = scene.taichi_frac_sim
+    frame_start, frame_end = scene.frame_start, scene.frame_end
+    stem, folder = os.path.splitext(cache)[0], os.path.dirname(cache)
     scene.frame_set(frame_start)
     # Velocities from animation first: they move the frame, the meshes are read at the start.
     velocities = {}

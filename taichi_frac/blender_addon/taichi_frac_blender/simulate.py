@@ -42,16 +42,27 @@ class Job:
         self.exported: export.Export | None = None
         self.run: runner.SimulationRun | None = None
         self.started = 0.0
+        self.shown = []  # objects hidden by the last simulation, shown to be exported
+
+    def hide_again(self) -> None:
+        """After a failure: hide again what the last simulation had hidden (its pieces still show)."""
+        for obj in self.shown:
+            obj.hide_viewport = obj.hide_render = True
+            obj.taichi_frac_sim.hidden_by_simulation = True
 
     def start(self, context) -> None:
         """Raises runner.RunError or export.ExportError (one line each)."""
         executable, _ = runner.find_executable(executable_preference(context))
-        hidden = [o for o in self.scene.objects if o.taichi_frac_sim.hidden_by_simulation]
-        for obj in hidden:  # (a hidden object is not evaluated: show it to read its mesh)
+        self.shown = [o for o in self.scene.objects if o.taichi_frac_sim.hidden_by_simulation]
+        for obj in self.shown:  # (a hidden object is not evaluated: show it to read its mesh)
             obj.hide_viewport = False
             obj.hide_render = False
             obj.taichi_frac_sim.hidden_by_simulation = False
-        self.exported = export.export_scene(context)
+        try:
+            self.exported = export.export_scene(context)
+        except Exception:
+            self.hide_again()
+            raise
         for path in (self.exported.stats_path,):
             if os.path.exists(path):
                 os.remove(path)  # (a failed run must not show the last run's findings)
@@ -71,6 +82,7 @@ class Job:
         run wrote one (finished, or stopped with the frames done)."""
         code = self.run.poll()
         if code not in (0, 130) or not os.path.exists(self.exported.cache_path):
+            self.hide_again()
             return "ERROR", f"taichi-frac: {self.run.error_line()}"
         from . import run_import  # (the package's import function; imported late: no cycle at load)
 
@@ -154,6 +166,7 @@ class TAICHI_FRAC_OT_simulate(bpy.types.Operator):
         try:
             job.start(context)
         except (runner.RunError, export.ExportError, OSError) as exc:
+            job.hide_again()
             self.report({"ERROR"}, f"taichi-frac: {exc}")
             return {"CANCELLED"}
         if self.wait or bpy.app.background or context.window is None:
