@@ -93,5 +93,5 @@ def test_failed_run_gives_the_commands_one_line_error(tmp_path):
     run.start()
     assert run.wait(timeout=300) == 2
     line = run.error_line()
-    assert line.startswith("error:") and "friction" in line and "\n" not in line, line
+    assert line.startswith("bad.toml:") and "friction" in line and "\n" not in line, line
     assert not (tmp_path / "stats.json").exists()

@@ -166,6 +166,19 @@ def section_simulate(workdir: Path):
 def section_offline(workdir: Path):
     scene = empty_scene(workdir)
     cube, _ = cube_and_sphere(scene)
+    command = os.environ["TAICHI_FRAC_EXECUTABLE"]
+    # A run that fails: the command's own one-line error, in Blender's report.
+    scene.taichi_frac_sim.ground_height = 1.0  # (above the cube: the scene loader refuses it)
+    try:
+        bpy.ops.taichi_frac.simulate(wait=True)
+        check(False, "simulate of a cube below the ground did not fail")
+    except RuntimeError as exc:
+        message = str(exc).strip()
+        report["failed_run_message"] = message
+        check("below the ground" in message and "Cube" in message and len(message.splitlines()) == 1,
+              f"failed-run message: {message!r}")
+    scene.taichi_frac_sim.ground_height = 0.0
+    check_export(workdir, scene, cube)
     # A missing executable: one line, naming where to set it.
     os.environ["TAICHI_FRAC_EXECUTABLE"] = str(workdir / "no-such-taichi-frac")
     try:
@@ -186,6 +199,7 @@ def section_offline(workdir: Path):
         report["not_found_message"] = str(exc).strip()
         check("TAICHI_FRAC_EXECUTABLE" in str(exc), f"not-found message: {exc}")
     os.environ["PATH"] = path
+    os.environ["TAICHI_FRAC_EXECUTABLE"] = command
     check(not cube.hide_viewport, "a failed run hid the cube")
     # Velocity from animation: linear keys, the slope is the keys' difference over their time.
     fps = 24.0
@@ -205,8 +219,7 @@ def section_offline(workdir: Path):
             key.interpolation = "LINEAR"
     scene.frame_set(1)
     addon().export.export_scene(bpy.context)
-    exported = tomllib.loads(Path(os.path.splitext(scene.taichi_frac_sim.cache_path)[0] + ".toml").read_text())
-    entry = next(o for o in exported["objects"] if o["name"] == "Cube")
+    entry = next(o for o in exported_scene(scene)["objects"] if o["name"] == "Cube")
     seconds = 10.0 / fps
     expected = np.array([1.0, 0.5, -0.4]) / seconds
     spin = np.array([0.0, 0.0, math.radians(90.0) / seconds])
@@ -217,6 +230,53 @@ def section_offline(workdir: Path):
     check(np.allclose(entry["angular_velocity"], spin, rtol=1e-3, atol=1e-3),
           f"spin from animation {entry['angular_velocity']}, keys' slope {spin.tolist()}")
     check(np.allclose(entry["position"], [0.0, 0.0, 1.0], atol=1e-6), f"position at the start {entry['position']}")
+
+
+def exported_scene(scene) -> dict:
+    return tomllib.loads(Path(os.path.splitext(scene.taichi_frac_sim.cache_path)[0] + ".toml").read_text())
+
+
+def check_export(workdir: Path, scene, cube):
+    """What the scene file says of a static box, a custom material, an automatic crack count,
+    a modifier and the unit scale, each against numbers worked out by hand."""
+    bpy.ops.mesh.primitive_cube_add(size=2.0, location=(1.0, 2.0, 0.05), rotation=(0.0, 0.0, math.radians(30.0)))
+    wall = bpy.context.active_object
+    wall.name = "Wall"
+    wall.scale = (0.5, 1.0, 0.1)
+    wall.taichi_frac_sim.role = "STATIC"
+    sim = cube.taichi_frac_sim
+    sim.material, sim.density, sim.young_modulus, sim.poisson_ratio, sim.tensile_strength = (
+        "custom", 2000.0, 5.0e9, 0.25, 3.0e6)
+    sim.crack_count_auto = True
+    cube.modifiers.new("bevel", "BEVEL").segments = 2
+    scene.unit_settings.system, scene.unit_settings.scale_length = "METRIC", 0.01  # (1 unit = 1 cm)
+    scene.frame_current = 7
+    addon().export.export_scene(bpy.context)
+    check(scene.frame_current == 7, f"the export left the scene at frame {scene.frame_current}")
+    exported = exported_scene(scene)
+    box = next(c for c in exported["colliders"] if c["type"] == "box")
+    half = math.radians(30.0) / 2
+    check(np.allclose(box["center"], [0.01, 0.02, 0.0005], atol=1e-9), f"static box centre {box['center']}")
+    check(np.allclose(box["half_extents"], [0.005, 0.01, 0.001], atol=1e-9), f"static box half {box['half_extents']}")
+    check(np.allclose(box["orientation"], [math.cos(half), 0.0, 0.0, math.sin(half)], atol=1e-6),
+          f"static box orientation {box['orientation']}")
+    entry = next(o for o in exported["objects"] if o["name"] == "Cube")
+    check(entry["material"] == {"density": 2000.0, "young_modulus": 5.0e9, "poisson_ratio": 0.25,
+                                "tensile_strength": 3.0e6, "look": "porcelain"}, f"custom material {entry['material']}")
+    check("crack_count" not in entry["fracture"], "auto crack count wrote a count")
+    check(np.allclose(entry["position"], [0.0, 0.0, 0.003], atol=1e-9), f"centimetre position {entry['position']}")
+    check(np.allclose(entry["linear_velocity"], [0.0, 0.0, -0.12], atol=1e-9), f"velocity {entry['linear_velocity']}")
+    vertices = np.array([[float(v) for v in line.split()[1:]] for line in
+                         (Path(scene.taichi_frac_sim.cache_path).parent
+                          / entry["mesh"]).read_text().splitlines() if line.startswith("v ")])
+    check(len(vertices) > 8, f"the bevel modifier was not applied ({len(vertices)} vertices)")
+    # The bevelled cube's extent along its own axes is still the 0.2-unit cube's: 2 mm.
+    local = (vertices - entry["position"]) @ np.array(cube.matrix_world.to_3x3())
+    check(np.allclose(np.ptp(local, axis=0), 0.002, rtol=1e-4), f"exported extents {np.ptp(local, axis=0)}")
+    bpy.data.objects.remove(wall)
+    cube.modifiers.clear()
+    sim.material, sim.crack_count_auto = "porcelain", False
+    scene.unit_settings.system, scene.unit_settings.scale_length = "METRIC", 1.0
 
 
 def _fcurves(obj):

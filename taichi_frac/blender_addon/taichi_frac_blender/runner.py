@@ -158,13 +158,14 @@ class SimulationRun:
             self.process.kill()
 
     def error_line(self) -> str:
-        """The command's own one-line error (``taichi-frac run: error: ...``), else the last
-        line it printed, else its exit status."""
+        """The command's own one-line error (what follows ``taichi-frac run: error:``), else
+        the last line it printed, else its exit status."""
         with self._lock:
             lines = [line.strip() for line in self.stderr_lines if line.strip()]
         for line in reversed(lines):
             if line.startswith(f"{COMMAND} run:"):
-                return line[len(f"{COMMAND} run:"):].strip()
+                line = line[len(f"{COMMAND} run:"):].strip()
+                return line[len("error:"):].strip() if line.startswith("error:") else line
         if lines:
             return lines[-1]
         code = None if self.process is None else self.process.returncode

@@ -83,7 +83,7 @@ class Job:
         code = self.run.poll()
         if code not in (0, 130) or not os.path.exists(self.exported.cache_path):
             self.hide_again()
-            return "ERROR", f"taichi-frac: {self.run.error_line()}"
+            return "ERROR", f"taichi-frac: the run failed: {self.run.error_line()}"
         from . import run_import  # (the package's import function; imported late: no cycle at load)
 
         with context.temp_override(scene=self.scene):  # (the scene simulated, whichever shows now)
