@@ -26,7 +26,8 @@ def test_zip_layout_and_manifest(tmp_path):
         manifest = tomllib.loads(archive.read("blender_manifest.toml").decode())
         sources = {n: archive.read(n).decode() for n in names if n.endswith(".py")}
     assert set(names) >= {"blender_manifest.toml", "__init__.py", "reader.py", "retime.py", "build.py", "materials.py",
-                          "properties.py", "ui.py", "schema.py"}
+                          "properties.py", "ui.py", "schema.py", "sim_properties.py", "sim_ui.py", "export.py",
+                          "scene_toml.py", "runner.py", "simulate.py"}
     assert all("/" not in n for n in names), names  # flat: no enclosing folder
     assert all(n.endswith((".py", ".toml")) for n in names), names  # no compiled code, no caches
     assert REQUIRED <= set(manifest)

@@ -143,7 +143,8 @@ class SimulationRun:
 
     def cancel(self) -> None:
         """Ask the run to stop: SIGINT, which the command honours between steps and answers
-        by closing a valid cache of the frames done (exit status 130)."""
+        by closing a valid cache of the frames done (exit status 130). On Windows a
+        Ctrl-Break, which ends the command: its cache keeps its last checkpoint."""
         if self.process is None or self.process.poll() is not None:
             return
         self.cancelled = True
