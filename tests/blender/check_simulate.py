@@ -311,6 +311,14 @@ def section_cancel(workdir: Path):
     report["cancel_layer"] = {k: (v if isinstance(v, (int, float, str, bool)) else str(v)) for k, v in data.items()}
     pieces = pieces_of(scene, job.exported.cache_path)
     check(len(pieces) >= 2, f"{len(pieces)} objects imported from the cancelled run's cache")
+    # Stopped at once, before a first frame: the last run's cache is not taken for its result.
+    early = module.simulate.Job(bpy.context)
+    early.start(bpy.context)
+    early.run.cancel()
+    early.run.wait(timeout=120)
+    level, message = early.finish(bpy.context)
+    report["early_cancel"] = [level, message]
+    check(level == "WARNING" and "before its first frame" in message, f"cancelled at once: {level} {message}")
 
 
 def main():

@@ -28,6 +28,14 @@ from . import export, runner
 POLL_SECONDS = 0.2
 
 
+def _modified(path: str):
+    """The file's modification time [ns], or None when there is no file."""
+    try:
+        return os.stat(path).st_mtime_ns
+    except OSError:
+        return None
+
+
 def executable_preference(context) -> str:
     addon = context.preferences.addons.get(__package__)
     return addon.preferences.executable if addon is not None and addon.preferences is not None else ""
@@ -43,6 +51,7 @@ class Job:
         self.run: runner.SimulationRun | None = None
         self.started = 0.0
         self.shown = []  # objects hidden by the last simulation, shown to be exported
+        self.cache_before = None  # the cache file's modification time before the run
 
     def hide_again(self) -> None:
         """After a failure: hide again what the last simulation had hidden (its pieces still show)."""
@@ -63,9 +72,11 @@ class Job:
         except Exception:
             self.hide_again()
             raise
-        for path in (self.exported.stats_path,):
-            if os.path.exists(path):
-                os.remove(path)  # (a failed run must not show the last run's findings)
+        if os.path.exists(self.exported.stats_path):
+            os.remove(self.exported.stats_path)  # (a failed run must not show the last run's findings)
+        # A run stopped before its first frame writes no cache: the last run's must not be
+        # taken for it.
+        self.cache_before = _modified(self.exported.cache_path)
         self.run = runner.SimulationRun(executable, self.exported.scene_path, self.exported.stats_path)
         self.started = time.perf_counter()
         self.run.start()
@@ -81,7 +92,11 @@ class Job:
         """After the run ended: (report level, one-line message); imports the cache when the
         run wrote one (finished, or stopped with the frames done)."""
         code = self.run.poll()
-        if code not in (0, 130) or not os.path.exists(self.exported.cache_path):
+        written = _modified(self.exported.cache_path) not in (None, self.cache_before)
+        if self.run.cancelled and not written:  # (stopped while Python was still starting: any status)
+            self.hide_again()
+            return "WARNING", "taichi-frac: the run was stopped before its first frame: nothing to import"
+        if code not in (0, 130) or not written:
             self.hide_again()
             return "ERROR", f"taichi-frac: the run failed: {self.run.error_line()}"
         from . import run_import  # (the package's import function; imported late: no cycle at load)
