@@ -179,6 +179,7 @@ def section_offline(workdir: Path):
               f"failed-run message: {message!r}")
     scene.taichi_frac_sim.ground_height = 0.0
     check_export(workdir, scene, cube)
+    check_panel(cube)
     # A missing executable: one line, naming where to set it.
     os.environ["TAICHI_FRAC_EXECUTABLE"] = str(workdir / "no-such-taichi-frac")
     try:
@@ -230,6 +231,58 @@ def section_offline(workdir: Path):
     check(np.allclose(entry["angular_velocity"], spin, rtol=1e-3, atol=1e-3),
           f"spin from animation {entry['angular_velocity']}, keys' slope {spin.tolist()}")
     check(np.allclose(entry["position"], [0.0, 0.0, 1.0], atol=1e-6), f"position at the start {entry['position']}")
+
+
+class Layout:
+    """Stands in for a panel's UILayout (Blender without a window draws no UI): records the
+    labels and checks that every property drawn exists on its data."""
+
+    def __init__(self, lines):
+        self.lines, self.enabled = lines, True
+
+    def prop(self, data, name, **_):
+        check(name in data.bl_rna.properties, f"the panel draws a missing property {name!r}")
+
+    def label(self, text="", **_):
+        self.lines.append(text)
+
+    def operator(self, idname, **_):
+        self.lines.append(f"[{idname}]")
+        return type("Op", (), {})()
+
+    def box(self):
+        return Layout(self.lines)
+
+    row = column = lambda self, **_: Layout(self.lines)
+
+
+def draw_panel(obj) -> list[str]:
+    lines = []
+    panel = bpy.types.VIEW3D_PT_taichi_frac_simulation
+    bpy.context.view_layer.objects.active = obj
+    panel.draw(type("Panel", (), {"layout": Layout(lines)})(), bpy.context)
+    return lines
+
+
+def check_panel(cube):
+    sim = cube.taichi_frac_sim
+    for role in ("NONE", "BREAKABLE", "RIGID", "STATIC"):
+        sim.role = role
+        for velocity in ("MANUAL", "ANIMATION"):
+            sim.velocity_source = velocity
+            for material in ("porcelain", "custom"):
+                sim.material = material
+                lines = draw_panel(cube)
+                check("[taichi_frac.simulate]" in lines, f"no Simulate button for role {role}")
+    sim.role, sim.material, sim.velocity_source = "STATIC", "porcelain", "MANUAL"
+    check(any("bounding box" in line for line in draw_panel(cube)), "the panel does not say how static objects collide")
+    sim.role = "BREAKABLE"
+    sim.result_state, sim.result_peak_stress, sim.result_strength = "UNBROKEN", 7.66e6, 35.0e6
+    sim.result_frame, sim.result_impact_speed, sim.result_break_speed = 11.0, 4.33, 15.4
+    lines = draw_panel(cube)
+    check("Peak stress 7.66 MPa of strength 35 MPa" in lines and any("15.4 m/s" in line for line in lines),
+          f"the panel's diagnosis: {lines[-6:]}")
+    sim.result_state = "NONE"
 
 
 def exported_scene(scene) -> dict:
