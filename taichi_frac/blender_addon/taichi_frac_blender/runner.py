@@ -145,8 +145,8 @@ class SimulationRun:
         """Ask the run to stop: SIGINT, which the command honours between steps and answers
         by closing a valid cache of the frames done (exit status 130). On Windows a
         Ctrl-Break, which ends the command: its cache keeps its last checkpoint."""
-        if self.process is None or self.process.poll() is not None:
-            return
+        if self.process is None or self.process.poll() is not None or self.cancelled:
+            return  # (a second SIGINT would end the command at once, losing the frames since its checkpoint)
         self.cancelled = True
         if os.name == "nt":
             self.process.send_signal(signal.CTRL_BREAK_EVENT)

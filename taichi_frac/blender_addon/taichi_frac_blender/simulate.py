@@ -83,6 +83,8 @@ class Job:
 
     def status_text(self) -> str:
         p = self.run.progress
+        if self.run.cancelled:
+            return f"taichi-frac: stopping after frame {p.frame}, keeping the frames done ..."
         if not p.frames:
             return f"taichi-frac: preparing the bodies ({time.perf_counter() - self.started:.0f} s) - Esc to stop"
         return (f"taichi-frac: frame {p.frame}/{p.frames}, {p.fragments} pieces, {p.fps:.1f} frames/s"
@@ -170,7 +172,7 @@ class TAICHI_FRAC_OT_simulate(bpy.types.Operator):
     wait: BoolProperty(name="Wait", default=False, options={"SKIP_SAVE"},
                        description="Block until the run ends (for scripts)")
 
-    _job: Job | None = None
+    _job = None  # (the Job of a modal run)
     _timer = None
 
     def invoke(self, context, event):
@@ -199,7 +201,7 @@ class TAICHI_FRAC_OT_simulate(bpy.types.Operator):
         job = self._job
         if event.type == "ESC" and event.value == "PRESS":
             job.run.cancel()
-            context.workspace.status_text_set("taichi-frac: stopping, keeping the frames done ...")
+            context.workspace.status_text_set(job.status_text())
             return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
