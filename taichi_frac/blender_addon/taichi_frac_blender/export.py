@@ -200,15 +200,6 @@ def _material(props) -> object:
     return props.material
 
 
-def material_strength(props) -> float:
-    """[Pa] the tensile strength the scene file gives this object."""
-    from .sim_properties import MATERIAL_PRESETS
-
-    if props.material == "custom":
-        return f32(props.tensile_strength)
-    return f32(props.strength_override) or MATERIAL_PRESETS[props.material][3]
-
-
 def _fracture(props, scale: float) -> dict:
     table = {}
     if not props.crack_count_auto:  # (auto: no key, the engine's default count)
