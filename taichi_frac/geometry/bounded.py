@@ -3,8 +3,9 @@
 The mesh libraries (MeshFix, manifold3d, TetGen, the quadric simplifier) are native code
 that Python cannot interrupt, so a bounded step runs in a forked child process (the child
 shares the parent's memory copy-on-write, so starting it costs milliseconds, not an
-interpreter start-up) and is killed when its time is up. Where fork is not available the
-step runs inline and the bound is checked after it returns.
+interpreter start-up) and is killed when its time is up. The child dies with its parent
+(``workers.die_with_parent``): a killed run leaves no worker behind. Where fork is not
+available the step runs inline and the bound is checked after it returns.
 """
 
 from __future__ import annotations
@@ -101,7 +102,7 @@ class StepClock:
         receive, send = context.Pipe(duplex=False)
         # Not a daemon, so a step may start its own bounded steps; the finally below always
         # stops it.
-        child = context.Process(target=_child, args=(send, function, args, kwargs))
+        child = context.Process(target=_child, args=(send, os.getpid(), function, args, kwargs))
         child.start()
         send.close()
         try:
@@ -125,7 +126,10 @@ class StepClock:
         return payload
 
 
-def _child(send, function, args, kwargs) -> None:
+def _child(send, parent_pid, function, args, kwargs) -> None:
+    from .workers import die_with_parent
+
+    die_with_parent(parent_pid)
     try:
         message = (True, function(*args, **kwargs))
     except BaseException as exc:  # sent back and raised in the parent

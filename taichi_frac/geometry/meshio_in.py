@@ -7,6 +7,11 @@ kept per corner (``mesh.metadata["corner_uvs"]``, (F,3,2)) and per vertex. Multi
 files (a glTF scene) are flattened into one mesh with their node transforms applied; each
 piece must then be a closed shell, and several shells are an error unless repaired.
 
+Up axis: the simulation is Z-up. glTF/GLB files are Y-up by the glTF specification and are
+always turned Z-up (x, y, z) -> (x, -z, y), as Blender's importer does; the other formats
+carry no up axis, so ``up_axis="y"`` says a file is Y-up (Blender's OBJ export default) and
+``"z"`` (the default) takes it as it is.
+
 Tet meshes (.msh, .vtk, .vtu, .mesh) are used as they are: no re-meshing.
 """
 
@@ -29,6 +34,11 @@ TET_SUFFIXES = (".msh", ".vtk", ".vtu", ".mesh")
 # Formats that are always text (and need no neighbouring files, as a glTF's buffers do):
 # bytes that are not text mean a wrong or damaged file.
 _TEXT_SUFFIXES = (".obj", ".off")
+
+#: Up axes a surface file's coordinates may use (``up_axis=``).
+UP_AXES = ("z", "y")
+#: Formats whose up axis their specification fixes (glTF 2.0: +Y up).
+_Y_UP_SUFFIXES = (".gltf", ".glb")
 
 #: Sizes [m] a solid may have: below 0.1 mm its particles' distances are lost against the
 #: float32 positions of a scene of metres; above 10 km float32 resolves only centimetres.
@@ -145,17 +155,19 @@ def attach_corner_uvs(mesh: trimesh.Trimesh, corner_uvs: np.ndarray) -> None:
 
 
 def check_or_repair(mesh: trimesh.Trimesh, name: str, *, repair: bool = False, clock=None,
-                    check_self_intersection: bool = True) -> trimesh.Trimesh:
+                    check_self_intersection: bool = True, min_kept_fraction: float | None = None) -> trimesh.Trimesh:
     """``mesh`` checked (``validate_surface``) or, with ``repair``, repaired first
     (``repair.repair_surface``, its steps in ``metadata["repair"]`` and its report in
-    ``metadata["repair_report"]``); input UVs are carried onto a repaired surface."""
+    ``metadata["repair_report"]``; ``min_kept_fraction``: its bound, None for its default);
+    input UVs are carried onto a repaired surface."""
     steps: list[str] = []
     report = None
     if repair:
         from .repair import repair_surface
         from .surface_attributes import boundary_corner_attributes
 
-        repaired, report = repair_surface(mesh, name, clock=clock)
+        bound = {} if min_kept_fraction is None else {"min_kept_fraction": min_kept_fraction}
+        repaired, report = repair_surface(mesh, name, clock=clock, **bound)
         if mesh.metadata.get("corner_uvs") is not None:
             # Each corner takes the UV of the input triangle it lies on.
             _, uvs = boundary_corner_attributes(mesh, repaired.triangles)
@@ -170,8 +182,49 @@ def check_or_repair(mesh: trimesh.Trimesh, name: str, *, repair: bool = False, c
     return mesh
 
 
+def check_up_axis(up_axis: str) -> str:
+    """``up_axis`` if it is one of :data:`UP_AXES`, else OptionError."""
+    if up_axis not in UP_AXES:
+        raise OptionError(f"up_axis = {up_axis!r}: use \"z\" (the file is Z-up, taken as it is) or \"y\" "
+                          "(the file is Y-up, e.g. Blender's OBJ export default; turned Z-up)")
+    return up_axis
+
+
+def file_up_axis(path: str | os.PathLike, up_axis: str = "z") -> str:
+    """The up axis of ``path``'s coordinates: "y" for glTF/GLB (their specification), else
+    ``up_axis``."""
+    check_up_axis(up_axis)
+    return "y" if Path(path).suffix.lower() in _Y_UP_SUFFIXES else up_axis
+
+
+def to_z_up(mesh: trimesh.Trimesh, up_axis: str) -> trimesh.Trimesh:
+    """``mesh`` turned in place from ``up_axis`` up to Z up: Y up is (x, y, z) -> (x, -z, y),
+    a quarter turn about x (orientation and winding kept)."""
+    if check_up_axis(up_axis) == "y":
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        mesh.vertices = np.column_stack([vertices[:, 0], -vertices[:, 2], vertices[:, 1]])
+    return mesh
+
+
+def load_raw_surface(path: str | os.PathLike, *, scale: float = 1.0, units: str = "m", up_axis: str = "z",
+                     clock=None) -> trimesh.Trimesh:
+    """A surface file in metres, Z up (see the module docstring), its size checked and
+    nothing else: open, crossing or degenerate surfaces are returned as they are."""
+    path = Path(path)
+    factor = unit_scale(scale, units)
+    axis = file_up_axis(path, up_axis)
+    mesh = clock.inline("load", read_surface, path) if clock is not None else read_surface(path)
+    to_z_up(mesh, axis)
+    mesh.apply_scale(factor)
+    if len(mesh.faces):
+        check_size(mesh.metadata["file_extent"] * factor, repr(path.name), scale, units)
+    mesh.metadata["source"] = str(path)
+    mesh.metadata["up_axis"] = axis
+    return mesh
+
+
 def load_surface(path: str | os.PathLike, *, scale: float = 1.0, units: str = "m", repair: bool = False,
-                 check_self_intersection: bool = True, clock=None) -> trimesh.Trimesh:
+                 check_self_intersection: bool = True, clock=None, up_axis: str = "z") -> trimesh.Trimesh:
     """Load a closed surface mesh in metres and check it (see ``validate_surface``).
 
     Args:
@@ -181,18 +234,18 @@ def load_surface(path: str | os.PathLike, *, scale: float = 1.0, units: str = "m
         repair: fix holes, flipped faces, overlapping shells and self-intersections first
             (``repair.repair_surface``); the steps taken are in ``mesh.metadata["repair"]``.
         clock: a ``bounded.StepClock`` whose time bound the steps run under (None: unbounded).
+        up_axis: "z" or "y", the up axis of an OBJ/STL/PLY/OFF file's coordinates (glTF/GLB
+            are Y-up by their specification whatever this says).
 
     Raises:
         MeshError: the file is missing, unreadable, or fails a check (message says which).
     """
     path = Path(path)
-    factor = unit_scale(scale, units)
-    mesh = clock.inline("load", read_surface, path) if clock is not None else read_surface(path)
-    mesh.apply_scale(factor)
-    if len(mesh.faces):
-        check_size(mesh.metadata["file_extent"] * factor, repr(path.name), scale, units)
+    mesh = load_raw_surface(path, scale=scale, units=units, up_axis=up_axis, clock=clock)
+    axis = mesh.metadata["up_axis"]
     mesh = check_or_repair(mesh, path.name, repair=repair, clock=clock, check_self_intersection=check_self_intersection)
     mesh.metadata["source"] = str(path)
+    mesh.metadata["up_axis"] = axis
     return mesh
 
 

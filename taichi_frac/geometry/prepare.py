@@ -23,7 +23,8 @@ import trimesh
 from ..model import BodyModel, build_body_model
 from ..options import Material, ParticleOptions, material_preset
 from .bounded import DEFAULT_PREPARE_SECONDS, StepClock, StepShareExceeded
-from .meshio_in import check_or_repair, is_tet_file, load_surface, load_tet_mesh, unit_scale
+from .meshio_in import (check_or_repair, check_up_axis, is_tet_file, load_raw_surface, load_surface, load_tet_mesh,
+                        to_z_up, unit_scale)
 from .primitives import make_primitive, parse_primitive_spec
 from .simplify import deviation_points, simplified_tet_surfaces, surface_deviation
 from .tetra import BACKENDS, TetMesh, regular_tet_edge, tetrahedralize
@@ -99,12 +100,16 @@ class PrepareReport:
         return {k: v for k, v in self.__dict__.items() if k not in ("surface", "tet_surface")}
 
 
-def _surface_from_source(source, factor: float, repair: bool, edge_length_for, clock: StepClock):
+def _surface_from_source(source, factor: float, repair: bool, edge_length_for, clock: StepClock,
+                         up_axis: str = "z", checked: bool = True):
     """Returns (name, trimesh surface in metres, is_primitive) for a path, primitive spec or
-    Trimesh; a mesh's repair report is in ``surface.metadata["repair_report"]``."""
+    Trimesh; a mesh's repair report is in ``surface.metadata["repair_report"]``. With
+    ``checked`` False a mesh is returned unchecked (``input_solid`` decides what it becomes)."""
     if isinstance(source, trimesh.Trimesh):
-        mesh = source.copy()
+        mesh = to_z_up(source.copy(), up_axis)
         mesh.apply_scale(factor)
+        if not checked:
+            return "mesh", mesh, False
         return "mesh", check_or_repair(mesh, "mesh", repair=repair, clock=clock), False
     spec = str(source)
     parsed = parse_primitive_spec(spec) if not os.path.exists(spec) else None
@@ -115,7 +120,17 @@ def _surface_from_source(source, factor: float, repair: bool, edge_length_for, c
         mesh = make_primitive(name, params, edge_length=edge_length_for(volume) / factor)
         mesh.apply_scale(factor)
         return spec, mesh, True
-    return Path(spec).name, load_surface(spec, scale=factor, repair=repair, clock=clock), False
+    if not checked:
+        return Path(spec).name, load_raw_surface(spec, scale=factor, up_axis=up_axis, clock=clock), False
+    return Path(spec).name, load_surface(spec, scale=factor, repair=repair, clock=clock, up_axis=up_axis), False
+
+
+def _volume_of(mesh: trimesh.Trimesh) -> float:
+    """The volume [m^3] of ``mesh``'s winding-number solid (coarse; for a volume bound's count)."""
+    from .winding_solid import estimate_volume, usable_faces
+
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    return max(estimate_volume(vertices, usable_faces(vertices, mesh.faces)), 1e-300)
 
 
 def _cache_key(mesh: trimesh.Trimesh, backend: str, target: int | None, max_volume: float | None,
@@ -280,6 +295,8 @@ def prepare_body(
     use_cache: bool = True,
     time_limit: float | None = DEFAULT_PREPARE_SECONDS,
     simplify: bool = True,
+    thickness: float | None = None,
+    up_axis: str = "z",
     surface_contact: bool = False,
 ) -> tuple[BodyModel, PrepareReport]:
     """Build the two-scale model of one solid.
@@ -299,6 +316,11 @@ def prepare_body(
         simplify: mesh a copy of a surface finer than the target's particle spacing,
             decimated to that spacing (``simplify.simplify_for_target``); primitives are
             built at that spacing already and never simplified.
+        thickness: [m] a shell this thick about the surface joins the solid: an open sheet (a
+            pane, a leaf) becomes a closed one (``winding_solid``). None: a surface with no
+            volume is an error.
+        up_axis: "z" or "y": the up axis of an OBJ/STL/PLY/OFF source's (or a Trimesh's)
+            coordinates; Y up is turned Z up. glTF/GLB are Y-up by their specification.
         surface_contact: the body will collide through its true surface: it is grouped by
             ``particles.surface_group_size`` when large enough (``model.group_sizes``).
 
@@ -336,7 +358,13 @@ def prepare_body(
             return PRIMITIVE_EDGE_FACTOR * regular_tet_edge(volume / (target or max(volume / max_volume, 1.0)))
         clock = StepClock(name=Path(str(source)).name if not isinstance(source, trimesh.Trimesh) else "mesh",
                           seconds=time_limit)
-        name, surface, is_primitive = _surface_from_source(source, factor, repair, edge_for, clock)
+        check_up_axis(up_axis)
+        # With repair or a thickness a mesh goes to input_solid, which decides: the mesh as it
+        # is when clean, else the solid of its winding number.
+        lenient = bool(repair or thickness is not None) and not (
+            isinstance(source, str) and parse_primitive_spec(source) is not None and not os.path.exists(source))
+        name, surface, is_primitive = _surface_from_source(source, factor, repair, edge_for, clock, up_axis,
+                                                           checked=not lenient)
         repair_steps = list(surface.metadata.get("repair", []))
         repair_report = surface.metadata.get("repair_report")
         surface_triangles = len(surface.faces)
@@ -346,7 +374,16 @@ def prepare_body(
                       min_dihedral=particles.min_dihedral_deg, use_cache=use_cache, clock=clock,
                       notes=mesher_notes)
         tet_surface, tm, cache_hit = surface, None, False
-        if simplify and not is_primitive:
+        solid = None
+        if lenient:
+            from .input_solid import solid_of_input
+
+            count = target if target is not None else max(int(_volume_of(surface) / max_volume), 1)
+            solid = solid_of_input(surface, name, count=count, kwargs=kwargs, clock=clock, thickness=thickness,
+                                   simplify=simplify)
+            surface, tet_surface, tm, cache_hit = solid.surface, solid.tet_surface, solid.tets, solid.cache_hit
+            repair_steps = list(solid.steps)
+        elif simplify and not is_primitive:
             # The tets' spacing: the target count, or the count a volume bound asks for.
             count = target if target is not None else max(int(surface.volume / max_volume), 1)
             tet_surface, tm, cache_hit, step = _mesh_simplified(surface, count, clock, kwargs)
@@ -398,9 +435,12 @@ def prepare_body(
         surface=surface,
         tet_surface=None if tet_surface is surface else tet_surface,
         tet_surface_triangles=-1 if surface is None else len(tet_surface.faces),
-        kept_volume_fraction=None if repair_report is None else repair_report.kept_fraction,
-        input_volume=None if repair_report is None else repair_report.input_volume,
-        input_extents=(list(repair_report.input_extents) if repair_report is not None and repair_report.input_extents
+        kept_volume_fraction=(solid.kept_fraction if solid is not None else
+                              None if repair_report is None else repair_report.kept_fraction),
+        input_volume=(solid.input_volume if solid is not None else
+                      None if repair_report is None else repair_report.input_volume),
+        input_extents=(list(solid.input_extents) if solid is not None else
+                       list(repair_report.input_extents) if repair_report is not None and repair_report.input_extents
                        else (surface.extents.tolist() if surface is not None else extents.tolist())),
         tet_extents=extents.tolist(),
         surface_closed=surface is None or bool(surface.is_watertight and surface.is_winding_consistent),

@@ -127,12 +127,11 @@ def _manifold_union(shells: list[tuple[np.ndarray, np.ndarray]]):
 def winding_inside(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
     """(P,) bool: |generalized winding number| >= 1/2 at each point (libigl's fast winding
     number, Barill et al. 2018), the inside of a closed, open or overlapping surface."""
-    import igl
+    from .winding_solid import inside_winding
 
-    w = igl.fast_winding_number(np.ascontiguousarray(vertices, dtype=np.float64),
-                                np.ascontiguousarray(faces, dtype=np.int64),
-                                np.ascontiguousarray(points, dtype=np.float64))
-    return np.abs(w) >= 0.5
+    # Guarded: zero-area faces dropped, flat surfaces answered without libigl, which crashes
+    # on them, and the native call made in a forked child.
+    return inside_winding(vertices, faces, points)
 
 
 def _box_text(points: np.ndarray) -> str:

@@ -135,6 +135,16 @@ def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return crossing_face_pairs(vertices, faces)
 
 
+def volume_free(mesh: trimesh.Trimesh) -> bool:
+    """Whether ``mesh`` is flat (one plane) or its generalized winding number reaches 1/2
+    nowhere on a coarse grid: a sheet that encloses nothing."""
+    from .winding_solid import estimate_volume, is_flat, usable_faces
+
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    faces = usable_faces(vertices, mesh.faces)
+    return is_flat(vertices, faces) or estimate_volume(vertices, faces) <= 0
+
+
 def validate_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, allow_multiple_shells: bool = False,
                      check_self_intersection: bool = True) -> None:
     """Raise :class:`MeshError` unless ``mesh`` is a closed, consistently wound, outward
@@ -156,8 +166,13 @@ def validate_surface(mesh: trimesh.Trimesh, name: str = "mesh", *, allow_multipl
     nonmanifold = int(np.sum(counts > 2))
     if len(open_edges):
         loops = count_loops(open_edges)
+        if volume_free(mesh):
+            raise MeshError(f"{label} has no volume: it is an open sheet ({loops} boundary loop{'' if loops == 1 else 's'}, "
+                            f"flat or enclosing nothing); give the object a thickness in metres (thickness = 0.005 "
+                            "makes a 5 mm shell about it), or model it as a closed solid")
         raise MeshError(f"{label} is not closed: {loops} boundary loop{'' if loops == 1 else 's'}, {len(open_edges)} "
-                        f"open edges; a breakable solid needs a watertight surface: {REPAIR_HINT}")
+                        f"open edges; a breakable solid needs a watertight surface: {REPAIR_HINT}; a sheet "
+                        "(a pane, a sign, a leaf) needs a thickness in metres instead")
     if nonmanifold:
         raise MeshError(f"{label} is not manifold: {nonmanifold} edges are shared by more than two faces; "
                         f"{REPAIR_HINT}")

@@ -1,0 +1,185 @@
+"""Any input with a volume becomes a solid: sheets, soups, overlapping and crossing shells,
+holes, Y-up files, and no worker outliving a killed run. Every mesh is built here (no
+../shared needed); volumes are checked against closed forms with explicit tolerances."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+import trimesh
+
+from taichi_frac.geometry.input_solid import kept_share
+from taichi_frac.geometry.meshio_in import load_raw_surface
+from taichi_frac.geometry.prepare import prepare_body
+from taichi_frac.geometry.validate import MeshError
+from taichi_frac.geometry.winding_solid import winding_numbers
+from taichi_frac.options import ParticleOptions
+
+TARGET = 2000
+PARTICLES = ParticleOptions(target_particles=TARGET)
+
+
+def _prepare(mesh, **kwargs):
+    return prepare_body(mesh, particles=PARTICLES, use_cache=False, **kwargs)
+
+
+def _grid_sheet(side, n):
+    """A flat square sheet of side ``side`` [m] in the z = 0 plane, 2 n^2 triangles."""
+    u = np.linspace(-side / 2, side / 2, n + 1)
+    x, y = np.meshgrid(u, u, indexing="ij")
+    vertices = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    index = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b, c, d = index[:-1, :-1].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel(), index[:-1, 1:].ravel()
+    faces = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    return trimesh.Trimesh(vertices, faces, process=False)
+
+
+def _in_band(value, reference, tolerance):
+    return abs(value / reference - 1.0) <= tolerance
+
+
+def test_flat_sheet_is_an_error_naming_thickness():
+    sheet = _grid_sheet(0.2, 12)
+    for repair in (False, True):
+        with pytest.raises(MeshError, match="thickness"):
+            _prepare(sheet, repair=repair)
+
+
+def test_flat_sheet_with_thickness_is_a_shell_of_that_thickness():
+    side, thickness = 0.2, 0.01
+    model, report = _prepare(_grid_sheet(side, 12), thickness=thickness)
+    # Steiner's formula for a flat square grown by a ball of radius r = thickness / 2:
+    # V = 2 r A + (pi P / 2) r^2 + (4/3) pi r^3.
+    r = thickness / 2
+    expected = 2 * r * side**2 + math.pi * (4 * side) / 2 * r**2 + 4 / 3 * math.pi * r**3
+    assert _in_band(model.volume, expected, 0.05), (model.volume, expected)
+    assert _in_band(report.physics_particles, TARGET, 0.15)
+    assert abs(report.tet_extents[2] - thickness) <= 0.2 * thickness
+
+
+def test_libigl_is_not_called_on_a_flat_outline():
+    # A flat outline crashes libigl's fast winding number: it is answered without it.
+    sheet = _grid_sheet(0.2, 40)
+    points = np.random.default_rng(0).random((100, 3)) - 0.5
+    assert np.all(winding_numbers(sheet.vertices, sheet.faces, points) == 0.0)
+    assert kept_share(sheet, sheet.vertices, sheet.faces) == (1.0, 0.0)
+
+
+def test_soup_of_disconnected_triangles_forming_a_box():
+    box = trimesh.creation.box((0.2, 0.1, 0.05))
+    tri = box.triangles
+    # Every triangle its own corners, pulled 0.5 % towards its centre: nothing to merge.
+    centre = tri.mean(axis=1, keepdims=True)
+    tri = centre + 0.995 * (tri - centre)
+    soup = trimesh.Trimesh(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3), process=False)
+    model, report = _prepare(soup, repair=True)
+    assert _in_band(model.volume, 0.2 * 0.1 * 0.05, 0.03)
+    assert _in_band(report.physics_particles, TARGET, 0.15)
+    assert report.kept_volume_fraction >= 0.95
+
+
+def test_two_overlapping_spheres_are_their_union():
+    radius, distance = 0.05, 0.06
+    a = trimesh.creation.icosphere(subdivisions=4, radius=radius)
+    b = a.copy()
+    b.apply_translation((distance, 0, 0))
+    model, report = _prepare(trimesh.util.concatenate([a, b]), repair=True)
+    # Union = two balls less their lens: pi (4 r + d) (2 r - d)^2 / 12.
+    lens = math.pi * (4 * radius + distance) * (2 * radius - distance) ** 2 / 12
+    union = 2 * 4 / 3 * math.pi * radius**3 - lens
+    assert _in_band(model.volume, union, 0.03), (model.volume, union)
+    assert _in_band(report.physics_particles, TARGET, 0.15)
+    extents = np.array(report.tet_extents) / np.array([2 * radius + distance, 2 * radius, 2 * radius])
+    assert np.all(np.abs(extents - 1) <= 0.03), extents
+
+
+def test_self_intersecting_box_pair_is_their_union():
+    a = trimesh.creation.box((0.2, 0.05, 0.05))
+    b = trimesh.creation.box((0.05, 0.2, 0.05))
+    b.apply_translation((0.0, 0.0, 0.02))
+    pair = trimesh.Trimesh(np.vstack([a.vertices, b.vertices]), np.vstack([a.faces, b.faces + len(a.vertices)]))
+    model, report = _prepare(pair, repair=True)
+    # Inclusion-exclusion of the two boxes: their overlap is 0.05 x 0.05 x 0.03.
+    union = 0.2 * 0.05 * 0.05 * 2 - 0.05 * 0.05 * 0.03
+    assert _in_band(model.volume, union, 0.04), (model.volume, union)
+    assert _in_band(report.physics_particles, TARGET, 0.15)
+
+
+def test_sphere_with_holes_keeps_its_volume():
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.08)
+    keep = np.ones(len(sphere.faces), dtype=bool)
+    keep[np.random.default_rng(3).choice(len(keep), 40, replace=False)] = False
+    holey = trimesh.Trimesh(sphere.vertices, sphere.faces[keep], process=False)
+    model, report = _prepare(holey, repair=True)
+    assert _in_band(model.volume, sphere.volume, 0.03)
+    assert _in_band(report.physics_particles, TARGET, 0.15)
+    assert report.kept_volume_fraction >= 0.95
+
+
+def test_y_up_gltf_stands_upright(tmp_path):
+    tall = trimesh.creation.box((0.1, 0.4, 0.05))  # tallest along +Y, as glTF stores "up"
+    tall.apply_translation((0, 0.2, 0))  # standing on y = 0
+    path = tmp_path / "statue.glb"
+    tall.export(str(path))
+    mesh = load_raw_surface(path)
+    assert np.allclose(mesh.extents, (0.1, 0.05, 0.4), atol=1e-6)
+    assert abs(mesh.bounds[0][2]) < 1e-6  # its foot on z = 0
+    obj = tmp_path / "statue.obj"
+    tall.export(str(obj))
+    assert np.allclose(load_raw_surface(obj).extents, (0.1, 0.4, 0.05), atol=1e-6)  # "z": as it is
+    assert np.allclose(load_raw_surface(obj, up_axis="y").extents, (0.1, 0.05, 0.4), atol=1e-6)
+
+
+_KILLED_RUN = textwrap.dedent("""
+    import os, sys, time
+    from taichi_frac.geometry.bounded import StepClock
+
+    def work(path):
+        with open(path, "w") as fh:
+            fh.write(str(os.getpid()))
+        time.sleep(120)
+
+    StepClock(seconds=None).run("a long step", work, sys.argv[1])
+""")
+
+
+def _gone(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/status") as fh:
+            return any(line.startswith("State:") and "Z" in line for line in fh)
+    except FileNotFoundError:
+        return True
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal is Linux's")
+@pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM, signal.SIGINT])
+def test_killed_run_leaves_no_worker(tmp_path, how):
+    marker = tmp_path / "child.pid"
+    parent = subprocess.Popen([sys.executable, "-c", _KILLED_RUN, str(marker)])
+    try:
+        for _ in range(300):
+            if marker.exists() and marker.read_text():
+                break
+            time.sleep(0.05)
+        child = int(marker.read_text())
+        assert not _gone(child)
+        parent.send_signal(how)
+        parent.wait(10)
+        for _ in range(100):
+            if _gone(child):
+                break
+            time.sleep(0.05)
+        assert _gone(child), f"worker {child} outlived its parent ({how.name})"
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+        if marker.exists() and not _gone(int(marker.read_text())):
+            os.kill(int(marker.read_text()), signal.SIGKILL)
