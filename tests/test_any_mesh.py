@@ -183,3 +183,23 @@ def test_killed_run_leaves_no_worker(tmp_path, how):
             parent.kill()
         if marker.exists() and not _gone(int(marker.read_text())):
             os.kill(int(marker.read_text()), signal.SIGKILL)
+
+
+def test_scene_object_takes_thickness_and_up_axis(tmp_path):
+    from taichi_frac.options import OptionError
+    from taichi_frac.scenes import load_scene
+
+    sheet = tmp_path / "pane.obj"
+    _grid_sheet(0.2, 6).export(str(sheet))
+    scene_file = tmp_path / "pane.toml"
+    scene_file.write_text('[[objects]]\nname = "pane"\nmesh = "pane.obj"\nthickness = 0.004\nup_axis = "y"\n')
+    obj = load_scene(str(scene_file)).objects[0]
+    assert (obj.thickness, obj.up_axis) == (0.004, "y")
+    # Y up: the sheet's plane (z = 0 in the file) becomes the y = 0 plane, standing upright.
+    _, report = obj.prepare(use_cache=False)
+    assert report.tet_extents[1] < 0.01 < report.tet_extents[2]
+    assert report.up_axis == "y"
+    for bad, match in (('thickness = -0.01', "thickness"), ('up_axis = "x"', "up_axis")):
+        scene_file.write_text(f'[[objects]]\nname = "pane"\nmesh = "pane.obj"\n{bad}\n')
+        with pytest.raises(OptionError, match=match):
+            load_scene(str(scene_file))

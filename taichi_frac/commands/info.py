@@ -44,6 +44,11 @@ def register(subparsers) -> None:
     p.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="unit of the file's coordinates (default: m)")
     p.add_argument("--scale", type=float, default=1.0, help="extra scale factor on the coordinates (default: 1)")
     p.add_argument("--repair", action="store_true", help="repair holes, flipped faces and self-intersections first")
+    p.add_argument("--thickness", type=float, default=None, metavar="M",
+                   help="make an open sheet a closed shell this thick [m] (a pane, a sign, a leaf)")
+    p.add_argument("--up-axis", choices=("z", "y"), default="z",
+                   help="up axis of an OBJ/PLY/STL/OFF file's coordinates; y is turned Z up (glTF/GLB: always y) "
+                        "(default: z)")
     p.add_argument("--material", default="porcelain",
                    help="material preset for the mass: porcelain, soda_lime_glass, concrete (default: porcelain)")
     p.add_argument("--backend", choices=("tetgen", "wildmeshing"), default="tetgen",
@@ -84,6 +89,10 @@ def _table(report) -> str:
     if report.kept_volume_fraction is not None:
         rows.append(("kept of the input", f"{100 * report.kept_volume_fraction:.1f} % of its winding-number volume "
                                           f"({report.input_volume:.6g} m^3)"))
+    if report.tet_extents:
+        size = ", ".join(f"{e:.4g}" for e in report.tet_extents)
+        rows.append(("extents (x, y, z)", f"({size}) m; up is +z (world), "
+                                          f"{'turned from the file +y' if report.up_axis == 'y' else 'the file +z'}"))
     if report.input_extents and report.tet_extents:
         ratio = ", ".join(f"{t / i:.3f}" if i > 0 else "-" for t, i in zip(report.tet_extents, report.input_extents))
         rows.append(("extents kept (x, y, z)", ratio))
@@ -106,6 +115,8 @@ def _check_arguments(args) -> None:
 
     if args.max_volume is not None and not (math.isfinite(args.max_volume) and args.max_volume > 0):
         raise OptionError(f"--max-volume {args.max_volume!r}: give a tet volume above 0 m^3, e.g. 1e-7")
+    if args.thickness is not None and not (math.isfinite(args.thickness) and args.thickness > 0):
+        raise OptionError(f"--thickness {args.thickness!r}: give a shell thickness above 0 m, e.g. 0.005")
     if not (math.isfinite(args.time_limit) and args.time_limit > 0):
         raise OptionError(f"--time-limit {args.time_limit!r}: give a number of seconds above 0, e.g. 300")
     factor = unit_scale(args.scale, args.units)
@@ -124,7 +135,8 @@ def run(args) -> int:
                                     keep_leftovers=not args.drop_leftovers)
         _, report = prepare_body(args.source, scale=args.scale, units=args.units, material=args.material,
                                  particles=particles, repair=args.repair, max_volume=args.max_volume,
-                                 backend=args.backend, use_cache=not args.no_cache, time_limit=args.time_limit)
+                                 backend=args.backend, use_cache=not args.no_cache, time_limit=args.time_limit,
+                                 thickness=args.thickness, up_axis=args.up_axis)
     except (MeshError, OptionError) as exc:
         print(f"taichi-frac info: error: {exc}", file=sys.stderr)
         return 2

@@ -23,7 +23,7 @@ import trimesh
 from ..model import BodyModel, build_body_model
 from ..options import Material, ParticleOptions, material_preset
 from .bounded import DEFAULT_PREPARE_SECONDS, StepClock, StepShareExceeded
-from .meshio_in import (check_or_repair, check_up_axis, is_tet_file, load_raw_surface, load_surface, load_tet_mesh,
+from .meshio_in import (check_or_repair, check_up_axis, file_up_axis, is_tet_file, load_raw_surface, load_surface, load_tet_mesh,
                         to_z_up, unit_scale)
 from .primitives import make_primitive, parse_primitive_spec
 from .simplify import deviation_points, simplified_tet_surfaces, surface_deviation
@@ -91,6 +91,8 @@ class PrepareReport:
     #: tets' boundary: how far the simulated solid strays from the artist's (None for
     #: tet-mesh files).
     surface_deviation: float | None = None
+    #: The up axis of the source file's coordinates ("z": as it is; "y": turned Z up).
+    up_axis: str = "z"
     #: [m] the mean V^(1/3) of the tets (``BodyModel.spacing``): the unit of the SPH smoothing
     #: length, the crack roughness and the piece-geometry measures. A regular tet of that
     #: volume has edges about 2.04 times as long.
@@ -446,5 +448,7 @@ def prepare_body(
         surface_closed=surface is None or bool(surface.is_watertight and surface.is_winding_consistent),
         surface_deviation=deviation,
         particle_spacing=model.spacing,
+        up_axis=(file_up_axis(str(source), up_axis) if not isinstance(source, trimesh.Trimesh) and surface is not None
+                 else up_axis),
     )
     return model, report

@@ -105,7 +105,12 @@ class SceneObject:
         primitive: or a primitive spec, e.g. "torus" or "box:x=1,y=1,z=0.01" (metres).
         scale: multiplies the mesh's coordinates [-].
         units: unit of the mesh file's coordinates: "m", "cm" or "mm".
-        repair: repair the mesh before meshing (holes, flips, self-intersections).
+        repair: repair the mesh before meshing (holes, flips, self-intersections): a mesh
+            that is not a clean solid becomes the solid of its generalized winding number.
+        thickness: [m] an open sheet (a pane, a sign, a leaf) becomes a closed shell this
+            thick about its surface; None: a mesh with no volume is an error.
+        up_axis: "z" (the file as it is) or "y" (a Y-up OBJ/PLY/STL/OFF file, turned Z up);
+            glTF/GLB files are always Y-up by their specification and turned Z up.
         material: a preset name ("porcelain", "soda_lime_glass", "concrete") or a Material.
         breakable: False for rigid props (a projectile); they never fracture.
         position: (3,) [m] world position of the body-frame origin = the centre of mass.
@@ -128,6 +133,8 @@ class SceneObject:
     scale: float = 1.0
     units: str = "m"
     repair: bool = False
+    thickness: float | None = None
+    up_axis: str = "z"
     material: Material | str = "porcelain"
     breakable: bool = True
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -152,6 +159,13 @@ class SceneObject:
         check_range(owner, "scale", self.scale, 0.0, None, low_open=True)
         if self.units not in UNITS:
             raise OptionError(f"{owner}.units = {self.units!r}: use one of {', '.join(UNITS)}")
+        if self.thickness is not None:
+            check_range(owner, "thickness", self.thickness, 0.0, None, low_open=True)
+            if self.primitive is not None:
+                raise OptionError(f"{owner}.thickness applies to a mesh (a sheet); a primitive is a solid already")
+        if self.up_axis not in ("z", "y"):
+            raise OptionError(f"{owner}.up_axis = {self.up_axis!r}: use \"z\" (the file as it is) or \"y\" "
+                              "(a Y-up file, turned Z up)")
         if self.primitive is not None:
             check_primitive_size(self.primitive, float(self.scale) * UNITS[self.units], owner)
         if isinstance(self.material, str):
@@ -193,7 +207,7 @@ class SceneObject:
 
         return prepare_body(self.source, scale=self.scale, units=self.units, material=self.material,
                             particles=self.particles, repair=self.repair, backend=backend, use_cache=use_cache,
-                            surface_contact=surface_contact)
+                            surface_contact=surface_contact, thickness=self.thickness, up_axis=self.up_axis)
 
 
 COLLIDER_TYPES = ("ground", "box")
