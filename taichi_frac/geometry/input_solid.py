@@ -33,7 +33,7 @@ from .validate import MeshError, validate_surface
 from .winding_solid import usable_faces, winding_numbers, winding_solid
 
 #: Share of the time left the clean path gets before the winding-number path takes over.
-CLEAN_TIME_SHARE = 0.3
+CLEAN_TIME_SHARE = 0.15
 #: Share of the time left that repairing the artist's surface (for rendering) gets.
 REPAIR_TIME_SHARE = 0.2
 #: The repaired artist's surface is rendered only if it keeps this share of the input's

@@ -194,7 +194,27 @@ def _build(values, origin, cell, contour, cube):
     # tets there are flat and hold no volume, so they go.
     tets = tets[_signed_volumes(vertices, tets) >= FLAT_FRACTION * cube**3 / 6.0]
     vertices, tets, _ = compact_vertices(vertices, tets)
-    return vertices, np.asarray(tets, dtype=np.int64)
+    return _restore_volume(vertices, np.asarray(tets, dtype=np.int64), float(contour.volume), cube)
+
+
+def _restore_volume(vertices, tets, volume: float, cube: float):
+    """Boundary vertices moved along their normals by (``volume`` - tets' volume) / boundary
+    area: the chords between vertices on the contour cut convex parts short, and this
+    first-order offset gives the solid its volume (its mass) back. A move that would flatten
+    a tet is undone."""
+    from .topology import boundary_faces
+
+    faces = boundary_faces(tets)[0]
+    surface = trimesh.Trimesh(vertices, faces, process=False)
+    offset = (volume - float(_signed_volumes(vertices, tets).sum())) / max(float(surface.area), 1e-300)
+    moved = vertices.copy()
+    at = np.unique(faces)
+    moved[at] += offset * surface.vertex_normals[at]
+    flat = _signed_volumes(moved, tets) < MIN_VOLUME_FRACTION * cube**3 / 6.0
+    if flat.any():
+        undo = np.unique(tets[flat])
+        moved[undo] = vertices[undo]
+    return moved, tets
 
 
 def lattice_tets(values: np.ndarray, origin: np.ndarray, cell: float, contour: trimesh.Trimesh, target: int):
