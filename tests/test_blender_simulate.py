@@ -57,8 +57,9 @@ def test_simulate_cube_from_blender_and_again_from_the_command_line(tmp_path):
     # The exported scene file repeats the run from the command line: the same fragments,
     # each ending where Blender's run left it.
     again = tmp_path / "again.usdc"
+    # (with the add-on's fixed string hash, so Taichi's kernel cache serves both runs)
     run = subprocess.run([str(COMMAND), "run", report["scene_path"], "-o", str(again), "-q"],
-                         capture_output=True, text=True, timeout=600)
+                         capture_output=True, text=True, timeout=600, env=dict(os.environ, PYTHONHASHSEED="0"))
     assert run.returncode == 0, run.stderr[-2000:]
     first, second = final_positions(Path(report["cache"])), final_positions(again)
     assert sorted(first) == sorted(second)

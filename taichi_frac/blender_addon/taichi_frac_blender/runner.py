@@ -106,6 +106,10 @@ class SimulationRun:
         # bundled site-packages): the command's environment is its own.
         for key in ("PYTHONPATH", "PYTHONHOME", "PYTHONNOUSERSITE"):
             env.pop(key, None)
+        # A fixed string hash: Taichi's offline kernel cache then finds the kernels of a scene
+        # run before (with two breakable bodies, randomised hashing misses it every run and
+        # the command compiles its kernels again: about 9 s on two cores).
+        env.setdefault("PYTHONHASHSEED", "0")
         try:
             self.process = subprocess.Popen(
                 self.command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
