@@ -302,6 +302,7 @@ def check_export(workdir: Path, scene, cube):
         "custom", 2000.0, 5.0e9, 0.25, 3.0e6)
     sim.crack_count_auto = True
     cube.modifiers.new("bevel", "BEVEL").segments = 2
+    cube.scale = (-1.0, 1.0, 1.0)  # (mirrored: the export turns its faces back outwards)
     scene.unit_settings.system, scene.unit_settings.scale_length = "METRIC", 0.01  # (1 unit = 1 cm)
     scene.frame_current = 7
     addon().export.export_scene(bpy.context)
@@ -328,6 +329,7 @@ def check_export(workdir: Path, scene, cube):
     check(np.allclose(np.ptp(local, axis=0), 0.002, rtol=1e-4), f"exported extents {np.ptp(local, axis=0)}")
     bpy.data.objects.remove(wall)
     cube.modifiers.clear()
+    cube.scale = (1.0, 1.0, 1.0)
     sim.material, sim.crack_count_auto = "porcelain", False
     scene.unit_settings.system, scene.unit_settings.scale_length = "METRIC", 1.0
 

@@ -115,7 +115,10 @@ def world_triangles(obj, depsgraph, scale: float):
     vertices = vertices.reshape(-1, 3)
     matrix = np.array(evaluated.matrix_world, dtype=np.float64)
     vertices = (vertices @ matrix[:3, :3].T + matrix[:3, 3]) * scale
-    return vertices, triangles.reshape(-1, 3)
+    triangles = triangles.reshape(-1, 3)
+    if np.linalg.det(matrix[:3, :3]) < 0.0:  # (a mirroring scale turns the faces inside out)
+        triangles = triangles[:, ::-1]
+    return vertices, triangles
 
 
 def volume_centroid(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, float]:
