@@ -357,8 +357,10 @@ def test_shared_meshes_keep_their_whole_shape(name, shells):
 def test_cow_keeps_its_tail():
     """The cow's tail is thinner than the particle spacing of 5,000 particles; its simplified
     copies either cross themselves there or lose it. The simulated solid's box is held to the
-    source file's own box (read without repair) within half a particle spacing on every side,
-    at the target count."""
+    source file's own box (read without repair) within half a tet edge on every side, at the
+    target count, and no point of the cow lies more than 0.75 tet edges from the simulated
+    solid (a lost tail lies 2.4 tet edges away; the winding-number solid's lattice tets,
+    which mesh the self-crossing cow, blunt thin tips by up to 0.6)."""
     path = SHARED / "cow.obj"
     if not path.exists():
         pytest.skip(f"{path} is not there (the public test meshes live beside the checkout)")
@@ -375,7 +377,7 @@ def test_cow_keeps_its_tail():
     lo, hi = np.asarray(report.tet_extents), np.asarray(source_bounds[1] - source_bounds[0])
     assert np.all(np.abs(lo - hi) <= spacing), (lo, hi, spacing)
     np.testing.assert_allclose(tets.bounds, source_bounds, atol=0.5 * spacing)
-    assert report.surface_deviation <= 0.5 * spacing
+    assert report.surface_deviation <= 0.75 * spacing
     assert abs(report.physics_particles / 5000 - 1) <= 0.15, report.physics_particles
 
 

@@ -1,23 +1,25 @@
-"""Which solid an artist's mesh becomes, and its tets: the mesh itself when it is clean, else
-the solid of its generalized winding number.
+"""Which solid an artist's mesh becomes, and its tets: the mesh itself when it is clean (or
+repairs cleanly), else the solid of its generalized winding number.
 
 With repair on (or a ``thickness``), :func:`solid_of_input` takes one of two paths:
 
-- **clean input** (closed, manifold, consistently wound, no crossings, one shell): the mesh
-  is meshed as it is (a copy simplified to the particle spacing, then TetGen), which keeps
-  its exact volume. That path gets :data:`CLEAN_TIME_SHARE` of the time left; when it runs
-  out, the mesher refuses, or the count misses the target by more than
-  :data:`COUNT_TOLERANCE` (thin parts that force small tets), the winding-number path below
-  meshes the same solid instead.
+- **clean input** (closed, manifold, consistently wound, no crossings, one shell), or input
+  that ``repair.repair_surface`` turns into one closed solid of its own triangles keeping
+  :data:`MIN_RENDER_KEPT` of its winding-number solid within :data:`REPAIR_TIME_SHARE` of the
+  time left: that surface is meshed as it is (a copy simplified to the particle spacing, then
+  TetGen), which keeps its exact volume. Meshing gets :data:`CLEAN_TIME_SHARE` of the time
+  left; when it runs out, the mesher refuses, or the count misses the target by more than
+  :data:`COUNT_TOLERANCE` (thin parts that force small tets), the second path meshes the
+  input instead.
 - **anything else**, or the fall-back: ``winding_solid.winding_solid`` samples the input's
-  inside on a grid set by the target and contours it; that closed surface is simplified and
-  meshed. Its cost is bounded by the grid, and it exists for every input with a volume.
+  inside on a grid set by the target and contours it; ``lattice_tets`` fills that with tets
+  calibrated to the target. Its cost is bounded by the grid, and it exists for every input
+  with a volume.
 
-The render surface stays the artist's: the input itself when clean, else the input repaired
-into one closed solid of its own triangles (``repair.repair_surface``) when that succeeds
-within :data:`REPAIR_TIME_SHARE` of the time left and keeps the winding-number solid; only
-when it fails is the contoured surface rendered. Every path reports the share of the
-input's winding-number solid the tets keep (:func:`kept_share`).
+The render surface stays the artist's: the clean or repaired surface, and only where there is
+none (the repair failed, or a sheet given a ``thickness``) the contour of the winding-number
+solid. Every path reports the share of the input's winding-number solid the tets keep
+(:func:`kept_share`).
 """
 
 from __future__ import annotations
@@ -145,39 +147,36 @@ def _lattice_mesh(solid, count: int, clock: StepClock):
                                     f"vertices moved onto the contour: {len(tets):,} tets")
 
 
-def _clean_path(raw, name, count, kwargs, clock, simplify):
-    """The clean input meshed as it is, under :data:`CLEAN_TIME_SHARE` of the time left.
-    Returns (surface, InputSolid or None, why it handed over or None)."""
+def _clean_path(surface, count, kwargs, clock, simplify):
+    """The clean (or repaired) ``surface`` meshed as it is, under :data:`CLEAN_TIME_SHARE` of
+    the time left. Returns (InputSolid or None, why it handed over or None)."""
     share = _share_clock(clock, CLEAN_TIME_SHARE)
     # No fTetWild fallback here: the winding-number path is the fallback, and far faster.
     kwargs = dict(kwargs, notes=None)
-    surface = raw  # checked by the caller: nothing to repair
-    surface.metadata["repair"], surface.metadata["repair_report"] = [], None
     try:
         tet_surface, tm, hit, step = _mesh(surface, count, kwargs, share, simplify)
     except MeshError as exc:
-        return surface, None, f"the clean surface could not be meshed in its share of the time ({exc})"
+        return None, f"the clean surface could not be meshed in its share of the time ({exc})"
     miss = tm.tet_count / count - 1.0
     if abs(miss) > COUNT_TOLERANCE:
-        return surface, None, (f"meshing the clean surface gave {tm.tet_count:,} particles for {count:,} "
-                               f"({miss:+.0%}: parts thinner than the particle spacing)")
+        return None, (f"meshing the clean surface gave {tm.tet_count:,} particles for {count:,} "
+                      f"({miss:+.0%}: parts thinner than the particle spacing)")
     steps = list(surface.metadata.get("repair", [])) + ([step] if step else [])
-    return surface, InputSolid(surface=surface, tet_surface=tet_surface, tets=tm, cache_hit=hit, steps=steps), None
+    return InputSolid(surface=surface, tet_surface=tet_surface, tets=tm, cache_hit=hit, steps=steps), None
 
 
-def _render_surface(raw, name, proxy, clock, steps):
-    """The artist's surface repaired into one closed solid, or ``proxy`` when that fails."""
+def _repaired(raw, name, clock, steps):
+    """The artist's surface repaired into one closed solid of its own triangles that keeps
+    :data:`MIN_RENDER_KEPT` of its winding-number solid, in :data:`REPAIR_TIME_SHARE` of the
+    time left; None (and a step saying why) when that fails."""
     from .meshio_in import check_or_repair
 
     share = _share_clock(clock, REPAIR_TIME_SHARE)
     try:
-        surface = check_or_repair(raw, name, repair=True, clock=share, min_kept_fraction=MIN_RENDER_KEPT)
+        return check_or_repair(raw, name, repair=True, clock=share, min_kept_fraction=MIN_RENDER_KEPT)
     except MeshError as exc:
-        steps.append(f"renders the contoured solid: the input could not be repaired into a closed solid of its own "
-                     f"triangles ({str(exc)[:200]})")
-        return proxy
-    steps.extend(surface.metadata.get("repair", []))
-    return surface
+        steps.append(f"could not be repaired into one closed solid of its own triangles ({str(exc)[:200]})")
+        return None
 
 
 def solid_of_input(raw: trimesh.Trimesh, name: str, *, count: int, kwargs: dict, clock: StepClock,
@@ -193,21 +192,30 @@ def solid_of_input(raw: trimesh.Trimesh, name: str, *, count: int, kwargs: dict,
     if thickness is None:
         problem = _is_clean(raw, name, clock)
         if problem is None:
-            surface, result, why = _clean_path(raw, name, count, kwargs, clock, simplify)
+            surface = raw
+            surface.metadata["repair"], surface.metadata["repair_report"] = [], None
+        else:
+            steps.append(f"not a clean solid ({problem.split(';')[0]})")
+            surface = _repaired(raw, name, clock, steps)
+        if surface is not None:
+            result, why = _clean_path(surface, count, kwargs, clock, simplify)
             if result is not None:
+                result.steps[:0] = steps
                 result.kept_fraction, result.input_volume = kept_share(
                     raw, result.tets.vertices, _boundary(result.tets.tets), clock)
                 result.input_extents = extents
                 return result
             steps.append(f"meshed the solid of its winding number instead: {why}")
         else:
-            steps.append(f"not a clean solid ({problem.split(';')[0]}): meshed the solid of its winding number")
+            steps.append("meshed the solid of its winding number")
     solid = winding_solid(raw, count, thickness=thickness, name=name, clock=clock)
     steps.extend(solid.steps)
     tet_surface, tm, hit, step = _lattice_mesh(solid, count, clock)
     steps.append(step)
     if surface is None:
-        surface = solid.surface if thickness is not None else _render_surface(raw, name, solid.surface, clock, steps)
+        surface = solid.surface
+        if thickness is None:
+            steps.append("renders the contour of the winding-number solid")
     kept, volume = kept_share(raw, tm.vertices, _boundary(tm.tets), clock)
     return InputSolid(surface=surface, tet_surface=tet_surface, tets=tm, cache_hit=hit, steps=steps,
                       kept_fraction=kept, input_volume=volume, input_extents=extents, path="winding number")

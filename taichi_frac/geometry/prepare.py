@@ -335,6 +335,7 @@ def prepare_body(
     timings = {}
     t0 = time.perf_counter()
     cache_hit = False
+    solid = None  # what input_solid built (meshes with repair or a thickness)
     repair_steps: list[str] = []
     if not isinstance(source, trimesh.Trimesh) and is_tet_file(str(source)):
         name = Path(str(source)).name
@@ -376,7 +377,6 @@ def prepare_body(
                       min_dihedral=particles.min_dihedral_deg, use_cache=use_cache, clock=clock,
                       notes=mesher_notes)
         tet_surface, tm, cache_hit = surface, None, False
-        solid = None
         if lenient:
             from .input_solid import solid_of_input
 
