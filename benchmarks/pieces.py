@@ -196,7 +196,8 @@ def run(ctx: BenchContext) -> Section:
     rows, cost_rows = [], []
     with tempfile.TemporaryDirectory() as folder:
         for label, scene, frames in _scene_cases(ctx.quick):
-            sim, summary, _ = run_scene(ctx, scene, label, frames=frames, output=Path(folder) / "cache.usdc")
+            sim, summary, _ = run_scene(ctx, scene, label, frames=frames, output=Path(folder) / "cache.usdc",
+                                        surface_workers=0)
             records = [sim.records[b] for b in sim.world.body_ids if sim.records[b].generation > 0]
             m = measure_pieces([(rec.model, rec.root, sim.surfaces.render_of(b))
                                 for b in sim.world.body_ids if (rec := sim.records[b]).generation > 0])

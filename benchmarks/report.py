@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from . import grouping, pieces, scaling, sph, stability, stress_models, tables
+from . import grouping, pieces, scaling, sph, stability, startup, stress_models, tables
 from .common import REPO, BenchContext, Section, load_average, machine_info, md_table, warm_up
 
 #: The parts in report order: key -> (module, one-line help).
@@ -23,6 +23,7 @@ PARTS = {
     "scaling": (scaling, "ms per frame and peak memory from 1e3 to 1e6 physics particles"),
     "stability": (stability, "the hard cases of the dynamics and the fracture"),
     "pieces": (pieces, "broken pieces' render surfaces: closed, on their cracks, what a split costs"),
+    "startup": (startup, "runs as a user runs them: a fresh process, the cache written, start to exit"),
 }
 #: Parts that write their own page under ``docs/benchmarks/`` (``taichi-frac bench
 #: <part> --out docs``), which the report links to rather than repeats: two copies of one

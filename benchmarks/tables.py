@@ -101,17 +101,19 @@ def default_cases() -> list[SceneCase]:
 
 
 def run_scene(ctx: BenchContext, scene, label: str, *, fracture: bool = True, single_scale: bool | None = None,
-              frames: int | None = None, output=False):
+              frames: int | None = None, output=False, surface_workers: int | None = None):
     """Run one scene on the report's World; returns (Simulation, RunSummary, counts) where
     counts are Table 1's particle counts summed over the scene's bodies at the start
     (every body, breakable or not, so a fracture-off run is counted the same way).
-    ``output``: a cache path to write (default: none, as the timed rows)."""
+    ``output``: a cache path to write (default: none, as the timed rows); ``surface_workers``:
+    as ``Simulation``'s (0 keeps the pieces' render solids readable here)."""
     from taichi_frac.simulation import Simulation
 
     mode = ("fracture on" if fracture else "fracture off") + (", single-scale" if single_scale else "")
     mode += ", USD cache written" if output else ""
     sim = Simulation(scene, output=output, world=ctx.world(), fracture=fracture, single_scale=single_scale,
-                     frames=frames, progress=ctx.progress.frames(f"{label} ({mode})"))
+                     frames=frames, progress=ctx.progress.frames(f"{label} ({mode})"),
+                     surface_workers=surface_workers)
     breakable = [r.model for r in sim.records.values() if r.breakable]
     counts = dict(
         physics=sum(m.tet_count for m in breakable), surface=sum(m.surface_particle_count for m in breakable),

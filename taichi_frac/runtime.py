@@ -8,6 +8,7 @@ a second ``ti.init`` throws away every field and compiled kernel.
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import sys
 from pathlib import Path
@@ -38,6 +39,36 @@ def cache_dir() -> Path:
 class ArchError(RuntimeError):
     """An arch that cannot be had: not on this machine, or another than the one this
     process already runs on."""
+
+
+def _plain_source_positions() -> None:
+    """Taichi 1.7 turns each kernel's Python source into its IR in every new process, even
+    when its offline cache holds the compiled kernel, and for every AST node it renders a
+    caret diagram of the node's source (textwrap) into the statement's debug info: about
+    half of that front end's time. The debug info keeps the file, line, function and source
+    line, which is what Taichi's error messages print first; only the carets go. Set
+    TAICHI_FRAC_STOCK_TAICHI=1 to keep Taichi's front end as shipped (the kernels compile
+    the same either way)."""
+    from taichi.lang.ast import ast_transformer_utils
+
+    context = ast_transformer_utils.ASTTransformerContext
+    if os.environ.get("TAICHI_FRAC_STOCK_TAICHI") == "1" or not hasattr(context, "get_pos_info"):
+        return
+
+    def get_pos_info(self, node):
+        return (f'File "{self.file}", line {node.lineno + self.lineno_offset}, in {self.func.func.__name__}:\n'
+                f"{self.src[node.lineno - 1]}\n")
+
+    context.get_pos_info = get_pos_info
+    # Each call site of a ti.func reads the function's source again (inspect walks every
+    # loaded module to find its file, then tokenizes it): a function's source does not
+    # change while the process runs, so it is read once.
+    from taichi.lang import kernel_impl
+
+    for name in ("getsourcefile", "getsourcelines"):
+        found = getattr(kernel_impl, name, None)
+        if found is not None and not hasattr(found, "cache_info"):
+            setattr(kernel_impl, name, functools.lru_cache(maxsize=None)(found))
 
 
 def _arches_of(name: str) -> set:
@@ -77,6 +108,7 @@ def init(arch: str | None = None, *, debug: bool = False) -> str:
     arch = "cpu" if arch is None else arch
     if arch not in _ARCHES:
         raise ValueError(f"unknown Taichi arch {arch!r}: use one of {', '.join(sorted(_ARCHES))}")
+    _plain_source_positions()
     with contextlib.redirect_stdout(sys.stderr):
         ti.init(
             arch=_gpu_arches() if arch == "gpu" else getattr(ti, _ARCHES[arch]),

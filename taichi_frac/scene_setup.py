@@ -22,7 +22,8 @@ from dataclasses import dataclass
 from . import interrupts
 from .geometry.validate import REPAIR_HINT, MeshError
 
-__all__ = ["PreparedObject", "dynamics_options", "furnish_world", "prepare_objects", "world_capacity"]
+__all__ = ["PreparedObject", "dynamics_options", "furnish_world", "prepare_objects", "release_world",
+           "world_capacity"]
 
 
 @dataclass(frozen=True)
@@ -85,14 +86,22 @@ def world_capacity(scene, prepared: list[PreparedObject], *, single_scale: bool 
                         for p in prepared)
     breakable = [p.model for p in prepared if p.breakable]
     extra = sum(4 * m.boundary_particle_count + m.surface_particle_count for m in breakable)
+    # Each size rounded up to a power of two: the compiled kernels depend on the fields'
+    # sizes, so scenes of like size share one set in Taichi's offline cache (and a World).
+    particles = _power_of_two(max(1024, particles_now + extra))
     return WorldCapacity(
-        max_bodies=max(64, len(prepared) + 256 * len(breakable)),
-        max_boundary_particles=max(1024, particles_now + extra),
+        max_bodies=_power_of_two(max(64, len(prepared) + 256 * len(breakable))),
+        max_boundary_particles=particles,
         # 4 per particle of that room: the shipped scenes peak far below it, and each
         # contact slot costs memory on every particle of the largest scenes.
-        max_contacts=max(65536, 4 * (particles_now + extra)),
-        max_static_boxes=max(4, sum(c.type == "box" for c in scene.colliders)),
+        max_contacts=max(65536, 4 * particles),
+        max_static_boxes=_power_of_two(max(4, sum(c.type == "box" for c in scene.colliders))),
     )
+
+
+def _power_of_two(n: int) -> int:
+    """The smallest power of two >= ``n`` (n >= 1)."""
+    return 1 << (int(n) - 1).bit_length()
 
 
 def dynamics_options(scene, *, single_scale: bool | None = None):
@@ -106,19 +115,35 @@ def dynamics_options(scene, *, single_scale: bool | None = None):
     return DynamicsOptions.from_simulation(scene.simulation, **overrides)
 
 
+#: The World this process built for a run, kept for the next run once that one has ended
+#: (``release_world``): its fields are allocated and its kernels compiled already.
+_SHARED = {"world": None, "busy": False}
+
+_CAPACITY_FIELDS = ("max_bodies", "max_boundary_particles", "max_contacts", "max_impacts", "max_static_boxes",
+                    "max_planes", "max_surface_points")
+
+
 def furnish_world(scene, capacity, options, *, arch: str | None = None, world=None):
     """A World with ``capacity`` and ``options`` holding the scene's ground and static boxes
     (no bodies yet). ``world``: one to reuse (its kernels are compiled already), cleared
-    first; ValueError naming the field when it has less room than ``capacity``."""
+    first; ValueError naming the field when it has less room than ``capacity``. Without one,
+    the World of this process's last ended run is reused when it has the room (call
+    :func:`release_world` when the run ends), else a new one is built."""
     from .dynamics import World
 
-    if world is None:
-        world = World(capacity, options, arch=arch or scene.simulation.arch)
-    else:
+    if world is not None:
         for name in ("max_bodies", "max_boundary_particles", "max_static_boxes"):
             if getattr(world.capacity, name) < getattr(capacity, name):
                 raise ValueError(f"the World given has {name}={getattr(world.capacity, name)}, this scene "
                                  f"needs {getattr(capacity, name)}")
+    elif _SHARED["world"] is not None and not _SHARED["busy"] and _fits(_SHARED["world"].capacity, capacity):
+        world = _SHARED["world"]
+        _SHARED["busy"] = True
+    else:
+        world = World(capacity, options, arch=arch or scene.simulation.arch)
+        _SHARED.update(world=world, busy=True)
+        options = None  # (built with them, and empty)
+    if options is not None:
         world.clear()
         world.set_options(options)
     for c in scene.colliders:
@@ -128,3 +153,14 @@ def furnish_world(scene, capacity, options, *, arch: str | None = None, world=No
             world.add_static_box(c.center, c.half_extents, c.orientation, friction=c.friction,
                                  restitution=c.restitution)
     return world
+
+
+def release_world(world) -> None:
+    """A run has ended with ``world``: the next run in this process may reuse it."""
+    if world is _SHARED["world"]:
+        _SHARED["busy"] = False
+
+
+def _fits(have, need) -> bool:
+    """Whether a World of capacity ``have`` has room for ``need`` in every field."""
+    return all(getattr(have, name) >= getattr(need, name) for name in _CAPACITY_FIELDS)

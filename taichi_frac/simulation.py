@@ -4,9 +4,10 @@ One frame is: the World's substeps (broadphase, narrowphase, contact impulses, i
 ``World.begin_frame`` / ``substep`` / ``end_frame``) → the fracture stage
 (``fracture/stage.py``: only for breakable bodies hit above their force threshold: contact
 displacement, stress, cracks, split into fragments that replace the parent in the world) →
-the piece surfaces (``surfaces/stage.py``: each split's pieces cut from their parent's
-render solid, only when a cache is written) → the recorder (``io/recorder.py``: one pose
-per live body, the pieces' surfaces). With
+the piece surfaces (``surfaces/``: each split's pieces cut from their parent's render
+solid, only when a cache is written, in worker processes the loop does not wait for) →
+the recorder (``io/recorder.py``: one pose per live body, the pieces' surfaces, written as
+the surfaces are done). With
 ``resimulate_fractures`` the stage runs after every substep instead, and this loop runs a
 substep again after a split, so the impact that broke a body meets its pieces. Each stage
 is timed; a stage a scene does not use costs nothing (no breakable body: the fracture stage
@@ -37,14 +38,16 @@ class NonFinitePoseError(RuntimeError):
 
 @dataclass
 class StageTimes:
-    """Wall-clock seconds spent per stage over a run. ``render_surfaces`` is the part of
-    ``fragment_split`` spent cutting the pieces' render surfaces along the cracks (only a
-    run that writes a cache cuts them)."""
+    """Wall-clock seconds spent per stage over a run. ``render_surfaces`` is the time spent
+    cutting the pieces' render surfaces along the cracks (only a run that writes a cache
+    cuts them): part of ``fragment_split`` when they are cut in this process, the workers'
+    time otherwise, of which the run waited ``surfaces_wait`` at its end."""
 
     dynamics: float = 0.0
     fracture_analysis: float = 0.0
     fragment_split: float = 0.0
     render_surfaces: float = 0.0
+    surfaces_wait: float = 0.0
     output: float = 0.0
 
     def as_dict(self) -> dict:
@@ -73,6 +76,7 @@ class RunSummary:
     mass_final: float = 0.0
     mass_dropped: float = 0.0
     resimulated_substeps: int = 0
+    surface_workers: int = 0
 
     def to_json(self) -> str:
         return json.dumps(self.__dict__, indent=2, default=float)
@@ -98,6 +102,9 @@ class Simulation:
         frames: simulate this many frames instead of duration x fps.
         world: an existing World to reuse (cleared first; its capacities must suffice):
             its kernels are already compiled, so a second scene in one process starts at once.
+            None: the World of this process's last ended run when it has the room (so a
+            second run pays for no World and no kernels), else a new one. A finished run's
+            results are its summary and its cache; its ``world`` belongs to the next run.
         overwrite: write the output even while another run holds its lock file.
 
     The output path is checked and locked (``io.output``) before any object is meshed.
@@ -105,18 +112,23 @@ class Simulation:
             used instead of ``obj.prepare()``: a memo kept by a process that runs many variants of one scene
             (a sweep's worker), so those that change no geometry reuse the model and its SPH
             neighbour lists. The model must not be changed by the caller between runs.
+        surface_workers: worker processes that cut the pieces' render surfaces while the
+            frames go on (0: in this process, between frames); None: one per core but one,
+            at most one per breakable object (``surfaces.pool.default_worker_count``). The
+            cache is the same either way.
 
     Attributes (for benches and tests): ``world``; ``records`` (body id -> BodyRecord, every
     body that lived); ``fracture_stage`` (``fracture.stage.FractureStage``, None without
     fracture); ``recorder`` (``io.recorder.CacheRecorder``, None without a cache);
-    ``surfaces`` (``surfaces.SurfaceStage``, None without a cache);
+    ``surfaces`` (``surfaces.pool.SurfaceWorkers`` or ``InProcessSurfaces``, None without a
+    cache);
     ``fracture_events``, ``mass_dropped``, ``resimulated_substeps``, ``render_cuts``,
     ``times`` (StageTimes).
     """
 
     def __init__(self, scene, *, output=None, arch: str | None = None, progress=None,
                  single_scale: bool | None = None, fracture: bool = True, frames: int | None = None,
-                 world=None, overwrite: bool = False, prepare=None):
+                 world=None, overwrite: bool = False, prepare=None, surface_workers: int | None = None):
         self.scene = scene
         sim = scene.simulation
         if frames is not None and (not isinstance(frames, numbers.Integral) or frames < 1):
@@ -131,7 +143,8 @@ class Simulation:
         self.prepare_reports = []
         self.fracture_stage: FractureStage | None = None  # (fracture enabled)
         self.recorder = None  # io.recorder.CacheRecorder (a cache is written)
-        self.surfaces = None  # surfaces.SurfaceStage (a cache is written)
+        self.surfaces = None  # surfaces.pool's stage (a cache is written)
+        self._surface_workers = surface_workers
         if output is None:
             output = scene.output_path
         self.output_path = None if output is False else output
@@ -143,11 +156,13 @@ class Simulation:
             check_output_path(self.output_path)
             self._lock = OutputLock(self.output_path)
             self._lock.acquire(overwrite=overwrite)
+        self.world = None
+        t_build = time.perf_counter()
         try:
             self._build(scene, arch, single_scale, world)
+            self.setup_seconds = time.perf_counter() - t_build - self.prepare_seconds
         except BaseException:
-            if self._lock is not None:
-                self._lock.release()
+            self._release()
             raise
 
     def _build(self, scene, arch, single_scale, world):
@@ -158,6 +173,14 @@ class Simulation:
         # and the first kernel fixes the process's arch. A World given brings its own.
         if world is None or arch is not None:
             runtime.init(arch or sim.arch)
+        if self.output_path is not None:
+            # Before the objects are prepared: worker processes start while this one meshes.
+            from .surfaces.pool import InProcessSurfaces, SurfaceWorkers, default_worker_count
+
+            workers = self._surface_workers
+            if workers is None:
+                workers = default_worker_count(sum(o.breakable for o in scene.objects) if self.fracture_enabled else 0)
+            self.surfaces = SurfaceWorkers(workers) if workers > 0 else InProcessSurfaces()
         prepared, self.prepare_seconds = prepare_objects(scene, fracture=self.fracture_enabled,
                                                          prepare=self._prepare)
         self.prepare_reports = [p.report for p in prepared]
@@ -166,12 +189,10 @@ class Simulation:
                                    dynamics_options(scene, single_scale=single_scale), arch=arch, world=world)
         if self.output_path is not None:
             from .io.recorder import CacheRecorder
-            from .surfaces import SurfaceStage
 
             out = scene.output
             self.recorder = CacheRecorder(self.output_path, fps=sim.fps, checkpoint_every=out.checkpoint_every,
                                           checkpoint_seconds=out.checkpoint_seconds, lock=self._lock)
-            self.surfaces = SurfaceStage()
         for p in prepared:
             obj, model = p.obj, p.model
             body = self.world.add_body(
@@ -187,7 +208,7 @@ class Simulation:
             )
             if self.surfaces is not None:
                 self._initial_surfaces.append((body, obj.name, LOOKS[obj.material.look],
-                                               self.surfaces.add_body(body, model, p.report)))
+                                               self.surfaces.add_body(body, model, p.report.surface)))
         self.initial_mass = sum(r.model.mass for r in self.records.values())
         self._dynamics_seconds_at_start = dict(self.world.stats.seconds)  # a reused World keeps counting
         self.table1 = dict(
@@ -292,9 +313,7 @@ class Simulation:
             return
         t = time.perf_counter()
         for fracture in fractures:
-            pieces = self.surfaces.cut(fracture)
-            self.times.render_surfaces += pieces.seconds
-            self.recorder.record_fracture(fracture, pieces.surfaces)
+            self.recorder.record_fracture(fracture, self.surfaces.cut(fracture))
         self.times.fragment_split += time.perf_counter() - t
 
     # ------------------------------------------------------------------ loop
@@ -361,11 +380,23 @@ class Simulation:
                     t = time.perf_counter()
                     # complete only when every requested frame was written
                     self.recorder.close(complete=not failed and not interrupted and done == self.frame_count)
-                    self.times.output += time.perf_counter() - t
+                    self.times.surfaces_wait += self.recorder.wait_seconds
+                    self.times.output += time.perf_counter() - t - self.recorder.wait_seconds
             finally:
-                if self._lock is not None:
-                    self._lock.release()
+                self._release()
+        self.times.render_surfaces = sum(seconds for seconds, _ in self.render_cuts)
         return self._summary(done, frame_ms, time.perf_counter() - start, interrupted)
+
+    def _release(self) -> None:
+        """The output's lock, and the World for the next run in this process."""
+        from .scene_setup import release_world
+
+        if self.surfaces is not None:
+            self.surfaces.close(cancel=self.recorder is None or self.recorder.writer is None)
+        if self._lock is not None:
+            self._lock.release()
+        if self.world is not None:
+            release_world(self.world)
 
     def _summary(self, frames: int, frame_ms: list[float], wall: float, interrupted: bool) -> RunSummary:
         ws = self.world.stats
@@ -382,7 +413,8 @@ class Simulation:
             fragments=self.fragment_count,
             fractures=self.fracture_events,
             wall_time=wall,
-            stage_seconds=self.times.as_dict() | {"prepare": round(self.prepare_seconds, 6)},
+            stage_seconds=self.times.as_dict() | {"prepare": round(self.prepare_seconds, 6),
+                                                  "setup": round(self.setup_seconds, 6)},
             dynamics_stage_seconds={k: round(v, 6) for k, v in dynamics_seconds.items()},
             # first: in a new process, the frame that launches the dynamics kernels for the
             # first time (Taichi's front end runs then, even with the offline cache warm);
@@ -396,4 +428,5 @@ class Simulation:
             mass_final=sum(self.records[b].model.mass for b in live),
             mass_dropped=self.mass_dropped,
             resimulated_substeps=self.resimulated_substeps,
+            surface_workers=getattr(self.surfaces, "count", 0),
         )

@@ -192,7 +192,7 @@ def test_the_crack_fit_options_reach_the_cut(world, tmp_path, monkeypatch):
     monkeypatch.setattr(piece_surface, "cut_render_solid", recording)
     scene = load_scene(SCENES / "single_ring.toml", ["ring.fracture.crack_count=3", "ring.fracture.crack_fit_rounds=2",
                                                      "ring.fracture.crack_fit_min_tets=30"])
-    summary = Simulation(scene, output=tmp_path / "ring.usdc", frames=30, world=world).run()
+    summary = Simulation(scene, output=tmp_path / "ring.usdc", frames=30, world=world, surface_workers=0).run()
     assert seen and set(seen) == {(2, 30)}
     # (the cut's time is reported as the part of the split stage it is)
     assert 0.0 < summary.stage_seconds["render_surfaces"] <= summary.stage_seconds["fragment_split"]

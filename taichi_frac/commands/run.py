@@ -29,6 +29,10 @@ def register(subparsers) -> None:
     p.add_argument("--no-output", action="store_true", help="write no cache (benchmarking)")
     p.add_argument("--overwrite", action="store_true",
                    help="write the cache even while another run holds its lock (that run then stops)")
+    p.add_argument("--surface-workers", type=int, default=None, metavar="N",
+                   help="processes that cut the broken pieces' render surfaces while the frames go on (0: in "
+                        "this process; default: one per core, at most one per breakable object); the cache is "
+                        "the same either way")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.add_argument("--progress-json", action="store_true",
                    help="report progress as one JSON object a frame on stderr, for programs that run this "
@@ -78,6 +82,16 @@ def _progress_printer(quiet: bool, as_json: bool = False):
     return cb, None
 
 
+def _stage_line(args, stage: str, text: str, **fields) -> None:
+    """A progress line before the frames start, so a long set-up shows at once that the run
+    has started: ``text`` on stderr, or a JSON object ``{"stage": stage, ...}`` with
+    ``--progress-json`` (programs that read the frames' lines skip it); none with -q."""
+    if args.progress_json:
+        print(json.dumps({"stage": stage} | fields), file=sys.stderr, flush=True)
+    elif not args.quiet:
+        print(text, file=sys.stderr, flush=True)
+
+
 def print_summary(summary, file=None) -> None:
     """The run's summary as a two-column table on ``file`` (default: sys.stdout at call
     time, so a redirected stdout receives it)."""
@@ -105,14 +119,19 @@ def print_summary(summary, file=None) -> None:
     dyn = s.dynamics_stage_seconds
     rows += [
         ("  prepare (mesh + model)", f"{stage.get('prepare', 0):.3f} s"),
+        ("  set-up (World, surface workers)", f"{stage.get('setup', 0):.3f} s"),
         ("  collision (broad + narrow phase)", f"{dyn.get('collision', 0):.3f} s"),
         ("  contact response + integration", f"{dyn.get('response', 0):.3f} s"),
         ("  fracture analysis", f"{stage['fracture_analysis']:.3f} s"),
         ("  fragment split", f"{stage['fragment_split']:.3f} s"),
     ]
-    if stage.get("render_surfaces", 0.0) > 0.0:  # (a cache was written and a body broke)
+    if stage.get("render_surfaces", 0.0) > 0.0 and s.surface_workers == 0:  # (a cache was written, a body broke)
         rows.append(("    of which render surfaces", f"{stage['render_surfaces']:.3f} s (the pieces' surfaces cut "
                                                     "along the cracks)"))
+    elif stage.get("render_surfaces", 0.0) > 0.0:
+        rows.append(("  render surfaces", f"{stage['render_surfaces']:.3f} s in {s.surface_workers} worker "
+                                          f"process(es) beside the frames; waited {stage['surfaces_wait']:.3f} s "
+                                          "for them at the end"))
     rows += [
         ("  output", f"{stage['output']:.3f} s"),
     ]
@@ -154,6 +173,8 @@ def main(args) -> int:
 
     if args.frames is not None and args.frames < 1:
         raise OptionError(f"--frames {args.frames}: simulate at least 1 frame")
+    if args.surface_workers is not None and not 0 <= args.surface_workers <= 256:
+        raise OptionError(f"--surface-workers {args.surface_workers}: give 0 (cut in this process) to 256")
     if args.stats_json:
         check_stats_path(args.stats_json)
     if args.output and not args.no_output:
@@ -164,10 +185,12 @@ def main(args) -> int:
         raise OptionError(str(exc)) from None
     output = False if args.no_output else (Path(args.output) if args.output else None)
     cb, bar = _progress_printer(args.quiet, args.progress_json)
+    _stage_line(args, "prepare", f"{scene.name}: preparing {len(scene.objects)} object(s)",
+                objects=len(scene.objects))
     try:
         sim = Simulation(scene, output=output, arch=args.arch, progress=cb, frames=args.frames,
                          single_scale=True if args.single_scale else None, fracture=not args.no_fracture,
-                         overwrite=args.overwrite)
+                         overwrite=args.overwrite, surface_workers=args.surface_workers)
         summary = sim.run()
     finally:
         if bar is not None:

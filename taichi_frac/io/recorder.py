@@ -2,12 +2,19 @@
 surface when it appears, its pose every frame, its end when it breaks, and the peak stress
 of the impact that made each piece.
 
-The simulation hands it everything: the bodies' surfaces (``surfaces.SurfaceStage``), each
-frame's poses and the fracture stage's splits with their pieces' surfaces. It computes
-nothing and changes nothing of the simulation.
+The simulation hands it everything: the bodies' surfaces as futures (the surface stage,
+``surfaces/pool.py``, may still be cutting them), each frame's poses and the fracture
+stage's splits. It writes them to the cache in the order they happened, as soon as the
+surfaces they need are done: a frame waits in memory (its poses: a few numbers a body)
+until every body alive in it has its surface. It computes nothing and changes nothing of
+the simulation.
 """
 
 from __future__ import annotations
+
+import collections
+import concurrent.futures
+import time
 
 
 class CacheRecorder:
@@ -18,6 +25,8 @@ class CacheRecorder:
         fps: frames per second of the run; checkpoint_every [frames], checkpoint_seconds [s]:
             the scene's ``[output]`` rules for rewriting the file while the run goes on (0:
             only the final write and Ctrl-C's).
+
+    ``wait_seconds``: [s] how long :meth:`close` waited for surfaces still being made.
     """
 
     def __init__(self, path, *, fps: float, checkpoint_every: int, checkpoint_seconds: float, lock=None):
@@ -27,54 +36,92 @@ class CacheRecorder:
         self.checkpoint_seconds = checkpoint_seconds
         self.lock = lock
         self.writer = None
+        self.wait_seconds = 0.0
         self._cache_ids: dict[int, int] = {}  # body id -> the writer's fragment id
+        self._log: collections.deque = collections.deque()  # what is not written yet, in order
 
     def open(self, bodies) -> None:
         """Create the writer and add ``bodies``, born at frame 0: (body id, name, look
-        (``options.MaterialLook``), ``surfaces.BodySurface``) each. The caller then writes
-        frame 0's poses."""
+        (``options.MaterialLook``), future of its ``surfaces.BodySurface``) each. The caller
+        then writes frame 0's poses."""
         from .cache import CacheWriter
 
         self.writer = CacheWriter(self.path, fps=self.fps, start_frame=0,
                                   checkpoint_every=self.checkpoint_every or 2**31 - 1,
                                   checkpoint_seconds=self.checkpoint_seconds, lock=self.lock)
         for body, name, look, surface in bodies:
-            self._add(body, name, surface, birth_frame=0, look=look)
+            self._log.append((surface, self._add, (body, name, 0, look, None, None, 0.0)))
+        self._flush()
 
     def write_frame(self, frame: int, ids, state) -> None:
-        """The poses of the live bodies ``ids`` (``state``: their World ``body_state``), and a
-        checkpoint of the file when one is due: the writer's every-N-frames rule; right after
-        the first simulated frame; then whenever ``checkpoint_seconds`` of wall time have
-        passed, however slow the frames (the first frame compiles kernels: minutes on a cold
-        cache). A kill then loses at most that much work."""
-        cache_ids = [self._cache_ids[b] for b in ids]
-        self.writer.write_frame(frame, cache_ids, state["position"], state["orientation"])
-        if self.checkpoint_every == 0 or self.writer.frames_since_write == 0:
-            return
-        if frame == 1 or (self.checkpoint_seconds > 0 and self.writer.seconds_since_write >= self.checkpoint_seconds):
-            self.writer.checkpoint()
+        """The poses of the live bodies ``ids`` (``state``: their World ``body_state``); then
+        what is ready of the log is written, with a checkpoint of the file when one is due:
+        the writer's every-N-frames rule; right after the first simulated frame; then
+        whenever ``checkpoint_seconds`` of wall time have passed, however slow the frames
+        (the first frame compiles kernels: minutes on a cold cache). A kill then loses at
+        most that much work."""
+        poses = (frame, list(ids), state["position"].copy(), state["orientation"].copy())
+        self._log.append((None, self._poses, poses))
+        self._flush()
 
     def record_fracture(self, fracture, surfaces) -> None:
         """A ``fracture.stage.Fracture``: the parent's end, and each piece's birth with its
-        surface (``surfaces``: one ``surfaces.BodySurface`` per piece), impact and peak stress."""
-        parent_cache = self._cache_ids.pop(fracture.parent)
-        self.writer.end_fragment(parent_cache, fracture.frame)
-        for piece, child, child_rec, surface in zip(fracture.pieces, fracture.children, fracture.children_records,
-                                                    surfaces):
-            impact = None if piece.impact is None else dict(point=piece.impact.point, force=piece.impact.force)
-            # (pieces share their body's look: the writer takes it from the parent)
-            self._add(child, child_rec.name, surface, fracture.frame, parent=parent_cache, impact=impact,
-                      peak=piece.peak_principal_stress)
+        surface (``surfaces``: future of the split's ``surfaces.PieceSurfaces``), impact and
+        peak stress."""
+        self._log.append((surfaces, self._pieces, fracture))
+        self._flush()
 
     def close(self, complete: bool) -> None:
-        """Write the file; ``complete``: every requested frame was written."""
-        if self.writer is not None:
-            self.writer.close(complete=complete)
+        """Write the file, once every surface asked for is done; ``complete``: every requested
+        frame was written. A Ctrl-C while it waits writes what is done so far, marked
+        incomplete."""
+        if self.writer is None:
+            return
+        t = time.perf_counter()
+        try:
+            self._flush(wait=True)
+        except KeyboardInterrupt:
+            complete = False
+            self._flush()
+        finally:
+            self.wait_seconds += time.perf_counter() - t
+            self.writer.close(complete=complete and not self._log)
 
-    def _add(self, body: int, name: str, surface, birth_frame: int, *, look=None, parent=None, impact=None,
-             peak=0.0) -> None:
+    def _flush(self, wait: bool = False) -> None:
+        """Write the log's entries in order up to the first whose surface is not done
+        (``wait``: all of them, waiting for each)."""
+        while self._log:
+            future, write, args = self._log[0]
+            if future is not None and not future.done():
+                if not wait:
+                    return
+                concurrent.futures.wait([future])
+            write(args, None if future is None else future.result())
+            self._log.popleft()
+
+    def _add(self, args, surface) -> None:
+        body, name, birth_frame, look, parent, impact, peak = args
         self._cache_ids[body] = self.writer.add_fragment(
             name, surface.vertices, surface.faces, surface.inner, birth_frame, parent=parent, impact=impact,
             peak_principal_stress=float(peak), face_peak_stress=surface.face_peak, normals=surface.normals,
             uvs=surface.uvs, shade_inner=surface.shade_inner, look=look,
         )
+
+    def _poses(self, args, _) -> None:
+        frame, ids, positions, orientations = args
+        self.writer.write_frame(frame, [self._cache_ids[b] for b in ids], positions, orientations)
+        if self.checkpoint_every == 0 or self.writer.frames_since_write == 0:
+            return
+        if frame == 1 or (self.checkpoint_seconds > 0 and self.writer.seconds_since_write >= self.checkpoint_seconds):
+            self.writer.checkpoint()
+
+    def _pieces(self, fracture, pieces) -> None:
+        parent_cache = self._cache_ids.pop(fracture.parent)
+        self.writer.end_fragment(parent_cache, fracture.frame)
+        for piece, child, child_rec, surface in zip(fracture.pieces, fracture.children, fracture.children_records,
+                                                    pieces.surfaces):
+            impact = None if piece.impact is None else dict(point=piece.impact.point, force=piece.impact.force)
+            # (pieces share their body's look: the writer takes it from the parent)
+            self._add((child, child_rec.name, fracture.frame, None, parent_cache, impact,
+                       piece.peak_principal_stress), surface)
+

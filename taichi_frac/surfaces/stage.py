@@ -10,6 +10,7 @@ shading of its source surface; a split cuts the parent's render solid along the 
 
 from __future__ import annotations
 
+import hashlib
 import time
 import weakref
 from dataclasses import dataclass
@@ -66,6 +67,42 @@ class PieceSurfaces:
     counts: dict | None = None
 
 
+@dataclass(frozen=True, eq=False)
+class CutRequest:
+    """What a split's cut needs of a ``fracture.stage.Fracture``, and nothing the World
+    holds, so that it can travel to a worker process.
+
+    Attributes:
+        parent: the parent's body id; model: its BodyModel; options: its FractureOptions.
+        fragment_tets: the split's pieces as parent tet indices (``FractureResult``).
+        cracks: the analysis' CrackPlane / RingCrack list.
+        principal_stress: (T,) [Pa] the largest principal stress at the parent's tets.
+        children: the pieces' body ids; models: their BodyModels; roots: their root models;
+        parent_tets: each piece's tets in the parent.
+    """
+
+    parent: int
+    model: BodyModel
+    options: object
+    fragment_tets: list
+    cracks: list
+    principal_stress: np.ndarray
+    children: list
+    models: list
+    roots: list
+    parent_tets: list
+
+    @classmethod
+    def of(cls, fracture) -> "CutRequest":
+        rec = fracture.parent_record
+        return cls(parent=fracture.parent, model=rec.model, options=rec.fracture,
+                   fragment_tets=list(fracture.split.fragment_tets), cracks=list(fracture.analysis.cracks),
+                   principal_stress=fracture.analysis.particle_principal_stress,
+                   children=list(fracture.children), models=[r.model for r in fracture.children_records],
+                   roots=[r.root for r in fracture.children_records],
+                   parent_tets=[p.parent_tets for p in fracture.pieces])
+
+
 def root_corner_attributes(model: BodyModel, surface) -> tuple:
     """(normals (Fr,3,3), uvs (Fr,3,2) or None) of ``model``'s boundary faces from its source
     surface (a trimesh.Trimesh in the model's source frame)."""
@@ -75,6 +112,24 @@ def root_corner_attributes(model: BodyModel, surface) -> tuple:
         corners = model.vertices[model.surface_faces] + model.com_in_source
         _CORNER_ATTRIBUTES[model] = boundary_corner_attributes(surface, corners)
     return _CORNER_ATTRIBUTES[model]
+
+
+def _content_key(model: BodyModel, surface) -> str:
+    """A digest of what a scene body's surface is made from: its model's boundary and frame,
+    and its source surface (None: its tets)."""
+    digest = hashlib.sha256()
+    arrays = [model.vertices, model.surface_faces, model.com_in_source, np.array([model.spacing])]
+    if surface is not None:
+        arrays += [surface.vertices, surface.faces]
+        uv = getattr(getattr(surface, "visual", None), "uv", None)
+        if uv is not None:
+            arrays.append(np.asarray(uv))
+    for array in arrays:
+        array = np.ascontiguousarray(array)
+        digest.update(f"{array.dtype}{array.shape}".encode())
+        digest.update(array.tobytes())
+    digest.update(b"tets" if surface is None else b"surface")
+    return digest.hexdigest()
 
 
 class SurfaceStage:
@@ -90,50 +145,59 @@ class SurfaceStage:
         self._render: dict[int, object] = {}
         self._shading: dict[int, tuple] = {}
         self._tet_peak: dict[int, np.ndarray] = {}
+        self._roots: dict[str, tuple] = {}  # content key -> (shading, render solid, BodySurface)
         self.cuts: list[tuple[float, dict]] = []
 
-    def add_body(self, body: int, model: BodyModel, report) -> BodySurface:
-        """A scene object's surface (``report``: its ``geometry.prepare.PrepareReport``; an
-        object given as tets has no source surface and shows its tets' boundary)."""
-        if report.surface is None:
-            self._shading[body] = (None, None)
-            self._render[body] = render_solid_from_tets(model)
-        else:
-            self._shading[body] = root_corner_attributes(model, report.surface)
-            self._render[body] = render_solid_from_surface(report.surface, model.com_in_source, model.spacing)
-        return self._surface(body, model, model)
+    def add_body(self, body: int, model: BodyModel, surface) -> BodySurface:
+        """A scene object's surface: ``surface`` is its source surface (a trimesh.Trimesh in
+        the model's source frame, ``PrepareReport.surface``), or None for an object given as
+        tets, which shows its tets' boundary."""
+        # Bodies of one mesh and one model (a scene's copies of one object) share their
+        # surface: it is made once.
+        key = _content_key(model, surface)
+        if key not in self._roots:
+            if surface is None:
+                self._shading[body] = (None, None)
+                self._render[body] = render_solid_from_tets(model)
+            else:
+                self._shading[body] = root_corner_attributes(model, surface)
+                self._render[body] = render_solid_from_surface(surface, model.com_in_source, model.spacing)
+            self._roots[key] = (self._shading[body], self._render[body], self._surface(body, model, model))
+        self._shading[body], self._render[body], made = self._roots[key]
+        return made
 
     def render_of(self, body: int):
         """The render solid of a live body (``solid.RenderSolid``) or None."""
         return self._render.get(body)
 
     def cut(self, fracture) -> PieceSurfaces:
-        """The pieces' surfaces of a ``fracture.stage.Fracture``: the parent's render solid cut
-        along its cracks, each piece carrying the peak stress its tets have seen."""
-        rec, analysis, split = fracture.parent_record, fracture.analysis, fracture.split
-        parent = fracture.parent
-        peak_parent = np.maximum(self._tet_peak.pop(parent, np.zeros(rec.model.tet_count)),
-                                 analysis.particle_principal_stress)
+        """The pieces' surfaces of a split (a ``fracture.stage.Fracture`` or its
+        :class:`CutRequest`): the parent's render solid cut along its cracks, each piece
+        carrying the peak stress its tets have seen."""
+        request = fracture if isinstance(fracture, CutRequest) else CutRequest.of(fracture)
+        parent = request.parent
+        peak_parent = np.maximum(self._tet_peak.pop(parent, np.zeros(request.model.tet_count)),
+                                 request.principal_stress)
         render = self._render.pop(parent, None)
         shading = self._shading.pop(parent, (None, None))
-        renders, seconds, counts = [None] * len(fracture.pieces), 0.0, {}
+        renders, seconds, counts = [None] * len(request.children), 0.0, {}
         if render is not None:
-            options = rec.fracture
+            options = request.options
             t = time.perf_counter()
             renders, counts = _cut.cut_render_solid(
-                render, rec.model, split.fragment_tets, analysis.cracks,
-                [p.model.com_in_source for p in fracture.pieces], roughness=options.crack_roughness,
+                render, request.model, request.fragment_tets, request.cracks,
+                [m.com_in_source for m in request.models], roughness=options.crack_roughness,
                 roughness_scale=options.crack_roughness_scale, seed=options.seed,
                 fit_rounds=options.crack_fit_rounds, fit_min_tets=options.crack_fit_min_tets)
             seconds = time.perf_counter() - t
             self.cuts.append((seconds, counts))
         surfaces = []
-        for piece, child, child_rec, piece_render in zip(fracture.pieces, fracture.children,
-                                                         fracture.children_records, renders):
+        for child, model, root, tets, piece_render in zip(request.children, request.models, request.roots,
+                                                          request.parent_tets, renders):
             self._render[child] = piece_render
             self._shading[child] = shading
-            self._tet_peak[child] = peak_parent[piece.parent_tets]
-            surfaces.append(self._surface(child, child_rec.model, child_rec.root))
+            self._tet_peak[child] = peak_parent[tets]
+            surfaces.append(self._surface(child, model, root))
         return PieceSurfaces(surfaces, seconds, counts)
 
     def _surface(self, body: int, model: BodyModel, root: BodyModel) -> BodySurface:

@@ -169,15 +169,16 @@ def flush_kernel_cache() -> bool:
 
 def _simulation(Simulation, scene, cache, task, progress):
     """A Simulation on the worker's World; a variant that needs larger capacities than
-    the World has (more particles) gets a new World, which later variants then share."""
+    the World has (more particles) gets a new World, which later variants then share. The
+    pieces' surfaces are cut in this process: the sweep's workers already fill the cores."""
     try:
         sim = Simulation(scene, output=cache, arch=task.arch, frames=task.frames, progress=progress,
-                         world=_STATE.world, prepare=_STATE.prepare)
+                         world=_STATE.world, prepare=_STATE.prepare, surface_workers=0)
     except ValueError as exc:
         if _STATE.world is None or "the World given has" not in str(exc):
             raise
         sim = Simulation(scene, output=cache, arch=task.arch, frames=task.frames, progress=progress,
-                         world=None, prepare=_STATE.prepare)
+                         world=None, prepare=_STATE.prepare, surface_workers=0)
     _STATE.world = sim.world
     return sim
 

@@ -1,0 +1,169 @@
+"""Piece surfaces cut in worker processes (taichi_frac/surfaces/pool.py), the recorder that
+writes them in order once they are done (io/recorder.py), and a second run in one process
+reusing the first one's World (scene_setup.py)."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from concurrent.futures import Future
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from taichi_frac.scenes import load_scene
+from taichi_frac.simulation import Simulation
+
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
+
+
+def cache_digest(path: Path) -> str:
+    """Every attribute of every prim at every time sample: what the cache holds."""
+    from pxr import Usd
+
+    stage = Usd.Stage.Open(str(path))
+    digest = hashlib.sha256()
+    for prim in stage.Traverse():
+        digest.update(str(prim.GetPath()).encode())
+        for attr in prim.GetAttributes():
+            digest.update(attr.GetName().encode())
+            for t in attr.GetTimeSamples() or [None]:
+                digest.update(repr(attr.Get() if t is None else attr.Get(t)).encode())
+    return digest.hexdigest()
+
+
+def test_workers_write_the_cache_the_process_writes_alone(tmp_path):
+    """The ring cracked three ways, pieces breaking again: the same cache, prim for prim and
+    sample for sample, with the surfaces cut here or in two worker processes."""
+    caches = {}
+    for workers in (0, 2):
+        scene = load_scene(SCENES / "single_ring.toml", ["ring.fracture.crack_count=3"])
+        path = tmp_path / f"ring_{workers}.usdc"
+        summary = Simulation(scene, output=path, frames=40, surface_workers=workers).run()
+        assert summary.fragments >= 3 and summary.surface_workers == workers
+        caches[workers] = cache_digest(path)
+    assert caches[0] == caches[2]
+
+
+class _Writer:
+    """A cache writer that records its calls."""
+
+    def __init__(self):
+        self.calls, self.frames_since_write, self.seconds_since_write = [], 0, 0.0
+
+    def add_fragment(self, name, *args, **kwargs):
+        self.calls.append(("add", name))
+        return len([c for c in self.calls if c[0] == "add"]) - 1
+
+    def write_frame(self, frame, ids, positions, orientations):
+        self.calls.append(("frame", frame, tuple(ids)))
+
+    def end_fragment(self, fid, frame):
+        self.calls.append(("end", fid, frame))
+
+    def close(self, complete):
+        self.calls.append(("close", complete))
+
+
+def test_the_recorder_writes_in_order_once_a_surface_is_done():
+    from taichi_frac.io.recorder import CacheRecorder
+    from taichi_frac.surfaces import BodySurface
+
+    surface = BodySurface(np.zeros((3, 3)), np.array([[0, 1, 2]]), np.zeros(1, bool))
+    recorder = CacheRecorder("unused.usdc", fps=50, checkpoint_every=0, checkpoint_seconds=0)
+    recorder.writer = writer = _Writer()
+    pending = Future()
+    recorder._log.append((pending, recorder._add, (7, "late", 0, None, None, None, 0.0)))
+    state = {"position": np.zeros((1, 3)), "orientation": np.array([[1.0, 0, 0, 0]])}
+    recorder.write_frame(0, [7], state)
+    recorder.write_frame(1, [7], state)
+    assert writer.calls == []  # (the frames wait for the body's surface)
+    pending.set_result(surface)
+    recorder.write_frame(2, [7], state)
+    assert writer.calls == [("add", "late"), ("frame", 0, (0,)), ("frame", 1, (0,)), ("frame", 2, (0,))]
+    recorder.close(complete=True)
+    assert writer.calls[-1] == ("close", True)
+
+
+def test_a_worker_error_reaches_the_caller_with_its_traceback():
+    from taichi_frac.surfaces.pool import SurfaceWorkerError, SurfaceWorkers
+
+    workers = SurfaceWorkers(1)
+    try:
+        future = workers._workers[0].submit(0, "cut", None)  # (no request: the stage fails on it)
+        with pytest.raises(SurfaceWorkerError, match="Traceback"):
+            future.result(timeout=120)
+    finally:
+        workers.close()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the parent-death signal is Linux's")
+def test_a_killed_run_leaves_no_surface_worker_behind(tmp_path):
+    script = textwrap.dedent("""
+        import sys, time
+        from taichi_frac.surfaces.pool import SurfaceWorkers
+        workers = SurfaceWorkers(2)
+        print("pids", " ".join(str(w.process.pid) for w in workers._workers), flush=True)
+        time.sleep(600)
+    """)
+    parent = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    line = next(line for line in parent.stdout if line.startswith("pids"))  # (after Taichi's banner)
+    pids = [int(p) for p in line.split()[1:]]
+    assert len(pids) == 2
+    parent.send_signal(signal.SIGKILL)
+    parent.wait(timeout=30)
+    deadline = time.monotonic() + 30
+    alive = pids
+    while alive and time.monotonic() < deadline:
+        alive = [pid for pid in alive if _running(pid)]
+        time.sleep(0.1)
+    assert not alive, f"workers {alive} outlived their parent"
+
+
+def _running(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
+    except FileNotFoundError:
+        return False
+    return state != "Z"  # (a zombie has ended; only its exit status is left)
+
+
+def test_a_second_run_in_the_process_takes_the_first_runs_world(tmp_path):
+    scene = load_scene(SCENES / "single_ring.toml")
+    first = Simulation(scene, output=False, frames=2)
+    held = Simulation(scene, output=False, frames=2)  # (built while the first is not run: its own World)
+    assert held.world is not first.world
+    first.run()
+    held.run()
+    again = Simulation(scene, output=False, frames=2)
+    assert again.world is held.world  # (the last World built, free once its run ended)
+    again.run()
+
+
+def test_world_sizes_are_rounded_up_to_powers_of_two():
+    from taichi_frac.scene_setup import _power_of_two
+
+    assert [_power_of_two(n) for n in (1, 2, 3, 64, 65, 1000, 1024, 1025)] == [1, 2, 4, 64, 128, 1024, 1024, 2048]
+
+
+def test_taichi_error_messages_still_name_the_file_and_line():
+    """Taichi's front end as this package runs it (``runtime._plain_source_positions``): an
+    error in a kernel names its file, line and source line."""
+    import taichi as ti
+
+    field = ti.field(ti.f32, shape=1)
+
+    @ti.kernel
+    def broken():
+        field[0] = undefined_name  # noqa: F821
+
+    with pytest.raises(Exception) as caught:
+        broken()
+    message = str(caught.value)
+    assert os.path.basename(__file__) in message and "undefined_name" in message, message
