@@ -113,19 +113,6 @@ def _share_clock(clock: StepClock, share: float) -> StepClock:
                      step_seconds=clock.step_seconds, crash_hint=clock.crash_hint)
 
 
-def _mesh(surface, count: int, kwargs: dict, clock: StepClock, simplify: bool):
-    """(tet surface, TetMesh, cache hit, step or None) of ``surface`` under ``clock``."""
-    from .prepare import _cached_tetrahedralize, _mesh_simplified
-
-    kwargs = dict(kwargs, clock=clock)
-    tet_surface, tm, hit, step = surface, None, False, None
-    if simplify:
-        tet_surface, tm, hit, step = _mesh_simplified(surface, count, clock, kwargs)
-    if tm is None:
-        tm, hit = _cached_tetrahedralize(surface, **kwargs)
-    return tet_surface, tm, hit, step
-
-
 def _lattice_mesh(solid, count: int, clock: StepClock):
     """(tet surface, TetMesh, False, step) of the winding-number solid from a cube lattice
     (``lattice_tets``)."""
@@ -147,14 +134,14 @@ def _lattice_mesh(solid, count: int, clock: StepClock):
                                     f"vertices moved onto the contour: {len(tets):,} tets")
 
 
-def _clean_path(surface, count, kwargs, clock, simplify):
+def _clean_path(surface, count, kwargs, clock, mesh_surface):
     """The clean (or repaired) ``surface`` meshed as it is, under :data:`CLEAN_TIME_SHARE` of
     the time left. Returns (InputSolid or None, why it handed over or None)."""
     share = _share_clock(clock, CLEAN_TIME_SHARE)
     # No fTetWild fallback here: the winding-number path is the fallback, and far faster.
     kwargs = dict(kwargs, notes=None)
     try:
-        tet_surface, tm, hit, step = _mesh(surface, count, kwargs, share, simplify)
+        tet_surface, tm, hit, step = mesh_surface(surface, count, kwargs, share)
     except MeshError as exc:
         return None, f"the clean surface could not be meshed in its share of the time ({exc})"
     miss = tm.tet_count / count - 1.0
@@ -180,9 +167,11 @@ def _repaired(raw, name, clock, steps):
 
 
 def solid_of_input(raw: trimesh.Trimesh, name: str, *, count: int, kwargs: dict, clock: StepClock,
-                   thickness: float | None = None, simplify: bool = True) -> InputSolid:
+                   mesh_surface, thickness: float | None = None) -> InputSolid:
     """The solid and tets of the input surface ``raw`` [m] for ``count`` particles (see the
-    module docstring). ``kwargs``: ``prepare._cached_tetrahedralize``'s settings.
+    module docstring). ``mesh_surface(surface, count, kwargs, clock)`` meshes a clean surface
+    (prepare's simplified copy and TetGen: (tet surface, TetMesh, cache hit, step or None));
+    ``kwargs``: its mesher settings.
 
     Raises MeshError when the input has no volume (naming ``thickness``) or no faces.
     """
@@ -198,7 +187,7 @@ def solid_of_input(raw: trimesh.Trimesh, name: str, *, count: int, kwargs: dict,
             steps.append(f"not a clean solid ({problem.split(';')[0]})")
             surface = _repaired(raw, name, clock, steps)
         if surface is not None:
-            result, why = _clean_path(surface, count, kwargs, clock, simplify)
+            result, why = _clean_path(surface, count, kwargs, clock, mesh_surface)
             if result is not None:
                 result.steps[:0] = steps
                 result.kept_fraction, result.input_volume = kept_share(

@@ -10,6 +10,7 @@ density and grouping options that change more often than the shape.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import os
 import sys
@@ -284,6 +285,18 @@ def _mesh_simplified(surface, count: int, clock: StepClock, kwargs: dict):
     return surface, None, False, None
 
 
+def _mesh_surface(surface, count: int, kwargs: dict, clock: StepClock, simplify: bool = True):
+    """(tet surface, TetMesh, cache hit, step or None) of a clean ``surface`` under ``clock``:
+    its simplified copy when ``simplify``, else (or when no copy applies) the surface itself."""
+    kwargs = dict(kwargs, clock=clock)
+    tet_surface, tm, hit, step = surface, None, False, None
+    if simplify:
+        tet_surface, tm, hit, step = _mesh_simplified(surface, count, clock, kwargs)
+    if tm is None:
+        tm, hit = _cached_tetrahedralize(surface, **kwargs)
+    return tet_surface, tm, hit, step
+
+
 def prepare_body(
     source,
     *,
@@ -382,7 +395,7 @@ def prepare_body(
 
             count = target if target is not None else max(int(_volume_of(surface) / max_volume), 1)
             solid = solid_of_input(surface, name, count=count, kwargs=kwargs, clock=clock, thickness=thickness,
-                                   simplify=simplify)
+                                   mesh_surface=functools.partial(_mesh_surface, simplify=simplify))
             surface, tet_surface, tm, cache_hit = solid.surface, solid.tet_surface, solid.tets, solid.cache_hit
             repair_steps = list(solid.steps)
         elif simplify and not is_primitive:
