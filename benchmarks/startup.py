@@ -94,7 +94,9 @@ def _pybullet_rings(folder: Path, env: dict) -> float | None:
             "import pybullet\n"
             "from benchmarks.pybullet_ref import run_rings\n"
             "from taichi_frac.scenes import load_scene\n"
-            f"run_rings(load_scene('thirteen_rings'), cache_dir=Path(r'{folder}') / 'vhacd')\n")
+            f"vhacd = Path(r'{folder}') / 'vhacd'\n"
+            "vhacd.mkdir(exist_ok=True)\n"
+            "run_rings(load_scene('thirteen_rings'), cache_dir=vhacd)\n")
     t = time.perf_counter()
     done = subprocess.run([sys.executable, "-c", code], env=env | {"PYTHONPATH": str(REPO)}, capture_output=True,
                           text=True, cwd=folder)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 from . import interrupts
 from .geometry.validate import REPAIR_HINT, MeshError
@@ -37,18 +38,49 @@ class PreparedObject:
     breakable: bool
 
 
+#: Prepared models kept in this process, by what a model depends on (``_prepare_key``): the
+#: copies of one object in a scene, and the next run of the same scene, take the model
+#: made once (a BodyModel never changes). The oldest go first past this many.
+PREPARED_KEPT = 64
+_PREPARED: dict[str, tuple] = {}
+
+
+def prepare_object(obj, *, surface_contact: bool = False):
+    """``obj.prepare(surface_contact=...)``, made once per process for what it depends on:
+    (BodyModel, PrepareReport)."""
+    key = _prepare_key(obj, surface_contact)
+    if key not in _PREPARED:
+        while len(_PREPARED) >= PREPARED_KEPT:
+            del _PREPARED[next(iter(_PREPARED))]
+        _PREPARED[key] = obj.prepare(surface_contact=surface_contact)
+    return _PREPARED[key]
+
+
+def _prepare_key(obj, surface_contact: bool) -> str:
+    """What a scene object's model depends on; a mesh file by its path, size and time."""
+    stamp = None
+    if obj.mesh is not None:
+        try:
+            info = Path(obj.mesh).stat()
+            stamp = (str(Path(obj.mesh).resolve()), info.st_size, info.st_mtime_ns)
+        except OSError:
+            stamp = str(obj.mesh)  # (prepare says what is wrong with it)
+    return repr((obj.source, stamp, obj.scale, obj.units, obj.material, obj.particles, obj.repair, surface_contact,
+                 getattr(obj, "thickness", None), getattr(obj, "up_axis", None)))
+
+
 def prepare_objects(scene, *, fracture: bool = True, prepare=None) -> tuple[list[PreparedObject], float]:
     """Every object of ``scene`` prepared, in order, and the seconds it took. ``prepare``:
     callable(SceneObject, *, surface_contact) -> (BodyModel, PrepareReport) used instead of
-    ``obj.prepare()`` (a sweep worker's memo). Ctrl-C is honoured between objects."""
+    :func:`prepare_object` (this process's memo). Ctrl-C is honoured between objects."""
     t0 = time.perf_counter()
+    prepare = prepare or prepare_object
     prepared = []
     for obj in scene.objects:
         interrupts.check()
         try:
             surface = scene.simulation.surface_contact
-            model, report = (obj.prepare(surface_contact=surface) if prepare is None
-                             else prepare(obj, surface_contact=surface))
+            model, report = prepare(obj, surface_contact=surface)
         except MeshError as exc:
             raise MeshError(f"object {obj.name!r}: " + str(exc).replace(REPAIR_HINT, _scene_repair_hint(obj.name))) \
                 from None

@@ -162,6 +162,8 @@ class SurfaceWorkers:
         worker = min(self._workers, key=lambda w: w.load)
         worker.load += model.tet_count
         self._route[body] = worker
+        # Without trimesh's cache: a spatial index built here does not survive pickling.
+        surface = None if surface is None else surface.copy(include_cache=False)
         return worker.submit(next(self._tasks), "add_body", (body, model, surface))
 
     def cut(self, fracture) -> Future:

@@ -1,7 +1,7 @@
 """What a Dask worker runs for one variant: the scene with its overrides, into its folder.
 
-A worker process keeps one World (its Taichi fields and compiled kernels) and a memo of the
-prepared bodies between variants, so only its first variant pays for kernel loading and
+A worker process keeps one World (its Taichi fields and compiled kernels) and its prepared
+bodies (``scene_setup.prepare_object``) between variants, so only its first variant pays for kernel loading and
 meshing; the next ones start their first frame at once (``seconds_to_first_frame`` in the
 stats). A variant's folder holds, when it is done:
 
@@ -63,16 +63,8 @@ class _WorkerState:
 
     def __init__(self):
         self.world = None
-        self.models: dict[str, tuple] = {}
         self.runs = 0
         self.closed = False
-
-    def prepare(self, obj, *, surface_contact: bool = False):
-        """``SceneObject.prepare`` memoised on what the model depends on."""
-        key = repr((obj.source, obj.scale, obj.units, obj.material, obj.particles, obj.repair, surface_contact))
-        if key not in self.models:
-            self.models[key] = obj.prepare(surface_contact=surface_contact)
-        return self.models[key]
 
 
 _STATE = _WorkerState()
@@ -173,12 +165,12 @@ def _simulation(Simulation, scene, cache, task, progress):
     pieces' surfaces are cut in this process: the sweep's workers already fill the cores."""
     try:
         sim = Simulation(scene, output=cache, arch=task.arch, frames=task.frames, progress=progress,
-                         world=_STATE.world, prepare=_STATE.prepare, surface_workers=0)
+                         world=_STATE.world, surface_workers=0)
     except ValueError as exc:
         if _STATE.world is None or "the World given has" not in str(exc):
             raise
         sim = Simulation(scene, output=cache, arch=task.arch, frames=task.frames, progress=progress,
-                         world=None, prepare=_STATE.prepare, surface_workers=0)
+                         world=None, surface_workers=0)
     _STATE.world = sim.world
     return sim
 
