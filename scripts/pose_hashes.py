@@ -23,27 +23,10 @@ RUNS = {
 }
 
 
-def cache_digest(path: Path) -> str:
-    """A hash of what the cache holds (every prim's attributes at every time sample), not of
-    the file's bytes, which carry no meaning in their order."""
-    from pxr import Usd
-
-    stage = Usd.Stage.Open(str(path))
-    h = hashlib.sha256()
-    for prim in stage.Traverse():
-        h.update(str(prim.GetPath()).encode())
-        for attr in prim.GetAttributes():
-            h.update(attr.GetName().encode())
-            times = attr.GetTimeSamples() or [None]
-            for t in times:
-                value = attr.Get() if t is None else attr.Get(t)
-                h.update(repr(value).encode())
-    return h.hexdigest()[:12]
-
-
 def run_one(key: str, out_dir: Path) -> str:
     import numpy as np
 
+    from taichi_frac.io.cache import cache_digest
     from taichi_frac.scenes import load_scene
     from taichi_frac.simulation import Simulation
 
@@ -62,7 +45,7 @@ def run_one(key: str, out_dir: Path) -> str:
 
     sim = Simulation(load_scene(scene_name, overrides), output=out, progress=progress, overwrite=True)
     summary = sim.run()
-    return f"{key:16s} fragments {summary.fragments:3d} poses {h.hexdigest()[:12]} cache {cache_digest(out)}"
+    return f"{key:16s} fragments {summary.fragments:3d} poses {h.hexdigest()[:12]} cache {cache_digest(out)[:12]}"
 
 
 def main() -> None:

@@ -4,7 +4,6 @@ reusing the first one's World (scene_setup.py)."""
 
 from __future__ import annotations
 
-import hashlib
 import os
 import signal
 import subprocess
@@ -17,25 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from taichi_frac.io.cache import cache_digest
 from taichi_frac.scenes import load_scene
 from taichi_frac.simulation import Simulation
 
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
-
-
-def cache_digest(path: Path) -> str:
-    """Every attribute of every prim at every time sample: what the cache holds."""
-    from pxr import Usd
-
-    stage = Usd.Stage.Open(str(path))
-    digest = hashlib.sha256()
-    for prim in stage.Traverse():
-        digest.update(str(prim.GetPath()).encode())
-        for attr in prim.GetAttributes():
-            digest.update(attr.GetName().encode())
-            for t in attr.GetTimeSamples() or [None]:
-                digest.update(repr(attr.Get() if t is None else attr.Get(t)).encode())
-    return digest.hexdigest()
 
 
 def test_workers_write_the_cache_the_process_writes_alone(tmp_path):

@@ -565,6 +565,23 @@ def _box_projection(corners: np.ndarray, normals: np.ndarray) -> np.ndarray:
     return np.take_along_axis(corners, drop, axis=1)
 
 
+def cache_digest(path) -> str:
+    """A SHA-256 of what a cache holds: every prim's path, and each attribute's name and value
+    at every time sample, in the stage's order. Two runs that wrote the same fragments,
+    surfaces and poses give the same digest whatever the file's byte layout."""
+    import hashlib
+
+    stage = Usd.Stage.Open(str(path))
+    digest = hashlib.sha256()
+    for prim in stage.Traverse():
+        digest.update(str(prim.GetPath()).encode())
+        for attr in prim.GetAttributes():
+            digest.update(attr.GetName().encode())
+            for t in attr.GetTimeSamples() or [None]:
+                digest.update(repr(attr.Get() if t is None else attr.Get(t)).encode())
+    return digest.hexdigest()
+
+
 def check_cache(path) -> list[str]:
     """Run every validator USD registers (what ``usdchecker`` runs: UsdValidation, which
     replaced UsdUtils.ComplianceChecker) on a cache; returns their errors and warnings as text,

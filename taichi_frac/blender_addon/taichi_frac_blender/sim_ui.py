@@ -120,11 +120,4 @@ class VIEW3D_PT_taichi_frac_simulation(bpy.types.Panel):
 classes = (VIEW3D_PT_taichi_frac_simulation,)
 
 
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)

@@ -260,11 +260,4 @@ class TaichiFracPreferences(bpy.types.AddonPreferences):
 classes = (TaichiFracPreferences, TAICHI_FRAC_OT_simulate)
 
 
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)

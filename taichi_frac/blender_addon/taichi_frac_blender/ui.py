@@ -164,11 +164,4 @@ class VIEW3D_PT_taichi_frac(bpy.types.Panel):
 classes = (TAICHI_FRAC_OT_select_fragments, TAICHI_FRAC_OT_stress_view, VIEW3D_PT_taichi_frac)
 
 
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)
