@@ -45,6 +45,10 @@ def _run_meshes(args) -> int:
     from .meshes import run
 
     out = Path(args.out) if args.out else REPO / "out" / "bench"
+    if args.folder is not None:
+        import os
+
+        os.environ["TAICHI_FRAC_SHARED_MESHES"] = str(args.folder)  # read by meshes.shared_meshes_dir
     section = run(BenchContext(quick=args.quick, markdown_dir=out, figure_dir=out / "benchmarks", arch=args.arch))
     print(f"\n## {section.title}\n\n{section.markdown}")
     return 0
@@ -99,6 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
     m = targets.add_parser("meshes", help="artists' meshes: particles vs target, volume and extents kept, "
                                           "prepare time, a 1 s drop (writes docs/benchmarks/meshes.md)")
     m.add_argument("--quick", action="store_true", help="smaller stress cases, written under --out only")
+    m.add_argument("--folder", type=Path, help="the meshes to run: every surface file in it (default ../shared/meshes)")
     m.add_argument("--out", type=Path, help="folder for the quick report and generated inputs (default out/bench/)")
     m.add_argument("--arch", default="cpu")
     m.set_defaults(func=_run_meshes)

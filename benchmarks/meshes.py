@@ -300,12 +300,20 @@ def run(ctx: BenchContext) -> Section:
         _write(ctx, _markdown(rows, drops, timing, target, load_before))  # what is done so far survives
     scaling = _scaling(ctx.quick)
     ctx.progress("face-count scaling: " + ", ".join(f"{r['faces']:,} faces {r['seconds']:.1f} s" for r in scaling))
-    markdown = _markdown(rows, drops, timing, target, load_before, scaling)
+    markdown = _markdown(rows, drops, timing, target, load_before, scaling, sheet=not ctx.quick)
     _write(ctx, markdown)
     return Section(key="meshes", title=TITLE, markdown=markdown)
 
 
 TITLE = "Artists' meshes: resolution, every part kept, bounded time"
+
+
+#: The contact sheet of the folder's drops (rendered from this run's caches by
+#: scripts/render_mesh_drops.py --all), linked when it is there.
+CONTACT_SHEET_TEXT = ("The folder's drops, whole at frame 1 and in pieces at frame 8, each frame framed on its own "
+                      "pieces (`scripts/render_mesh_drops.py --all -o docs/benchmarks/meshes_drops.jpg` on this run's "
+                      "caches; Blender, 320x240, 6 samples a tile):\n\n"
+                      "![every mesh of the folder dropped, whole and broken](meshes_drops.jpg)")
 
 
 def _write(ctx: BenchContext, markdown: str) -> None:
@@ -345,7 +353,7 @@ def summary(rows, group: str) -> str:
             f"max {times.max():.1f} s")
 
 
-def _markdown(rows, drops, timing, target, load_before, scaling=()) -> str:
+def _markdown(rows, drops, timing, target, load_before, scaling=(), sheet: bool = False) -> str:
     m = machine_info()
     table_rows = []
     for r in rows:
@@ -393,6 +401,7 @@ def _markdown(rows, drops, timing, target, load_before, scaling=()) -> str:
         "input meshed as it is; `lattice`, the input's winding-number solid (a cube lattice moved onto its contour). "
         "*Verdict*: particles within 15 % of the target, kept >= 98 %, extents within 2 %, prepared in 30 s or "
         "less, a drop that breaks (2 or more fragments).",
+        CONTACT_SHEET_TEXT if sheet and (REPO / "docs" / "benchmarks" / "meshes_drops.jpg").exists() else "",
         ("Preparation time against the face count: the noisy sphere (a 0.3 m icosphere, radial noise 2e-4) at "
          "4x the faces a step, repair on, the same target, no tet cache (time per face flat or falling: linear "
          "or better):\n\n" + md_table(["faces", "prepare [s]", "us per face", "particles", "tets from"],

@@ -16,6 +16,7 @@ from PIL import Image, ImageDraw
 
 ROOT = Path(__file__).resolve().parents[1]
 MESHES = ("beetle", "cow", "fandisk", "rocker-arm", "spot", "stanford-bunny", "suzanne", "teapot")
+SHARED_MESHES = ROOT.parent / "shared" / "meshes"
 TILE = (320, 240)
 
 
@@ -34,15 +35,21 @@ def main() -> int:
     parser.add_argument("--broken-frame", type=int, default=8, help="the frame that shows the pieces")
     parser.add_argument("--samples", type=int, default=6)
     parser.add_argument("-o", "--output", type=Path, default=ROOT / "docs" / "gallery" / "meshes_drops.jpg")
+    parser.add_argument("--all", action="store_true",
+                        help="every mesh of ../shared/meshes (the benchmark's corpus), not the gallery's eight")
     args = parser.parse_args()
-    missing = [m for m in MESHES if not (args.caches / f"{m}.usdc").exists()]
+    meshes = (sorted(p.stem for p in SHARED_MESHES.iterdir() if p.suffix.lower() in (".obj", ".ply", ".stl", ".off",
+                                                                                       ".glb", ".gltf"))
+              if args.all else MESHES)
+    missing = [m for m in meshes if not (args.caches / f"{m}.usdc").exists()]
     if missing:
         print(f"no drop cache for {', '.join(missing)} under {args.caches}: run `taichi-frac bench meshes` first",
               file=sys.stderr)
         return 2
-    columns = 4  # two meshes a row, each whole then broken
-    sheet = Image.new("RGB", (columns * TILE[0], (len(MESHES) * 2 // columns) * TILE[1]), "white")
-    for i, name in enumerate(MESHES):
+    columns = 8 if args.all else 4  # four (two) meshes a row, each whole then broken
+    rows = -(-len(meshes) * 2 // columns)
+    sheet = Image.new("RGB", (columns * TILE[0], rows * TILE[1]), "white")
+    for i, name in enumerate(meshes):
         cache = args.caches / f"{name}.usdc"
         for j, frame in enumerate((1, args.broken_frame)):
             tile = render(cache, frame, args.caches.parent / "renders" / name / str(frame), args.samples)
