@@ -113,9 +113,9 @@ class Simulation:
             (a sweep's worker), so those that change no geometry reuse the model and its SPH
             neighbour lists. The model must not be changed by the caller between runs.
         surface_workers: worker processes that cut the pieces' render surfaces while the
-            frames go on (0: in this process, between frames); None: one per core but one,
-            at most one per breakable object (``surfaces.pool.default_worker_count``). The
-            cache is the same either way.
+            frames go on (0: in this process, between frames); None: as many as the cores
+            spare (``surfaces.pool.default_worker_count``: none on 2-3 cores). The cache is
+            the same either way.
 
     Attributes (for benches and tests): ``world``; ``records`` (body id -> BodyRecord, every
     body that lived); ``fracture_stage`` (``fracture.stage.FractureStage``, None without

@@ -27,12 +27,13 @@ class SurfaceWorkerError(RuntimeError):
 
 
 def default_worker_count(breakable_bodies: int) -> int:
-    """Workers for a run with ``breakable_bodies`` scene bodies that may break: one per core,
-    no more than there are such bodies; none when nothing breaks (the scene bodies' surfaces
-    are then all there is to make)."""
-    if breakable_bodies <= 0:
-        return 0
-    return max(1, min(os.cpu_count() or 1, breakable_bodies))
+    """Workers for a run with ``breakable_bodies`` scene bodies that may break: one for every
+    two cores past the first two, no more than there are such bodies. None on a machine of
+    two or three cores, nor when nothing breaks: there each worker's start (its imports) and
+    its share of the cores cost the frame loop more than the cuts it takes off it (the
+    13 rings on 2 cores ran slower with 1 or 2 workers than without, ``bench startup``)."""
+    spare = max(0, (os.cpu_count() or 1) - 2) // 2
+    return min(spare, max(0, breakable_bodies))
 
 
 def _done(value) -> Future:
