@@ -134,7 +134,7 @@ def _lattice_mesh(solid, count: int, clock: StepClock):
                                     f"vertices moved onto the contour: {len(tets):,} tets")
 
 
-def _clean_path(surface, count, kwargs, clock, mesh_surface):
+def _clean_path(surface, count, kwargs, clock, mesh_surface, check_count=True):
     """The clean (or repaired) ``surface`` meshed as it is, under :data:`CLEAN_TIME_SHARE` of
     the time left. Returns (InputSolid or None, why it handed over or None)."""
     share = _share_clock(clock, CLEAN_TIME_SHARE)
@@ -145,7 +145,7 @@ def _clean_path(surface, count, kwargs, clock, mesh_surface):
     except MeshError as exc:
         return None, f"the clean surface could not be meshed in its share of the time ({exc})"
     miss = tm.tet_count / count - 1.0
-    if abs(miss) > COUNT_TOLERANCE:
+    if check_count and abs(miss) > COUNT_TOLERANCE:
         return None, (f"meshing the clean surface gave {tm.tet_count:,} particles for {count:,} "
                       f"({miss:+.0%}: parts thinner than the particle spacing)")
     steps = list(surface.metadata.get("repair", [])) + ([step] if step else [])
@@ -167,11 +167,12 @@ def _repaired(raw, name, clock, steps):
 
 
 def solid_of_input(raw: trimesh.Trimesh, name: str, *, count: int, kwargs: dict, clock: StepClock,
-                   mesh_surface, thickness: float | None = None) -> InputSolid:
+                   mesh_surface, thickness: float | None = None, check_count: bool = True) -> InputSolid:
     """The solid and tets of the input surface ``raw`` [m] for ``count`` particles (see the
     module docstring). ``mesh_surface(surface, count, kwargs, clock)`` meshes a clean surface
     (prepare's simplified copy and TetGen: (tet surface, TetMesh, cache hit, step or None));
-    ``kwargs``: its mesher settings.
+    ``kwargs``: its mesher settings. ``check_count`` False (a volume bound was asked for, not a
+    count): the clean path's count is not held to ``count``.
 
     Raises MeshError when the input has no volume (naming ``thickness``) or no faces.
     """
@@ -187,7 +188,7 @@ def solid_of_input(raw: trimesh.Trimesh, name: str, *, count: int, kwargs: dict,
             steps.append(f"not a clean solid ({problem.split(';')[0]})")
             surface = _repaired(raw, name, clock, steps)
         if surface is not None:
-            result, why = _clean_path(surface, count, kwargs, clock, mesh_surface)
+            result, why = _clean_path(surface, count, kwargs, clock, mesh_surface, check_count)
             if result is not None:
                 result.steps[:0] = steps
                 result.kept_fraction, result.input_volume = kept_share(

@@ -395,7 +395,8 @@ def prepare_body(
 
             count = target if target is not None else max(int(_volume_of(surface) / max_volume), 1)
             solid = solid_of_input(surface, name, count=count, kwargs=kwargs, clock=clock, thickness=thickness,
-                                   mesh_surface=functools.partial(_mesh_surface, simplify=simplify))
+                                   mesh_surface=functools.partial(_mesh_surface, simplify=simplify),
+                                   check_count=target is not None)
             surface, tet_surface, tm, cache_hit = solid.surface, solid.tet_surface, solid.tets, solid.cache_hit
             repair_steps = list(solid.steps)
         elif simplify and not is_primitive:
