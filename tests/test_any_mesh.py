@@ -203,3 +203,39 @@ def test_scene_object_takes_thickness_and_up_axis(tmp_path):
         scene_file.write_text(f'[[objects]]\nname = "pane"\nmesh = "pane.obj"\n{bad}\n')
         with pytest.raises(OptionError, match=match):
             load_scene(str(scene_file))
+
+
+def test_winding_solid_lattice_of_overlapping_spheres_is_their_union():
+    """The winding-number path on its own (repair would unite these shells exactly): the
+    contour and its lattice tets against the union's closed form."""
+    from taichi_frac.geometry.lattice_tets import lattice_tets
+    from taichi_frac.geometry.topology import boundary_faces, signed_volumes
+    from taichi_frac.geometry.winding_solid import winding_solid
+
+    radius, distance = 0.05, 0.06
+    a = trimesh.creation.icosphere(subdivisions=4, radius=radius)
+    b = a.copy()
+    b.apply_translation((distance, 0, 0))
+    pair = trimesh.util.concatenate([a, b])
+    lens = math.pi * (4 * radius + distance) * (2 * radius - distance) ** 2 / 12
+    union = 2 * 4 / 3 * math.pi * radius**3 - lens
+    solid = winding_solid(pair, TARGET)
+    assert solid.surface.is_watertight and _in_band(solid.volume, union, 0.01), (solid.volume, union)
+    vertices, tets, _ = lattice_tets(solid.values, solid.origin, solid.cell, solid.surface, TARGET)
+    assert _in_band(len(tets), TARGET, 0.15)
+    assert np.all(signed_volumes(vertices, tets) > 0)
+    assert _in_band(float(signed_volumes(vertices, tets).sum()), union, 0.02)
+    extents = np.ptp(vertices, axis=0) / np.array([2 * radius + distance, 2 * radius, 2 * radius])
+    assert np.all(np.abs(extents - 1) <= 0.03), extents
+    kept, volume = kept_share(pair, vertices, boundary_faces(tets)[0])
+    assert kept >= 0.95 and _in_band(volume, union, 0.03)
+
+
+def test_a_crashing_native_step_is_an_error_not_the_end_of_the_process():
+    from taichi_frac.geometry.bounded import StepClock
+
+    def crash():
+        os.kill(os.getpid(), signal.SIGSEGV)
+
+    with pytest.raises(MeshError, match="crashed"):
+        StepClock(seconds=None).run("a native call", crash)
