@@ -323,6 +323,11 @@ def prepare_body(
         scale, units: size of the source's coordinates (metres = value x scale x unit).
         material: a Material or a preset name (density is what matters here).
         particles: target count, boundary group size, leftovers, quality bound.
+        repair: a mesh that is not a clean solid (open, a soup, overlapping or crossing
+            shells, non-manifold, degenerate) becomes one: repaired into a closed solid of
+            its own triangles where that works, else the solid of its generalized winding
+            number (``input_solid``; the steps are in ``PrepareReport.repair_steps``).
+            False: such a mesh is an error saying what is wrong.
         max_volume: mesh with this tet volume bound [m^3] instead of a target count.
         backend: tet mesher ("tetgen" or "wildmeshing").
         use_cache: read and write the on-disk tet cache.
