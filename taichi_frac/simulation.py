@@ -387,6 +387,12 @@ class Simulation:
         self.times.render_surfaces = sum(seconds for seconds, _ in self.render_cuts)
         return self._summary(done, frame_ms, time.perf_counter() - start, interrupted)
 
+    def _first_analysis(self) -> float:
+        """[s] the run's first impact analysis (0 without one): in a new process, mostly the
+        fracture kernels' first launch."""
+        stage = self.fracture_stage
+        return 0.0 if stage is None or stage.first_analysis_seconds is None else stage.first_analysis_seconds
+
     def _release(self) -> None:
         """The output's lock, and the World for the next run in this process."""
         from .scene_setup import release_world
@@ -414,7 +420,8 @@ class Simulation:
             fractures=self.fracture_events,
             wall_time=wall,
             stage_seconds=self.times.as_dict() | {"prepare": round(self.prepare_seconds, 6),
-                                                  "setup": round(self.setup_seconds, 6)},
+                                                  "setup": round(self.setup_seconds, 6),
+                                                  "first_analysis": round(self._first_analysis(), 6)},
             dynamics_stage_seconds={k: round(v, 6) for k, v in dynamics_seconds.items()},
             # first: in a new process, the frame that launches the dynamics kernels for the
             # first time (Taichi's front end runs then, even with the offline cache warm);

@@ -370,3 +370,26 @@ def test_rough_stretches_share_one_surface_and_move_their_pieces_volume(box):
         assert piece.solid.volume() - before.solid.volume() == pytest.approx(expected, abs=2.0 * spacing * SIZE[1]
                                                                               * 0.5 * spacing), k
     assert sum(p.solid.volume() for p in shifted) == pytest.approx(np.prod(SIZE), rel=1e-4)
+
+
+def test_a_whole_plane_fit_that_fails_a_piece_no_move_can_free_stops_cleanly():
+    """The whole-plane fit (no ``near``): a cut that fails a piece whose cracks no move row
+    names freezes nothing more and gives the kept cut back, rather than failing on the
+    empty set of jumped pieces."""
+    from taichi_frac.surfaces.cut import _fit_rounds, _Kept
+
+    kept = _Kept([None], [None], {"fallback_ids": np.zeros(0, dtype=np.int64)}, np.zeros(0), 1.0)
+    tried = []
+
+    def cut(moves):
+        tried.append(moves.copy())
+        return [None], {"fallback_ids": np.array([0])}, None, np.zeros(0)
+
+    def freeze(pieces):
+        assert isinstance(pieces, np.ndarray), pieces  # (the cut's freeze reads pieces.tolist())
+        return np.zeros(1, dtype=bool)
+
+    result, moves, cuts = _fit_rounds(
+        2, kept, np.zeros((1, 3)), np.ones(1), [np.arange(200)], 100,
+        fit=lambda solids, sources, moves, frozen: (np.ones((1, 3)), 0.0), cut=cut, freeze=freeze, near=None)
+    assert result is kept and np.all(moves == 0.0) and cuts == len(tried) >= 1

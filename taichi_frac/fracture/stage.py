@@ -144,6 +144,7 @@ class FractureStage:
         self.skip_repeats = bool(skip_repeats)
         self.times = times
         self.fracture_events = 0
+        self.first_analysis_seconds = None  # [s] the first impact analysis of the run
         self.mass_dropped = 0.0
         self.peaks = PeakTracker()
         # (body, other) -> largest force [N] analysed in this frame without a crack.
@@ -222,6 +223,8 @@ class FractureStage:
         force_b = impacts["force_body"][rows]
         analysis = analyze_impact(rec.model, points_b, normals_b, force_b, rec.material, rec.fracture,
                                   full_field=False)
+        if self.first_analysis_seconds is None:  # (in a new process: its kernels' first launch)
+            self.first_analysis_seconds = time.perf_counter() - t
         times.fracture_analysis += time.perf_counter() - t
         self.peaks.analysed(rec, analysis, impacts, rows, frame,
                             lambda: self.world.body_state([body])["orientation"][0])

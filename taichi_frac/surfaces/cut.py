@@ -279,7 +279,8 @@ def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, mi
             if not len(newly) and misfit < kept.misfit:
                 kept, moves = _Kept(pieces, solids, stats, sources, misfit), tried
                 break
-            jumped = jumped_pieces(kept.solids, solids, targets, fragment_tets, min_tets) if near else []
+            jumped = (jumped_pieces(kept.solids, solids, targets, fragment_tets, min_tets) if near
+                      else np.zeros(0, dtype=np.int64))
             if len(newly) or len(jumped):
                 rows = freeze(newly)
                 # (failed pieces whose own moves are frozen already: a neighbour's move opened the gap)
