@@ -73,7 +73,7 @@ def _tetgen(vertices, faces, max_volume, min_dihedral_deg, minratio=1.5, optimis
     # The optimisation settings (flips + smoothing, dihedral target 165 deg) halve the
     # slivers left by plain quality refinement at no measurable cost on primitives (tori).
     # On a surface whose short features force tiny tets under a 10 degree bound they cost
-    # 10x (22 s instead of 2 s for 38,000 tets): ``optimise=False`` keeps TetGen's defaults.
+    # an order of magnitude more: ``optimise=False`` keeps TetGen's defaults.
     kwargs = dict(quality=True, minratio=minratio, mindihedral=min_dihedral_deg, verbose=0)
     if optimise:
         kwargs.update(opt_scheme=7, opt_max_flip_level=5, opt_iterations=20, optmaxdihedral=165.0)
@@ -138,7 +138,7 @@ def _wildmeshing_here(vertices, faces, max_volume, min_dihedral_deg):
 BACKENDS = {"tetgen": _tetgen, "wildmeshing": _wildmeshing}
 
 #: Tets per (volume / max_volume) that tetgen's quality refinement produces on typical
-#: closed meshes; measured 2.0-2.1 on tori, boxes and spheres (benchmarks/bench_prepare.py).
+#: closed meshes (tori, boxes, spheres: benchmarks/bench_prepare.py measures it).
 _TETGEN_OVERSHOOT = 2.0
 
 
@@ -228,8 +228,8 @@ def tetrahedralize(
         if quality is not None:
             v, t = _tetgen(vertices, faces, bound, quality[1], minratio=quality[0], optimise=False)
         elif relaxed_tetgen:
-            # Copies of artists' surfaces: the extra optimisation can grind for minutes there
-            # (the beetle's copy: over 20 s a run where TetGen's defaults take 0.6-4 s).
+            # Copies of artists' surfaces: the extra optimisation can grind for minutes there,
+            # where TetGen's defaults take seconds.
             v, t = _tetgen(vertices, faces, bound, min_dihedral_deg, optimise=False)
         else:
             v, t = run(vertices, faces, bound, min_dihedral_deg)

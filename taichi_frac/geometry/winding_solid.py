@@ -42,7 +42,7 @@ from .validate import MeshError
 
 #: Grid cell over the particle spacing (V / target)^(1/3) of the target.
 CELL_PER_SPACING = 0.5
-#: Largest number of grid points sampled (the cost bound: about 2-4 s of winding numbers).
+#: Largest number of grid points sampled: the bound on the winding numbers' cost.
 MAX_GRID_POINTS = 2_500_000
 #: Points along the longest side of the first, coarse grid that estimates the volume.
 COARSE_POINTS = 40
