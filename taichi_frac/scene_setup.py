@@ -118,11 +118,13 @@ def world_capacity(scene, prepared: list[PreparedObject], *, single_scale: bool 
                         for p in prepared)
     breakable = [p.model for p in prepared if p.breakable]
     extra = sum(4 * m.boundary_particle_count + m.surface_particle_count for m in breakable)
-    # Each size rounded up to a power of two: the compiled kernels depend on the fields'
-    # sizes, so scenes of like size share one set in Taichi's offline cache (and a World).
-    particles = _power_of_two(max(1024, particles_now + extra))
+    # Each size rounded up to a power of two, from a floor that holds scenes of up to a few
+    # dozen breakable bodies: the compiled kernels depend on the fields' sizes, so scenes of
+    # like size share one set in Taichi's offline cache (and a World) instead of compiling
+    # anew. The floor costs about 120 MB of fields; the frames cost the same.
+    particles = _power_of_two(max(65536, particles_now + extra))
     return WorldCapacity(
-        max_bodies=_power_of_two(max(64, len(prepared) + 256 * len(breakable))),
+        max_bodies=_power_of_two(max(4096, len(prepared) + 256 * len(breakable))),
         max_boundary_particles=particles,
         # 4 per particle of that room: the shipped scenes peak far below it, and each
         # contact slot costs memory on every particle of the largest scenes.
