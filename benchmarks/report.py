@@ -28,7 +28,7 @@ PARTS = {
 #: Parts that write their own page under ``docs/benchmarks/`` (``taichi-frac bench
 #: <part> --out docs``), which the report links to rather than repeats: two copies of one
 #: measurement made at different commits would disagree.
-OWN_PAGE = ("pieces",)
+OWN_PAGE = ("pieces", "startup")
 
 #: The parts ``taichi-frac bench report`` runs by default.
 REPORT_PARTS = tuple(k for k in PARTS if k not in OWN_PAGE)

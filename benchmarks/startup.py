@@ -6,7 +6,8 @@ rows); the stats give where the time went inside. ``imports + exit`` is what the
 spent outside the run's own clocks (the interpreter, the imports, writing the stats).
 Beside them: the same process running the 13 rings twice (the second run's time), the time
 to the first progress line, and pybullet's whole run of the 13 rings (import, V-HACD of
-each ring with an empty cache, 3 s simulated) in a fresh process.
+each ring with an empty cache, 3 s simulated) in a fresh process. Writes
+``benchmarks/startup.md`` under the markdown folder (``taichi-frac bench startup --out docs``).
 """
 
 from __future__ import annotations
@@ -151,4 +152,9 @@ def run(ctx: BenchContext, repeat: int | None = None) -> Section:
         "",
         f"Part time: {time.perf_counter() - t0:.0f} s.",
     ]
-    return Section("startup", "Start to exit: a run as a user runs it", "\n".join(lines), headline=headline)
+    markdown = "\n".join(lines)
+    path = ctx.markdown_dir / "benchmarks" / "startup.md"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("# Start to exit: a run as a user runs it\n\n" + markdown + "\n")
+    ctx.progress(f"wrote {path}")
+    return Section("startup", "Start to exit: a run as a user runs it", markdown, headline=headline)

@@ -118,19 +118,28 @@ def world_capacity(scene, prepared: list[PreparedObject], *, single_scale: bool 
                         for p in prepared)
     breakable = [p.model for p in prepared if p.breakable]
     extra = sum(4 * m.boundary_particle_count + m.surface_particle_count for m in breakable)
-    # Each size rounded up to a power of two, from a floor that holds scenes of up to a few
-    # dozen breakable bodies: the compiled kernels depend on the fields' sizes, so scenes of
-    # like size share one set in Taichi's offline cache (and a World) instead of compiling
-    # anew. The floor costs about 120 MB of fields; the frames cost the same.
-    particles = _power_of_two(max(65536, particles_now + extra))
     return WorldCapacity(
-        max_bodies=_power_of_two(max(4096, len(prepared) + 256 * len(breakable))),
-        max_boundary_particles=particles,
+        max_bodies=max(64, len(prepared) + 256 * len(breakable)),
+        max_boundary_particles=max(1024, particles_now + extra),
         # 4 per particle of that room: the shipped scenes peak far below it, and each
         # contact slot costs memory on every particle of the largest scenes.
-        max_contacts=max(65536, 4 * particles),
-        max_static_boxes=_power_of_two(max(4, sum(c.type == "box" for c in scene.colliders))),
+        max_contacts=max(65536, 4 * (particles_now + extra)),
+        max_static_boxes=max(4, sum(c.type == "box" for c in scene.colliders)),
     )
+
+
+def allocated_capacity(need):
+    """The capacity a new World is built with for a scene that needs ``need``: each size
+    rounded up to a power of two, from a floor that holds scenes of up to a few dozen
+    breakable bodies. The compiled kernels depend on the fields' sizes, so scenes of like
+    size share one set in Taichi's offline cache (and a World) instead of compiling anew;
+    the floor costs about 120 MB of fields, and the frames cost the same."""
+    from .dynamics import WorldCapacity
+
+    particles = _power_of_two(max(65536, need.max_boundary_particles))
+    return WorldCapacity(max_bodies=_power_of_two(max(4096, need.max_bodies)), max_boundary_particles=particles,
+                         max_contacts=max(need.max_contacts, 4 * particles),
+                         max_static_boxes=_power_of_two(max(4, need.max_static_boxes)))
 
 
 def _power_of_two(n: int) -> int:
@@ -158,7 +167,8 @@ _CAPACITY_FIELDS = ("max_bodies", "max_boundary_particles", "max_contacts", "max
 
 
 def furnish_world(scene, capacity, options, *, arch: str | None = None, world=None):
-    """A World with ``capacity`` and ``options`` holding the scene's ground and static boxes
+    """A World with room for ``capacity`` (what the scene needs: a new one is built with
+    :func:`allocated_capacity`) and ``options``, holding the scene's ground and static boxes
     (no bodies yet). ``world``: one to reuse (its kernels are compiled already), cleared
     first; ValueError naming the field when it has less room than ``capacity``. Without one,
     the World of this process's last ended run is reused when it has the room (call
@@ -174,7 +184,7 @@ def furnish_world(scene, capacity, options, *, arch: str | None = None, world=No
         world = _SHARED["world"]
         _SHARED["busy"] = True
     else:
-        world = World(capacity, options, arch=arch or scene.simulation.arch)
+        world = World(allocated_capacity(capacity), options, arch=arch or scene.simulation.arch)
         _SHARED.update(world=world, busy=True)
         options = None  # (built with them, and empty)
     if options is not None:

@@ -132,7 +132,7 @@ def test_a_second_run_in_the_process_takes_the_first_runs_world(tmp_path):
 
 
 def test_world_sizes_are_rounded_up_to_powers_of_two():
-    from taichi_frac.scene_setup import _power_of_two, world_capacity
+    from taichi_frac.scene_setup import _power_of_two, allocated_capacity, world_capacity
 
     assert [_power_of_two(n) for n in (1, 2, 3, 64, 65, 1000, 1024, 1025)] == [1, 2, 4, 64, 128, 1024, 1024, 2048]
     # The single ring and the 13 rings get one World size (their kernels compiled once).
@@ -141,7 +141,7 @@ def test_world_sizes_are_rounded_up_to_powers_of_two():
     sizes = []
     for name in ("single_ring", "thirteen_rings"):
         scene = load_scene(SCENES / f"{name}.toml")
-        sizes.append(world_capacity(scene, prepare_objects(scene)[0]))
+        sizes.append(allocated_capacity(world_capacity(scene, prepare_objects(scene)[0])))
     assert sizes[0] == sizes[1] and sizes[0].max_boundary_particles == 65536
 
 
