@@ -56,7 +56,9 @@ class StageTimes:
 
 @dataclass
 class RunSummary:
-    """The paper's Table 1 columns and what a run cost."""
+    """The paper's Table 1 columns and what a run cost. ``events``: one dict per split
+    (``fracture.stage.impact_event``: frame, body, speed [m/s], energy [J], force [N],
+    cracks, ring_cracks, pieces)."""
 
     scene: str
     frames: int
@@ -77,6 +79,7 @@ class RunSummary:
     mass_dropped: float = 0.0
     resimulated_substeps: int = 0
     surface_workers: int = 0
+    events: list = field(default_factory=list)
 
     def to_json(self) -> str:
         return json.dumps(self.__dict__, indent=2, default=float)
@@ -140,6 +143,7 @@ class Simulation:
         self.times = StageTimes()
         self.records: dict[int, BodyRecord] = {}
         self.resimulated_substeps = 0
+        self.events: list[dict] = []  # one per split (fracture.stage.impact_event)
         self.prepare_reports = []
         self.fracture_stage: FractureStage | None = None  # (fracture enabled)
         self.recorder = None  # io.recorder.CacheRecorder (a cache is written)
@@ -308,7 +312,9 @@ class Simulation:
         return seconds
 
     def _record(self, fractures) -> None:
-        """Cut the splits' piece surfaces and hand them to the recorder (timed with the splits)."""
+        """List the splits' events; cut their piece surfaces and hand them to the recorder
+        (timed with the splits)."""
+        self.events += [f.event for f in fractures]
         if self.recorder is None or not fractures:
             return
         t = time.perf_counter()
@@ -436,4 +442,5 @@ class Simulation:
             mass_dropped=self.mass_dropped,
             resimulated_substeps=self.resimulated_substeps,
             surface_workers=getattr(self.surfaces, "count", 0),
+            events=list(self.events),
         )

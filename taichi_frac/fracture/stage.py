@@ -57,6 +57,7 @@ class Fracture:
         split: the cut (``fragments.split_body``).
         pieces: the pieces as placed in the World (lifted out of the ground).
         children: (len(pieces),) their body ids; children_records: their records.
+        event: the split as the run's record lists it (:func:`impact_event`).
     """
 
     frame: int
@@ -67,6 +68,7 @@ class Fracture:
     pieces: list[Fragment]
     children: list[int]
     children_records: list[BodyRecord]
+    event: dict = dataclasses.field(default_factory=dict)
 
     @property
     def born(self) -> list[int]:
@@ -171,6 +173,7 @@ class FractureStage:
         if len(impacts["body"]) == 0:
             return []
         fractures = []
+        masses = {b: r.model.mass for b, r in self.records.items() if b in live}  # (before any slot is reused)
         for body, rows in strongest_per_pair(impacts, breakable).items():
             self.peaks.touched(self.records[body], impacts, rows)
             rows = self._rows_to_analyse(body, rows, impacts)
@@ -180,7 +183,9 @@ class FractureStage:
             if found is None:
                 continue
             analysis, split = found
-            fractures.append(self._replace(frame, body, analysis, split, start))
+            fracture = self._replace(frame, body, analysis, split, start)
+            fracture.event.update(impact_event(masses, rows, impacts, fracture))
+            fractures.append(fracture)
         return fractures
 
     def _rows_to_analyse(self, body: int, rows: np.ndarray, impacts: dict) -> np.ndarray | None:
@@ -285,3 +290,26 @@ class FractureStage:
         self.times.fragment_split += time.perf_counter() - t
         return Fracture(frame=frame, parent=body, parent_record=rec, analysis=analysis, split=split,
                         pieces=pieces, children=list(children), children_records=children_records)
+
+
+def impact_event(masses: dict, rows: np.ndarray, impacts: dict, fracture: Fracture) -> dict:
+    """One fracture event as the run's record lists it: the frame, the body's name, its
+    strongest touch's approach speed [m/s] and force [N], the kinetic energy of the touches'
+    approach [J] (1/2 m v^2 of each pair's reduced mass, the body's own against the ground or
+    a static box), the radial and ring cracks and the pieces. ``masses``: body id -> [kg] of
+    the bodies alive when the impacts were recorded."""
+    from .crack_types import RingCrack
+
+    mass = fracture.parent_record.model.mass
+    speeds = np.asarray(impacts["speed"][rows], dtype=np.float64)
+    forces = np.linalg.norm(np.asarray(impacts["force"][rows], dtype=np.float64), axis=1)
+    energy = 0.0
+    for other, speed in zip(impacts["other"][rows], speeds):
+        other_mass = masses.get(int(other), np.inf)  # (ground, static boxes: no body)
+        reduced = mass if not np.isfinite(other_mass) else mass * other_mass / (mass + other_mass)
+        energy += 0.5 * reduced * speed**2
+    strongest = int(np.argmax(forces))
+    rings = sum(isinstance(c, RingCrack) for c in fracture.analysis.cracks)
+    return dict(frame=int(fracture.frame), body=fracture.parent_record.name, speed=float(speeds[strongest]),
+                energy=float(energy), force=float(forces[strongest]),
+                cracks=len(fracture.analysis.cracks) - rings, ring_cracks=int(rings), pieces=len(fracture.pieces))
