@@ -494,9 +494,26 @@ def _assemble(vertices, tets, vol, neighbor, tet_start, vertex_start, density, p
                                                     renumber[owner[sub]], b_pos[which], b_radius[which],
                                                     group_piece=group_piece[which], face_piece=face_piece)
 
+    batch = dict(vertices=vertices, tets=tets, vol=vol, neighbor=neighbor, centroids=centroids, mass=mass,
+                 radius=radius, is_surface=is_surface, surface=surface, faces=faces, face_tet=face_tet,
+                 face_local=face_local, face_piece=face_piece, b_pos=b_pos, b_mass=b_mass, b_radius=b_radius,
+                 offsets=offsets, members=members, group_piece=group_piece, dropped=dropped, contact_pos=contact_pos,
+                 com=com, props=props, source_tet=source_tet)
+    return _piece_models(batch, tet_start, vertex_start, piece_of_tet, piece_n, density=density, spacing=spacing,
+                         root=root, coarse_group_size=coarse_group_size)
+
+
+def _piece_models(batch: dict, tet_start, vertex_start, piece_of_tet, piece_n, *, density, spacing, root,
+                  coarse_group_size) -> list[BodyModel]:
+    """Each piece's BodyModel cut out of ``_assemble``'s batch arrays (``batch``: its rows,
+    piece-major), indices renumbered to the piece's own rows."""
+    vertices, tets, neighbor, surface = batch["vertices"], batch["tets"], batch["neighbor"], batch["surface"]
+    faces, face_tet, members, offsets = batch["faces"], batch["face_tet"], batch["members"], batch["offsets"]
+    dropped, props, com = batch["dropped"], batch["props"], batch["com"]
+    piece_count = len(tet_start) - 1
     bonds = bonds_from_neighbors(neighbor)  # rows of the batch, piece-major
-    face_start = _starts(face_piece, piece_count)
-    group_start = _starts(group_piece, piece_count)
+    face_start = _starts(batch["face_piece"], piece_count)
+    group_start = _starts(batch["group_piece"], piece_count)
     surface_start = np.searchsorted(surface, tet_start)
     bond_start = np.searchsorted(bonds[:, 0], tet_start)
     dropped_start = _starts(piece_of_tet[dropped], piece_count)
@@ -510,20 +527,20 @@ def _assemble(vertices, tets, vol, neighbor, tet_start, vertex_start, density, p
         models.append(BodyModel(
             vertices=vertices[v0:v1],
             tets=(tets[t0:t1] - v0).astype(np.int32),
-            tet_volume=vol[t0:t1],
+            tet_volume=batch["vol"][t0:t1],
             tet_neighbor=np.where(own_neighbor >= 0, own_neighbor - t0, -1).astype(np.int32),
             bonds=(bonds[bond_start[k]:bond_start[k + 1]] - t0).astype(np.int32),
-            particle_position=centroids[t0:t1],
-            particle_mass=mass[t0:t1],
-            particle_radius=radius[t0:t1],
-            is_surface=is_surface[t0:t1],
+            particle_position=batch["centroids"][t0:t1],
+            particle_mass=batch["mass"][t0:t1],
+            particle_radius=batch["radius"][t0:t1],
+            is_surface=batch["is_surface"][t0:t1],
             surface_particles=(surface[surface_start[k]:surface_start[k + 1]] - t0).astype(np.int32),
             surface_faces=(faces[f0:f1] - v0).astype(np.int32),
             surface_face_tet=(face_tet[f0:f1] - t0).astype(np.int32),
-            surface_face_local=face_local[f0:f1],
-            boundary_position=b_pos[g0:g1],
-            boundary_mass=b_mass[g0:g1],
-            boundary_radius=b_radius[g0:g1],
+            surface_face_local=batch["face_local"][f0:f1],
+            boundary_position=batch["b_pos"][g0:g1],
+            boundary_mass=batch["b_mass"][g0:g1],
+            boundary_radius=batch["b_radius"][g0:g1],
             boundary_member_offsets=(offsets[g0:g1 + 1] - offsets[g0]).astype(np.int32),
             boundary_members=(members[offsets[g0]:offsets[g1]] - t0).astype(np.int32),
             dropped_surface_particles=(dropped[dropped_start[k]:dropped_start[k + 1]] - t0).astype(np.int32),
@@ -531,10 +548,10 @@ def _assemble(vertices, tets, vol, neighbor, tet_start, vertex_start, density, p
             mass=props[k].mass,
             inertia=props[k].inertia,
             com_in_source=com[k],
-            source_tet=np.asarray(source_tet[t0:t1]).astype(np.int32),
+            source_tet=np.asarray(batch["source_tet"][t0:t1]).astype(np.int32),
             boundary_group_size=int(piece_n[k]),
             coarse_group_size=int(coarse_group_size),
-            boundary_contact_position=contact_pos[g0:g1],
+            boundary_contact_position=batch["contact_pos"][g0:g1],
             particle_spacing=float(spacing),
             root=root,
         ))
