@@ -160,3 +160,11 @@ def test_taichi_error_messages_still_name_the_file_and_line():
         broken()
     message = str(caught.value)
     assert os.path.basename(__file__) in message and "undefined_name" in message, message
+
+
+def test_a_bad_worker_count_is_one_clear_error(capsys):
+    from taichi_frac.cli import main
+
+    assert main(["run", "single_ring", "--no-output", "--surface-workers", "-1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--surface-workers -1" in err[0] and "0" in err[0], err
