@@ -404,7 +404,10 @@ class Simulation:
         from .scene_setup import release_world
 
         if self.surfaces is not None:
-            self.surfaces.close(cancel=self.recorder is None or self.recorder.writer is None)
+            # Workers whose results can no longer be written are killed; the others end with
+            # their input.
+            recorder = self.recorder
+            self.surfaces.close(cancel=recorder is None or recorder.writer is None or recorder.pending)
         if self._lock is not None:
             self._lock.release()
         if self.world is not None:

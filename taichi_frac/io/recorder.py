@@ -71,6 +71,12 @@ class CacheRecorder:
         self._log.append((surfaces, self._pieces, fracture))
         self._flush()
 
+    @property
+    def pending(self) -> bool:
+        """Whether entries wait for surfaces still being made (after :meth:`close`: ones it
+        gave up on, at a second Ctrl-C)."""
+        return bool(self._log)
+
     def close(self, complete: bool) -> None:
         """Write the file, once every surface asked for is done; ``complete``: every requested
         frame was written. A Ctrl-C while it waits writes what is done so far, marked
