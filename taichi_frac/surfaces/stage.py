@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import time
-import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,10 +21,13 @@ from . import cut as _cut
 from .mesh import fragment_surface, render_surface, root_faces_of, surface_corner_attributes
 from .solid import render_solid_from_surface, render_solid_from_tets
 
-# The shading attributes of a prepared model's boundary faces, kept while the model lives: a
-# process that runs many variants of one scene reuses its models (a sweep's worker), and
-# finding them (closest points on the source surface) is most of such a run's set-up.
-_CORNER_ATTRIBUTES: "weakref.WeakKeyDictionary[BodyModel, tuple]" = weakref.WeakKeyDictionary()
+#: Scene bodies' surfaces made in this process, by what they are made from (``_content_key``):
+#: (shading, render solid, BodySurface), all read-only. The copies of one object in a scene,
+#: and the next run of it in this process (a sweep's variants), take the surface made once:
+#: finding the corner shading (closest points on the source surface) and the render solid
+#: are most of a body's set-up. The oldest go first past this many.
+ROOT_SURFACES_KEPT = 64
+_ROOT_SURFACES: dict[str, tuple] = {}
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,17 +105,6 @@ class CutRequest:
                    parent_tets=[p.parent_tets for p in fracture.pieces])
 
 
-def root_corner_attributes(model: BodyModel, surface) -> tuple:
-    """(normals (Fr,3,3), uvs (Fr,3,2) or None) of ``model``'s boundary faces from its source
-    surface (a trimesh.Trimesh in the model's source frame)."""
-    if model not in _CORNER_ATTRIBUTES:
-        from ..geometry.surface_attributes import boundary_corner_attributes
-
-        corners = model.vertices[model.surface_faces] + model.com_in_source
-        _CORNER_ATTRIBUTES[model] = boundary_corner_attributes(surface, corners)
-    return _CORNER_ATTRIBUTES[model]
-
-
 def _content_key(model: BodyModel, surface) -> str:
     """A digest of what a scene body's surface is made from: its model's boundary and frame,
     and its source surface (None: its tets)."""
@@ -145,25 +136,27 @@ class SurfaceStage:
         self._render: dict[int, object] = {}
         self._shading: dict[int, tuple] = {}
         self._tet_peak: dict[int, np.ndarray] = {}
-        self._roots: dict[str, tuple] = {}  # content key -> (shading, render solid, BodySurface)
         self.cuts: list[tuple[float, dict]] = []
 
     def add_body(self, body: int, model: BodyModel, surface) -> BodySurface:
         """A scene object's surface: ``surface`` is its source surface (a trimesh.Trimesh in
         the model's source frame, ``PrepareReport.surface``), or None for an object given as
         tets, which shows its tets' boundary."""
-        # Bodies of one mesh and one model (a scene's copies of one object) share their
-        # surface: it is made once.
         key = _content_key(model, surface)
-        if key not in self._roots:
+        if key not in _ROOT_SURFACES:
             if surface is None:
                 self._shading[body] = (None, None)
                 self._render[body] = render_solid_from_tets(model)
             else:
-                self._shading[body] = root_corner_attributes(model, surface)
+                from ..geometry.surface_attributes import boundary_corner_attributes
+
+                corners = model.vertices[model.surface_faces] + model.com_in_source
+                self._shading[body] = boundary_corner_attributes(surface, corners)
                 self._render[body] = render_solid_from_surface(surface, model.com_in_source, model.spacing)
-            self._roots[key] = (self._shading[body], self._render[body], self._surface(body, model, model))
-        self._shading[body], self._render[body], made = self._roots[key]
+            while len(_ROOT_SURFACES) >= ROOT_SURFACES_KEPT:
+                del _ROOT_SURFACES[next(iter(_ROOT_SURFACES))]
+            _ROOT_SURFACES[key] = (self._shading[body], self._render[body], self._surface(body, model, model))
+        self._shading[body], self._render[body], made = _ROOT_SURFACES[key]
         return made
 
     def render_of(self, body: int):
