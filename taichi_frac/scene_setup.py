@@ -66,7 +66,7 @@ def _prepare_key(obj, surface_contact: bool) -> str:
         except OSError:
             stamp = str(obj.mesh)  # (prepare says what is wrong with it)
     return repr((obj.source, stamp, obj.scale, obj.units, obj.material, obj.particles, obj.repair, surface_contact,
-                 getattr(obj, "thickness", None), getattr(obj, "up_axis", None)))
+                 obj.thickness, obj.up_axis))
 
 
 def prepare_objects(scene, *, fracture: bool = True, prepare=None) -> tuple[list[PreparedObject], float]:
@@ -175,6 +175,7 @@ def furnish_world(scene, capacity, options, *, arch: str | None = None, world=No
     :func:`release_world` when the run ends), else a new one is built."""
     from .dynamics import World
 
+    built = False
     if world is not None:
         for name in ("max_bodies", "max_boundary_particles", "max_static_boxes"):
             if getattr(world.capacity, name) < getattr(capacity, name):
@@ -186,8 +187,8 @@ def furnish_world(scene, capacity, options, *, arch: str | None = None, world=No
     else:
         world = World(allocated_capacity(capacity), options, arch=arch or scene.simulation.arch)
         _SHARED.update(world=world, busy=True)
-        options = None  # (built with them, and empty)
-    if options is not None:
+        built = True
+    if not built:  # (a new World is empty and has the options already)
         world.clear()
         world.set_options(options)
     for c in scene.colliders:

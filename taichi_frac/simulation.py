@@ -112,9 +112,9 @@ class Simulation:
 
     The output path is checked and locked (``io.output``) before any object is meshed.
         prepare: callable(SceneObject, *, surface_contact) -> (BodyModel, PrepareReport)
-            used instead of ``obj.prepare()``: a memo kept by a process that runs many variants of one scene
-            (a sweep's worker), so those that change no geometry reuse the model and its SPH
-            neighbour lists. The model must not be changed by the caller between runs.
+            used instead of ``scene_setup.prepare_object`` (this process's memo of prepared
+            models, so runs that change no geometry reuse the model and its SPH neighbour
+            lists). The model must not be changed by the caller between runs.
         surface_workers: worker processes that cut the pieces' render surfaces while the
             frames go on (0: in this process, between frames); None: as many as the cores
             spare (``surfaces.pool.default_worker_count``: none on 2-3 cores). The cache is

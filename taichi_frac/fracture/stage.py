@@ -21,7 +21,7 @@ from ..kinematics.quaternion import quaternion_matrix
 from ..model import BodyModel
 from ..options import FractureOptions, Material, ParticleOptions
 from .cracks import analyze_impact
-from .crack_types import ImpactAnalysis
+from .crack_types import ImpactAnalysis, RingCrack
 from .fragments import Fragment, FractureResult, fragment_peak_stress, make_fragments, split_body
 from .peaks import PeakTracker
 
@@ -298,8 +298,6 @@ def impact_event(masses: dict, rows: np.ndarray, impacts: dict, fracture: Fractu
     approach [J] (1/2 m v^2 of each pair's reduced mass, the body's own against the ground or
     a static box), the radial and ring cracks and the pieces. ``masses``: body id -> [kg] of
     the bodies alive when the impacts were recorded."""
-    from .crack_types import RingCrack
-
     mass = fracture.parent_record.model.mass
     speeds = np.asarray(impacts["speed"][rows], dtype=np.float64)
     forces = np.linalg.norm(np.asarray(impacts["force"][rows], dtype=np.float64), axis=1)
