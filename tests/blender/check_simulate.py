@@ -161,42 +161,38 @@ def section_simulate(workdir: Path):
     report["second_pieces"] = sorted(o.taichi_frac.prim_path for o in again if o.taichi_frac.generation >= 1)
 
 
+def simulate_error(case: str) -> str:
+    """The error Blender reports for ``simulate(wait=True)`` in ``case``, where it must fail."""
+    try:
+        bpy.ops.taichi_frac.simulate(wait=True)
+    except RuntimeError as exc:
+        return str(exc).strip()
+    check(False, f"simulate with {case} did not fail")
+    return ""
+
+
 def section_offline(workdir: Path):
     scene = empty_scene(workdir)
     cube, _ = cube_and_sphere(scene)
     command = os.environ["TAICHI_FRAC_EXECUTABLE"]
     # A run that fails: the command's own one-line error, in Blender's report.
     scene.taichi_frac_sim.ground_height = 1.0  # (above the cube: the scene loader refuses it)
-    try:
-        bpy.ops.taichi_frac.simulate(wait=True)
-        check(False, "simulate of a cube below the ground did not fail")
-    except RuntimeError as exc:
-        message = str(exc).strip()
-        report["failed_run_message"] = message
-        check("below the ground" in message and "Cube" in message and len(message.splitlines()) == 1,
-              f"failed-run message: {message!r}")
+    message = report["failed_run_message"] = simulate_error("a cube below the ground")
+    check("below the ground" in message and "Cube" in message and len(message.splitlines()) == 1,
+          f"failed-run message: {message!r}")
     scene.taichi_frac_sim.ground_height = 0.0
     check_export(workdir, scene, cube)
     check_panel(cube)
     # A missing executable: one line, naming where to set it.
     os.environ["TAICHI_FRAC_EXECUTABLE"] = str(workdir / "no-such-taichi-frac")
-    try:
-        bpy.ops.taichi_frac.simulate(wait=True)
-        check(False, "simulate with a missing executable did not fail")
-    except RuntimeError as exc:
-        message = str(exc).strip()
-        report["missing_message"] = message
-        check("no-such-taichi-frac" in message and "\n" not in message.split("Error: ", 1)[-1],
-              f"missing-executable message: {message!r}")
+    message = report["missing_message"] = simulate_error("a missing executable")
+    check("no-such-taichi-frac" in message and "\n" not in message.split("Error: ", 1)[-1],
+          f"missing-executable message: {message!r}")
     os.environ.pop("TAICHI_FRAC_EXECUTABLE")
     path = os.environ.get("PATH", "")
     os.environ["PATH"] = str(workdir)  # (no taichi-frac there)
-    try:
-        bpy.ops.taichi_frac.simulate(wait=True)
-        check(False, "simulate without taichi-frac on the PATH did not fail")
-    except RuntimeError as exc:
-        report["not_found_message"] = str(exc).strip()
-        check("TAICHI_FRAC_EXECUTABLE" in str(exc), f"not-found message: {exc}")
+    message = report["not_found_message"] = simulate_error("taichi-frac not on the PATH")
+    check("TAICHI_FRAC_EXECUTABLE" in message, f"not-found message: {message}")
     os.environ["PATH"] = path
     os.environ["TAICHI_FRAC_EXECUTABLE"] = command
     check(not cube.hide_viewport, "a failed run hid the cube")

@@ -83,8 +83,8 @@ def parse_progress(line: str) -> Progress | None:
 class SimulationRun:
     """One ``taichi-frac run SCENE --progress-json --stats-json STATS`` in a child process.
 
-    The child gets a session of its own (``start_new_session``): a Ctrl-C typed in the
-    terminal that started Blender does not reach it; only :meth:`cancel` stops it.
+    The child runs apart from Blender's terminal (``start_new_session``): a Ctrl-C typed in
+    the terminal that started Blender does not reach it; only :meth:`cancel` stops it.
     """
 
     def __init__(self, executable: str, scene_path: str, stats_path: str | None = None, extra_args=()):
