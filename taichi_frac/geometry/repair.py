@@ -34,12 +34,10 @@ import trimesh
 
 from .bounded import StepClock
 from .validate import MeshError, _edges, degenerate_faces, self_intersections, shell_labels
+from .winding_solid import KEPT_SAMPLES, sampled_kept
 
 #: Below this fraction of the input's winding-number volume kept, repair is an error.
 MIN_KEPT_FRACTION = 0.95
-#: Random points in the bounding box at which the kept fraction is measured; its standard
-#: error is about sqrt(p (1 - p) / n) of the box, under 0.3 % of the solid here.
-KEPT_SAMPLES = 40_000
 
 
 @dataclass
@@ -124,16 +122,6 @@ def _manifold_union(shells: list[tuple[np.ndarray, np.ndarray]]):
     return np.asarray(out.vert_properties, dtype=np.float64)[:, :3], np.asarray(out.tri_verts, dtype=np.int64)
 
 
-def winding_inside(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(P,) bool: |generalized winding number| >= 1/2 at each point (libigl's fast winding
-    number, Barill et al. 2018), the inside of a closed, open or overlapping surface."""
-    from .winding_solid import inside_winding
-
-    # Guarded: zero-area faces dropped, flat surfaces answered without libigl, which crashes
-    # on them, and the native call made in a forked child.
-    return inside_winding(vertices, faces, points)
-
-
 def _box_text(points: np.ndarray) -> str:
     lo, hi = points.min(axis=0), points.max(axis=0)
     return ", ".join(f"{axis} {a:.4g}..{b:.4g}" for axis, a, b in zip("xyz", lo, hi))
@@ -145,15 +133,12 @@ def measure_kept(input_mesh: trimesh.Trimesh, output: trimesh.Trimesh, shell_of_
     volume [m^3] and a description of what is lost (None if nothing measurable)."""
     lo, hi = input_mesh.bounds
     size = np.maximum(hi - lo, 1e-12 * max(float(np.max(hi - lo)), 1e-300))
-    points = lo + size * np.random.default_rng(seed).random((samples, 3))
-    inside_in = winding_inside(input_mesh.vertices, input_mesh.faces, points)
-    count = int(inside_in.sum())
-    if count == 0:
+    points, held, volume = sampled_kept(input_mesh.vertices, input_mesh.faces, output.vertices, output.faces, lo, size,
+                                        samples=samples, seed=seed)
+    if not len(points):
         return 1.0, 0.0, None
-    inside_out = winding_inside(output.vertices, output.faces, points[inside_in])
-    kept = float(inside_out.mean())
-    volume = float(np.prod(size)) * count / samples
-    lost_points = points[inside_in][~inside_out]
+    kept = float(held.mean())
+    lost_points = points[~held]
     lost = None
     if len(lost_points):
         _, _, nearest = trimesh.proximity.closest_point(input_mesh, lost_points[:2000])

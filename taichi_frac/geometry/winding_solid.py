@@ -146,10 +146,24 @@ def winding_numbers(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray,
     return clock.run(step, _winding_numbers, vertices, faces, points)
 
 
-def inside_winding(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray,
-                   clock: StepClock | None = None) -> np.ndarray:
-    """(P,) bool: |generalized winding number| >= 1/2, the inside of any surface."""
-    return np.abs(winding_numbers(vertices, faces, points, clock)) >= 0.5
+#: Random points in the input's box at which a kept share is measured (:func:`sampled_kept`):
+#: its standard error is about sqrt(p (1 - p) / n) of the box, under 0.3 % of the solid for
+#: solids filling over 5 % of their box.
+KEPT_SAMPLES = 40_000
+
+
+def sampled_kept(input_vertices, input_faces, vertices, faces, lo: np.ndarray, size: np.ndarray, *,
+                 samples: int = KEPT_SAMPLES, seed: int = 0, clock: StepClock | None = None,
+                 step: str = "winding numbers (libigl)"):
+    """The input surface's winding-number solid sampled at ``samples`` random points of the
+    box ``lo`` + [0, ``size``] [m], and which of its points the closed surface (``vertices``,
+    ``faces``) holds: (the points inside the input (K,3), held (K,) bool, the input solid's
+    volume [m^3])."""
+    points = lo + size * np.random.default_rng(seed).random((samples, 3))
+    inside = np.abs(winding_numbers(input_vertices, input_faces, points, clock, step)) >= 0.5
+    points = points[inside]
+    held = np.abs(winding_numbers(vertices, faces, points, clock, step)) >= 0.5 if len(points) else np.zeros(0, bool)
+    return points, held, float(np.prod(size) * len(points) / samples)
 
 
 def _grid(lo: np.ndarray, hi: np.ndarray, cell: float, pad: int = 2):
