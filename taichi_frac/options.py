@@ -132,6 +132,9 @@ class Material:
         young_modulus: Young's modulus E [Pa].
         poisson_ratio: Poisson's ratio nu [-], in [0, 0.5).
         tensile_strength: Rankine threshold on the largest principal stress [Pa].
+        fracture_toughness: mode-I fracture toughness K_Ic [Pa m^0.5]: what new crack
+            surface costs, as the fracture energy G_c = K_Ic^2 / E (:attr:`fracture_energy`).
+            ``crack_count = "auto"`` weighs an impact's energy against it.
         look: how it renders, a name in ``LOOKS`` (glass, porcelain, concrete, steel,
             plaster); written into the cache, no effect on the physics.
     """
@@ -141,6 +144,7 @@ class Material:
     young_modulus: float = 70.0e9
     poisson_ratio: float = 0.2
     tensile_strength: float = 35.0e6
+    fracture_toughness: float = 1.0e6
     look: str = "plaster"
 
     def __post_init__(self):
@@ -150,6 +154,13 @@ class Material:
         check_range("material", "young_modulus", self.young_modulus, 0.0, None, low_open=True)
         check_range("material", "poisson_ratio", self.poisson_ratio, 0.0, 0.5, high_open=True)
         check_range("material", "tensile_strength", self.tensile_strength, 0.0, None, low_open=True)
+        check_range("material", "fracture_toughness", self.fracture_toughness, 0.0, None, low_open=True)
+
+    @property
+    def fracture_energy(self) -> float:
+        """G_c = K_Ic^2 / E [J/m^2]: the energy a unit area of new crack costs (Griffith,
+        plane stress)."""
+        return self.fracture_toughness**2 / self.young_modulus
 
     @property
     def shear_modulus(self) -> float:
@@ -169,21 +180,25 @@ MATERIAL_PRESETS: dict[str, Material] = {
     # Annealed soda-lime glass: E 72 GPa, nu 0.23, 2500 kg/m^3 (Shelby, "Introduction to
     # Glass Science and Technology", 2nd ed., RSC 2005, ch. 8); practical tensile strength
     # of annealed float glass about 40-50 MPa (EN 572-1 gives 45 MPa characteristic bending).
+    # K_Ic 0.75 MPa m^0.5 (Wiederhorn, J. Am. Ceram. Soc. 52(2), 1969: fracture surface
+    # energy 3.9 J/m^2, so G_c = 2 gamma = 7.8 J/m^2).
     "soda_lime_glass": Material(
         name="soda_lime_glass", density=2500.0, young_modulus=72.0e9, poisson_ratio=0.23,
-        tensile_strength=45.0e6, look="glass",
+        tensile_strength=45.0e6, fracture_toughness=0.75e6, look="glass",
     ),
     # Porcelain (triaxial whiteware): E 60-100 GPa, nu about 0.2, 2300-2500 kg/m^3, flexural
-    # strength 40-100 MPa, tensile lower (Carty & Senapati, J. Am. Ceram. Soc. 81(1), 1998).
+    # strength 40-100 MPa, tensile lower, K_Ic 1.0-1.5 MPa m^0.5 (Carty & Senapati, J. Am.
+    # Ceram. Soc. 81(1), 1998): 1.2 MPa m^0.5 here, G_c 21 J/m^2.
     "porcelain": Material(
         name="porcelain", density=2400.0, young_modulus=70.0e9, poisson_ratio=0.2,
-        tensile_strength=35.0e6, look="porcelain",
+        tensile_strength=35.0e6, fracture_toughness=1.2e6, look="porcelain",
     ),
     # Normal-strength concrete C30/37: Ecm 33 GPa, fctm 2.9 MPa (EN 1992-1-1, Table 3.1),
-    # nu 0.2, about 2400 kg/m^3.
+    # nu 0.2, about 2400 kg/m^3; fracture energy G_F = 73 f_cm^0.18 = 140 J/m^2 (fib Model
+    # Code 2010, eq. 5.1-9, f_cm 38 MPa), i.e. K = sqrt(G_F E) = 2.15 MPa m^0.5.
     "concrete": Material(
         name="concrete", density=2400.0, young_modulus=33.0e9, poisson_ratio=0.2,
-        tensile_strength=2.9e6, look="concrete",
+        tensile_strength=2.9e6, fracture_toughness=2.15e6, look="concrete",
     ),
 }
 
@@ -242,7 +257,10 @@ SMALL_FRAGMENT_POLICIES = ("merge", "debris", "drop")
 # How an impact's stress is computed (docs/guide/stress-models.md): the paper's SPH gradient
 # of the half-space displacement, its exact closed-form gradient, or linear elasticity on
 # the body's own tets.
-STRESS_MODELS = ("sph", "halfspace", "fem")
+STRESS_MODELS = ("auto", "sph", "halfspace", "fem")
+#: ``crack_count`` may be a number or this word: the count then follows each impact's
+#: energy (``fracture/energy.py``).
+AUTO = "auto"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -251,7 +269,12 @@ class FractureOptions:
 
     Attributes:
         crack_count: n, the number of neighbour groups at an analysis point; each group's
-            stress gives one crack direction. n = 1 is the physical answer.
+            stress gives one crack direction. n = 1 is the single crack of the stress field
+            alone. "auto" (the default): n follows each impact's energy against the fracture
+            energy of a crack through the body (Griffith; ``fracture/energy.py``), so a
+            harder hit makes more cracks.
+        crack_scale: multiplies the automatic count (``crack_count = "auto"`` only) [-]:
+            the artist's control over a physical count; the result is rounded, 1 to 64.
         seed: seed of every random choice (grouping start angle), so runs repeat exactly.
         impact_force_threshold: contacts whose force |impulse| / dt is below this are not
             analysed at all [N].
@@ -272,9 +295,12 @@ class FractureOptions:
             particle's radius (a minimum distance of about one particle radius).
         refracture: fragments may break again on later impacts.
         stress_model: how an impact's stress is computed: "halfspace" (the exact stress of
-            the regularised Boussinesq-Cerruti load, closed form), "sph" (the paper's SPH
-            gradient of that displacement) or "fem" (linear elasticity on the body's tets,
-            the body's shape included; a stiffness factorisation per body).
+            the regularised Boussinesq-Cerruti load, closed form: the paper's model), "sph"
+            (the paper's SPH gradient of that displacement), "fem" (linear elasticity on the
+            body's tets, the body's shape and so its bending included; a stiffness
+            factorisation per body) or "auto" (the default): "fem" for slender bodies (plates,
+            rods, rings, shells), which break by bending, where a half-space sees none,
+            and "halfspace" for compact ones (``fracture/energy.py``).
         max_generations: how many times a piece of a piece may break again (>= 0).
         crack_roughness: amplitude [m] of the noise that roughens the rendered crack faces
             (the physics is untouched); 0, the default, leaves them flat, as glass breaks.
@@ -300,7 +326,8 @@ class FractureOptions:
             that many larger pieces lie on.
     """
 
-    crack_count: int = 1
+    crack_count: int | str = AUTO
+    crack_scale: float = 1.0
     seed: int = 0
     impact_force_threshold: float = 0.0
     crack_length: float | None = None
@@ -316,10 +343,15 @@ class FractureOptions:
     crack_roughness_scale: float | None = None
     crack_fit_rounds: int = 3
     crack_fit_min_tets: int = 100
-    stress_model: str = "halfspace"
+    stress_model: str = AUTO
 
     def __post_init__(self):
-        check_range("fracture", "crack_count", self.crack_count, 1, 64)
+        if self.crack_count != AUTO:
+            if isinstance(self.crack_count, str):
+                raise OptionError(f"fracture.crack_count = {self.crack_count!r}: use a number of cracks (1-64) or "
+                                  f"{AUTO!r}")
+            check_range("fracture", "crack_count", self.crack_count, 1, 64)
+        check_range("fracture", "crack_scale", self.crack_scale, 0.0, 64.0, low_open=True)
         check_range("fracture", "seed", self.seed, 0, 2**31 - 1)
         check_range("fracture", "impact_force_threshold", self.impact_force_threshold, 0.0, None)
         if self.crack_length is not None:

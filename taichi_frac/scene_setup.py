@@ -92,7 +92,9 @@ def prepare_objects(scene, *, fracture: bool = True, prepare=None) -> tuple[list
             from .fracture.neighbors import model_neighbor_lists, smoothing_length
 
             model_neighbor_lists(model, smoothing_length(model, obj.fracture))
-            if obj.fracture.stress_model == "fem":  # its stiffness, factorised once
+            from .fracture.energy import stress_model_of
+
+            if stress_model_of(model, obj.fracture) == "fem":  # its stiffness, factorised once
                 from .fracture.fem import elastic_body_of
 
                 elastic_body_of(model, obj.material)

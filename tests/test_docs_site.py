@@ -54,7 +54,7 @@ def test_reference_has_every_key_with_its_default():
         assert table in text
     fracture = reference.section_table(FractureOptions)
     row = next(line for line in fracture.splitlines() if line.startswith("| `crack_count`"))
-    assert "| `1` |" in row and "[1, 64]" in row
+    assert '| `"auto"` |' in row and "[1, 64]" in row
     row = next(line for line in fracture.splitlines() if line.startswith("| `crack_length`"))
     assert "(optional)" in row and "| m |" in row and "(0, inf)" in row
 

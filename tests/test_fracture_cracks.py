@@ -123,9 +123,11 @@ def test_ring_cracks_cut_the_wedges_into_rings():
 def test_rankine_and_one_group_is_the_physical_answer():
     model = struck_ring_model()
     strong = Material(name="strong", density=2400.0, young_modulus=70e9, poisson_ratio=0.2, tensile_strength=1e9)
-    none = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, strong, FractureOptions(crack_count=3))
+    none = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, strong,
+                          FractureOptions(crack_count=3, stress_model="halfspace"))
     assert not none.any_crack and none.peak_principal_stress < 1e9
-    one = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, RING_MATERIAL, FractureOptions(crack_count=1))
+    one = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, RING_MATERIAL,
+                         FractureOptions(crack_count=1, stress_model="halfspace"))
     assert one.any_crack and len(one.cracks) == 1
     i = int(one.analysis_particle[0])
     # The analysis point carries the largest principal stress within 2 h of the contact ...
@@ -139,7 +141,7 @@ def test_rankine_and_one_group_is_the_physical_answer():
     assert abs(abs(one.cracks[0].normal @ v[:, -1]) - 1.0) < 1e-9
     # Below the force threshold nothing is analysed.
     quiet = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, RING_MATERIAL,
-                           FractureOptions(impact_force_threshold=2e4))
+                           FractureOptions(impact_force_threshold=2e4, stress_model="halfspace"))
     assert len(quiet.contact_point) == 0 and not quiet.any_crack
 
 
@@ -147,7 +149,7 @@ def test_group_gradient_uses_only_its_sector():
     """A group's stress equals an independent plain-sum gradient over that sector's
     neighbours (recomputed here from the neighbour list and the sector rule)."""
     model = struck_ring_model()
-    opts = FractureOptions(crack_count=3, seed=4)
+    opts = FractureOptions(crack_count=3, seed=4, stress_model="halfspace")
     a = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, RING_MATERIAL, opts)
     i = int(a.analysis_particle[0])
     x = model.particle_position
@@ -166,7 +168,7 @@ def test_group_gradient_uses_only_its_sector():
 def test_several_contacts_analysed_together_give_the_union():
     model = struck_ring_model()
     second = np.array([-0.125, 0.0, 0.0])
-    opts = FractureOptions(crack_count=2, crack_length=0.05)
+    opts = FractureOptions(crack_count=2, crack_length=0.05, stress_model="halfspace")
     both = analyze_impact(model, np.stack([RING_CONTACT, second]), np.stack([RING_NORMAL, -RING_NORMAL]),
                           np.stack([RING_FORCE, -RING_FORCE]), RING_MATERIAL, opts)
     assert sorted({c.impact_index for c in both.cracks}) == [0, 1] and len(both.cracks) == 4
@@ -203,7 +205,7 @@ def test_local_analysis_of_a_crack_of_given_length_needs_no_full_field():
     contact; the simulation computes the whole field only when the cracks split the body."""
     model = struck_ring_model()
     material = Material(name="m", density=2400.0, young_modulus=70e9, poisson_ratio=0.2, tensile_strength=1.0e6)
-    options = FractureOptions(crack_count=3, seed=4, crack_length=0.04)
+    options = FractureOptions(crack_count=3, seed=4, crack_length=0.04, stress_model="halfspace")
     full = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, material, options)
     fast = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, material, options, full_field=False)
     assert len(full.cracks) == len(fast.cracks) == 3
@@ -223,7 +225,7 @@ def test_local_first_analysis_matches_the_full_field(strength):
     step 9, only when it cracks."""
     model = struck_ring_model()
     material = Material(name="m", density=2400.0, young_modulus=70e9, poisson_ratio=0.2, tensile_strength=strength)
-    options = FractureOptions(crack_count=3, seed=4)
+    options = FractureOptions(crack_count=3, seed=4, stress_model="halfspace")
     full = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, material, options)
     fast = analyze_impact(model, RING_CONTACT, RING_NORMAL, RING_FORCE, material, options, full_field=False)
     assert full.field_particles is None
@@ -257,7 +259,7 @@ def test_neighbor_rows_of_a_piece_are_its_restricted_lists_rows():
     from taichi_frac.model import build_fragment_model
 
     root = struck_ring_model()
-    options = FractureOptions(crack_count=3, seed=4, crack_length=0.04)
+    options = FractureOptions(crack_count=3, seed=4, crack_length=0.04, stress_model="halfspace")
     h = smoothing_length(root, options)
     piece = build_fragment_model(root, np.arange(300, root.tet_count, dtype=np.int64), boundary_group_size=4)
     off, idx = restrict_neighbor_lists(*model_neighbor_lists(root, h), piece.source_tet, root.tet_count)

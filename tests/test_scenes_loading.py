@@ -133,7 +133,8 @@ crack_length = 0.05
         objects=[SceneObject(
             name="ring", primitive="torus:major=0.1,minor=0.025",
             material=Material(name=porcelain.name, density=porcelain.density, young_modulus=porcelain.young_modulus,
-                              poisson_ratio=porcelain.poisson_ratio, tensile_strength=20.0e6, look=porcelain.look),
+                              poisson_ratio=porcelain.poisson_ratio, tensile_strength=20.0e6,
+                              fracture_toughness=porcelain.fracture_toughness, look=porcelain.look),
             position=(0, 0, 1.0), orientation=(0, 1, 0, 0), linear_velocity=(1, 0, 0), friction=0.4, restitution=0.3,
             particles=ParticleOptions(target_particles=3000, boundary_group_size=3, keep_leftovers=False),
             fracture=FractureOptions(crack_count=3, crack_length=0.05))],
@@ -178,7 +179,7 @@ def test_mesh_paths_resolve_against_the_scene_folder(tmp_path):
     (MINIMAL + "[objects.particles]\ntarget_particle = 5000\n",
      r"scene.toml: objects\[0\].particles: unknown key 'target_particle'; allowed keys: target_particles"),
     (MINIMAL + "[objects.fracture]\ncrack_count = 'three'\n",
-     r"scene.toml: objects\[0\].fracture.crack_count = 'three' has the wrong type: expected int"),
+     r"scene.toml: objects\[0\].fracture: fracture.crack_count = 'three': use a number of cracks \(1-64\) or 'auto'"),
     (MINIMAL + "[objects.particles]\ntarget_particles = 0\n",
      r"scene.toml: objects\[0\].particles: particles.target_particles = 0 is out of range: allowed \[1, 5e\+06\]"),
     (MINIMAL + "[objects.fracture]\ncrack_count = 100\n",

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..options import STRESS_MODELS, FractureOptions
+from ..options import AUTO, STRESS_MODELS, FractureOptions
 from .field import load_rows, point_load_displacement, point_loads_displacement
 from .halfspace import halfspace_stress_rows
 from .sph import default_smoothing_length, displacement_gradient, neighbor_lists
@@ -81,13 +81,15 @@ def contact_field(points, volumes, contact_point, normal, force, young_modulus, 
         options: FractureOptions for those defaults (default ``FractureOptions()``).
         method: "halfspace" (the gradient in closed form: exact, no neighbour search) or
             "sph" (the paper's SPH gradient, ``corrected`` or plain); None =
-            ``options.stress_model``. "fem" needs the tets: use :func:`body_stress`.
+            ``options.stress_model``. "fem" needs the tets: use :func:`body_stress`; "auto" is "halfspace" here.
 
     Returns:
         :class:`ContactField` (numpy float64 arrays, SI units).
     """
     options = FractureOptions() if options is None else options
     method = options.stress_model if method is None else method
+    if method == AUTO:  # (points alone have no shape to bend: the half-space answer)
+        method = "halfspace"
     if method not in ("halfspace", "sph"):
         raise ValueError(f"contact_field method {method!r}: use 'halfspace' or 'sph' ('fem' needs the tets: "
                          "use body_stress(vertices, tets, ...))")
@@ -184,8 +186,9 @@ def body_stress(vertices, tets, density, contact_points, normals, forces, young_
     from ..geometry.topology import signed_volumes
     from .fem import elastic_body, fem_response
 
-    if method not in STRESS_MODELS:
-        raise ValueError(f"body_stress method {method!r}: use one of " + ", ".join(STRESS_MODELS))
+    if method not in STRESS_MODELS or method == AUTO:
+        raise ValueError(f"body_stress method {method!r}: use one of "
+                         + ", ".join(m for m in STRESS_MODELS if m != AUTO))
     verts = np.ascontiguousarray(vertices, dtype=np.float64)
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     if verts.ndim != 2 or verts.shape[1] != 3 or tets.ndim != 2 or tets.shape[1] != 4 or len(tets) == 0:

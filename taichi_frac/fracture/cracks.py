@@ -66,8 +66,9 @@ import numpy as np
 
 from ..geometry import rows
 from ..model import BodyModel
-from ..options import FractureOptions, Material
+from ..options import AUTO, FractureOptions, Material
 from .crack_types import CrackPlane, ImpactAnalysis, RingCrack
+from .energy import crack_counts, energy_limited_extent, hertz_impact_energy, stress_model_of
 from .fem import elastic_body_of, fem_response
 from .field import load_rows
 from .fused import stress_at as _stress_at
@@ -128,12 +129,15 @@ def analyze_impact(
     options: FractureOptions,
     *,
     full_field: bool = True,
+    energy=None,
 ) -> ImpactAnalysis:
     """Stress and crack planes of one body's contacts in one step (body frame).
 
     ``contact_point_body``, ``normal_in_body`` (into the body) and ``force_body`` (on the
     body, [N]) are (3,) for one contact or (K,3) for several analysed together. Contacts
-    with |force| below ``options.impact_force_threshold`` are ignored.
+    with |force| below ``options.impact_force_threshold`` are ignored. ``energy``: (K,) [J]
+    each contact's approach energy, which sets the crack count under ``crack_count =
+    "auto"`` (``energy.py``); None: the energy of the Hertz impact of each force.
 
     ``full_field=False`` (the simulation's choice) first computes the stress only at the
     particles within reach of the contacts, which is all the Rankine test and the crack
@@ -147,8 +151,8 @@ def analyze_impact(
     the whole field: analyse again with ``full_field=True`` (the simulation does when it
     writes a cache, whose per-face stress reads it).
     """
-    contact, normal, force = _analysed_contacts(contact_point_body, normal_in_body, force_body,
-                                                options.impact_force_threshold)
+    contact, normal, force, energy = _analysed_contacts(contact_point_body, normal_in_body, force_body,
+                                                        options.impact_force_threshold, energy)
     h = smoothing_length(model, options)  # support radius
     points = np.ascontiguousarray(model.particle_position, dtype=np.float64)
     d2, nearest, radius = _load_patches(model, points, contact, options)
@@ -184,8 +188,12 @@ def analyze_impact(
     # (the simulation's): only the crack directions read the groups, and most impacts crack
     # nothing, and each analysis skipped saves three launches.
     grouped = np.arange(len(contact)) if full_field else np.nonzero(cracking)[0]
-    groups = _group_stresses(field, grouped, analysis, normal, displacement, stress, options)
-    cracks = _crack_shapes(points, analysis, cracking, groups, particle_peak, h, material, options)
+    counts, thickness = crack_counts(model, material, options, contact[grouped], normal[grouped], force[grouped],
+                                     None if energy is None else energy[grouped], h)
+    counts, thickness = _scatter(counts, grouped, len(contact), 1), _scatter(thickness, grouped, len(contact), np.nan)
+    groups = _group_stresses(field, grouped, analysis, normal, displacement, stress, options, counts)
+    reach = _energy_reach(options, energy, counts, material, thickness, force, model)
+    cracks = _crack_shapes(points, analysis, cracking, groups, particle_peak, h, material, options, reach)
     counts, group_stress, g_values, g_dirs = groups
     return ImpactAnalysis(
         contact_point=contact, normal_in=normal, force=force, analysis_particle=analysis,
@@ -197,18 +205,42 @@ def analyze_impact(
     )
 
 
-def _analysed_contacts(contact_point_body, normal_in_body, force_body, force_threshold: float):
+def _analysed_contacts(contact_point_body, normal_in_body, force_body, force_threshold: float, energy=None):
     """(K,3) contact points, unit normals and forces of the contacts at or over
-    ``force_threshold`` [N] (and not zero)."""
+    ``force_threshold`` [N] (and not zero), and their energies (K,) [J] (None if not given)."""
     contact = _as_rows(contact_point_body, "contact_point_body")
     normal = _as_rows(normal_in_body, "normal_in_body")
     force = _as_rows(force_body, "force_body")
     if not (len(contact) == len(normal) == len(force)):
         raise ValueError("contact points, normals and forces must have the same length")
+    if energy is not None:
+        energy = np.atleast_1d(np.asarray(energy, dtype=np.float64))
+        if energy.shape != (len(contact),):
+            raise ValueError(f"energy must hold one value per contact ({len(contact)}), got shape {energy.shape}")
     normal = normal / np.linalg.norm(normal, axis=1, keepdims=True)
     keep = np.linalg.norm(force, axis=1) >= force_threshold
     keep &= np.linalg.norm(force, axis=1) > 0.0
-    return contact[keep], normal[keep], force[keep]
+    return contact[keep], normal[keep], force[keep], (None if energy is None else energy[keep])
+
+
+def _scatter(values: np.ndarray, where: np.ndarray, size: int, fill) -> np.ndarray:
+    """(size,) ``fill`` with ``values`` at ``where``."""
+    out = np.full(size, fill, dtype=values.dtype)
+    out[where] = values
+    return out
+
+
+def _energy_reach(options: FractureOptions, energy, counts, material: Material, thickness, force, model):
+    """(K,) [m] how far each contact's cracks run on its energy (``energy.py``); inf where
+    the count is the artist's (a number) or the length is given."""
+    reach = np.full(len(counts), np.inf)
+    if options.crack_count != AUTO or options.crack_length is not None:
+        return reach
+    for k in range(len(counts)):
+        e = (hertz_impact_energy(float(np.linalg.norm(force[k])), model, material) if energy is None
+             else float(energy[k]))
+        reach[k] = energy_limited_extent(e, int(counts[k]), material, float(thickness[k]))
+    return reach
 
 
 def _load_patches(model: BodyModel, points: np.ndarray, contact: np.ndarray, options: FractureOptions):
@@ -227,7 +259,7 @@ def _load_patches(model: BodyModel, points: np.ndarray, contact: np.ndarray, opt
 
 def _no_contact(model, points, contact, normal, force, nearest, radius, h, material, options) -> ImpactAnalysis:
     """The analysis of a step whose contacts are all under the force threshold."""
-    t_count, n_groups = model.tet_count, options.crack_count
+    t_count, n_groups = model.tet_count, 1 if options.crack_count == AUTO else options.crack_count
     return ImpactAnalysis(
         contact_point=contact, normal_in=normal, force=force, analysis_particle=nearest,
         analysis_point=points[nearest], smoothing_length=h, contact_radius=radius,
@@ -263,7 +295,7 @@ class _StressField:
         self.volumes = np.ascontiguousarray(model.tet_volume, dtype=np.float64)
         self.contact, self.normal, self.force, self.radius = contact, normal, force, radius
         self.loads = load_rows(contact, normal, force, radius)
-        kind = options.stress_model
+        kind = stress_model_of(model, options)
         if kind == "fem" and elastic_body_of(model, material) is None:
             kind = "halfspace"  # a piece whose stiffness cannot be factorised (fem.elastic_body_of)
         self.kind = kind
@@ -314,12 +346,14 @@ class _StressField:
 
 
 def _group_stresses(field: _StressField, grouped: np.ndarray, analysis: np.ndarray, normal: np.ndarray,
-                    displacement, stress: np.ndarray, options: FractureOptions):
-    """Step 9 for the contacts ``grouped``: each one's analysis-point neighbours in n =
-    ``crack_count`` azimuthal sectors, one stress per sector. Returns the neighbour counts
+                    displacement, stress: np.ndarray, options: FractureOptions, crack_count: np.ndarray):
+    """Step 9 for the contacts ``grouped``: each one's analysis-point neighbours in n_k =
+    ``crack_count[k]`` azimuthal sectors, one stress per sector. Returns the neighbour counts
     (K,n), stresses (K,n,3,3) [Pa], principal values (K,n,3) [Pa] and directions
-    (K,n,3,3); NaN (and counts 0) for the contacts not grouped."""
-    k_count, n_groups = len(analysis), options.crack_count
+    (K,n,3,3), n the largest count (a contact's sectors past its own count are empty); NaN
+    (and counts 0) for the contacts not grouped."""
+    k_count = len(analysis)
+    n_groups = int(max(crack_count.max(initial=1), 1))
     points = field.points
     counts = np.zeros((k_count, n_groups), dtype=np.int64)
     group_stress = np.full((k_count, n_groups, 3, 3), np.nan)
@@ -331,7 +365,8 @@ def _group_stresses(field: _StressField, grouped: np.ndarray, analysis: np.ndarr
     for k in grouped:
         i = int(analysis[k])
         nbrs = field.neighbours_of(i)
-        sector = group_neighbors(points, nbrs, points[i], normal[k], n_groups, start_angle(options.seed, int(k)))
+        sector = group_neighbors(points, nbrs, points[i], normal[k], int(crack_count[k]),
+                                 start_angle(options.seed, int(k)))
         order = np.argsort(sector, kind="stable")
         counts[k] = np.bincount(sector, minlength=n_groups)
         group_rows.append(nbrs[order])
@@ -360,17 +395,26 @@ def _group_stresses(field: _StressField, grouped: np.ndarray, analysis: np.ndarr
     group_stress[grouped] = stress_g.reshape(len(grouped), n_groups, 3, 3)
     g_values[grouped] = np.asarray(values_g).reshape(len(grouped), n_groups, 3)
     g_dirs[grouped] = np.asarray(dirs_g).reshape(len(grouped), n_groups, 3, 3)
+    single = [int(k) for k in grouped if crack_count[k] == 1]
+    if n_groups > 1 and single and field.kind != "sph":
+        # A contact of one crack among contacts of several: its whole neighbourhood, the
+        # model's own stress, as when every contact has one.
+        at = analysis[single]
+        values_1, dirs_1 = principal_stresses(stress[at])
+        group_stress[single, 0] = stress[at]
+        g_values[single, 0] = np.asarray(values_1)
+        g_dirs[single, 0] = np.asarray(dirs_1)
     return counts, group_stress, g_values, g_dirs
 
 
 def _crack_shapes(points, analysis, cracking, groups, particle_peak, h: float, material: Material,
-                  options: FractureOptions) -> tuple:
+                  options: FractureOptions, energy_reach) -> tuple:
     """Step 8's cracks: each cracking contact's planes (one per non-empty group, normal =
-    the group's largest principal direction, extent ``crack_length`` or the reach of the
-    over-strength particles near the plane), then its ring cracks, in (contact, group)
-    order."""
+    the group's largest principal direction, extent ``crack_length``, or under an automatic
+    count the contact's ``energy_reach`` (K,) [m], else the reach of the over-strength
+    particles near the plane), then its ring cracks, in (contact, group) order."""
     counts, _stress, g_values, g_dirs = groups
-    n_groups = options.crack_count
+    n_groups = counts.shape[1]
     over = particle_peak > material.tensile_strength
     cracks = []
     for k in range(len(analysis)):
@@ -390,6 +434,8 @@ def _crack_shapes(points, analysis, cracking, groups, particle_peak, h: float, m
                 near_plane = np.abs(rel @ crack_normal) <= h
                 reach = np.linalg.norm(rel[near_plane], axis=1)
                 extent = max(h, float(reach.max()) if reach.size else 0.0)
+            if np.isfinite(energy_reach[k]):
+                extent = max(h, float(energy_reach[k]))
             cracks.append(CrackPlane(point=origin.copy(), normal=crack_normal, extent=extent,
                                      peak_stress=peak, impact_index=k, group_index=g))
         planes = [c for c in cracks if isinstance(c, CrackPlane) and c.impact_index == k]

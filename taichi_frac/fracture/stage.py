@@ -179,7 +179,7 @@ class FractureStage:
             rows = self._rows_to_analyse(body, rows, impacts)
             if rows is None:
                 continue
-            found = self._analyse(body, rows, impacts, frame)
+            found = self._analyse(body, rows, impacts, frame, touch_energies(masses, body, rows, impacts))
             if found is None:
                 continue
             analysis, split = found
@@ -213,7 +213,7 @@ class FractureStage:
             p = (body, int(o))
             self._analysed[p] = max(self._analysed.get(p, 0.0), float(size[i]))
 
-    def _analyse(self, body: int, rows: np.ndarray, impacts: dict, frame: int):
+    def _analyse(self, body: int, rows: np.ndarray, impacts: dict, frame: int, energies: np.ndarray):
         """(analysis, split) of ``body``'s touches ``rows`` when they break it in two or
         more, else None. The stress is computed near the contacts only; the whole field
         only when the cracks do split the body and ``field_stress`` asks for it (in the 13
@@ -227,7 +227,7 @@ class FractureStage:
         points_b, normals_b = impacts["point_body"][rows], impacts["normal_body"][rows]
         force_b = impacts["force_body"][rows]
         analysis = analyze_impact(rec.model, points_b, normals_b, force_b, rec.material, rec.fracture,
-                                  full_field=False)
+                                  full_field=False, energy=energies)
         if self.first_analysis_seconds is None:  # (in a new process: its kernels' first launch)
             self.first_analysis_seconds = time.perf_counter() - t
         times.fracture_analysis += time.perf_counter() - t
@@ -244,7 +244,7 @@ class FractureStage:
         if analysis.field_particles is not None and self.field_stress:
             t = time.perf_counter()
             analysis = analyze_impact(rec.model, points_b, normals_b, force_b, rec.material, rec.fracture,
-                                      full_field=True)
+                                      full_field=True, energy=energies)
             split = dataclasses.replace(split, fragment_peak_stress=fragment_peak_stress(
                 split.fragment_tets, analysis.particle_principal_stress))
             times.fracture_analysis += time.perf_counter() - t
@@ -292,20 +292,26 @@ class FractureStage:
                         pieces=pieces, children=list(children), children_records=children_records)
 
 
+def touch_energies(masses: dict, body: int, rows: np.ndarray, impacts: dict) -> np.ndarray:
+    """(R,) [J] the kinetic energy of each touch's approach, 1/2 m* v^2 with m* the reduced
+    mass of ``body`` and the other (the body's own mass against the ground or a static box).
+    ``masses``: body id -> [kg] of the bodies alive when the impacts were recorded."""
+    mass = masses[body]
+    speeds = np.asarray(impacts["speed"][rows], dtype=np.float64)
+    other = np.array([masses.get(int(o), np.inf) for o in impacts["other"][rows]], dtype=np.float64)
+    reduced = np.where(np.isfinite(other), mass * other / (mass + np.where(np.isfinite(other), other, 0.0)), mass)
+    return 0.5 * reduced * speeds**2
+
+
 def impact_event(masses: dict, rows: np.ndarray, impacts: dict, fracture: Fracture) -> dict:
     """One fracture event as the run's record lists it: the frame, the body's name, its
     strongest touch's approach speed [m/s] and force [N], the kinetic energy of the touches'
     approach [J] (1/2 m v^2 of each pair's reduced mass, the body's own against the ground or
     a static box), the radial and ring cracks and the pieces. ``masses``: body id -> [kg] of
     the bodies alive when the impacts were recorded."""
-    mass = fracture.parent_record.model.mass
     speeds = np.asarray(impacts["speed"][rows], dtype=np.float64)
     forces = np.linalg.norm(np.asarray(impacts["force"][rows], dtype=np.float64), axis=1)
-    energy = 0.0
-    for other, speed in zip(impacts["other"][rows], speeds):
-        other_mass = masses.get(int(other), np.inf)  # (ground, static boxes: no body)
-        reduced = mass if not np.isfinite(other_mass) else mass * other_mass / (mass + other_mass)
-        energy += 0.5 * reduced * speed**2
+    energy = float(touch_energies(masses, fracture.parent, rows, impacts).sum())
     strongest = int(np.argmax(forces))
     rings = sum(isinstance(c, RingCrack) for c in fracture.analysis.cracks)
     return dict(frame=int(fracture.frame), body=fracture.parent_record.name, speed=float(speeds[strongest]),

@@ -185,11 +185,13 @@ def section_table(cls, skip=()) -> str:
 
 
 def _presets_table() -> str:
-    rows = ["| preset | density [kg/m^3] | Young's modulus [GPa] | Poisson's ratio | tensile strength [MPa] | look |",
-            "|---|---|---|---|---|---|"]
+    rows = ["| preset | density [kg/m^3] | Young's modulus [GPa] | Poisson's ratio | tensile strength [MPa] "
+            "| fracture toughness [MPa m^0.5] | fracture energy [J/m^2] | look |",
+            "|---|---|---|---|---|---|---|---|"]
     for name, m in MATERIAL_PRESETS.items():
         rows.append(f"| `{name}` | {m.density:g} | {m.young_modulus / 1e9:g} | {m.poisson_ratio:g} | "
-                    f"{m.tensile_strength / 1e6:g} | `{m.look}` |")
+                    f"{m.tensile_strength / 1e6:g} | {m.fracture_toughness / 1e6:g} | {m.fracture_energy:.3g} | "
+                    f"`{m.look}` |")
     return "\n".join(rows)
 
 

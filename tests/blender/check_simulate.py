@@ -310,7 +310,8 @@ def check_export(workdir: Path, scene, cube):
           f"static box orientation {box['orientation']}")
     entry = next(o for o in exported["objects"] if o["name"] == "Cube")
     check(entry["material"] == {"density": 2000.0, "young_modulus": 5.0e9, "poisson_ratio": 0.25,
-                                "tensile_strength": 3.0e6, "look": "porcelain"}, f"custom material {entry['material']}")
+                                "tensile_strength": 3.0e6, "fracture_toughness": 1.0e6, "look": "porcelain"},
+          f"custom material {entry['material']}")
     check("crack_count" not in entry["fracture"], "auto crack count wrote a count")
     check(np.allclose(entry["position"], [0.0, 0.0, 0.003], atol=1e-9), f"centimetre position {entry['position']}")
     check(np.allclose(entry["linear_velocity"], [0.0, 0.0, -0.12], atol=1e-9), f"velocity {entry['linear_velocity']}")

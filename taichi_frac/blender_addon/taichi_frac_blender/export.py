@@ -197,7 +197,8 @@ def _material(props) -> object:
     if props.material == "custom":
         return scene_toml.Inline(density=f32(props.density), young_modulus=f32(props.young_modulus),
                                  poisson_ratio=f32(props.poisson_ratio),
-                                 tensile_strength=f32(props.tensile_strength), look=props.look)
+                                 tensile_strength=f32(props.tensile_strength),
+                                 fracture_toughness=f32(props.fracture_toughness), look=props.look)
     if props.strength_override > 0.0:
         return scene_toml.Inline(preset=props.material, tensile_strength=f32(props.strength_override))
     return props.material
@@ -207,6 +208,8 @@ def _fracture(props, scale: float) -> dict:
     table = {}
     if not props.crack_count_auto:  # (auto: no key, the engine's default count)
         table["crack_count"] = int(props.crack_count)
+    elif props.crack_scale != 1.0:
+        table["crack_scale"] = f32(props.crack_scale)
     table["seed"] = int(props.seed)
     if props.crack_length > 0.0:
         table["crack_length"] = f32(float(props.crack_length) * scale)

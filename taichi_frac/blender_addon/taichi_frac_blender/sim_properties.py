@@ -35,7 +35,9 @@ MATERIALS = (
 LOOKS = tuple((k, k.replace("_", " ").title(), f"Render the pieces as {k}")
               for k in ("porcelain", "glass", "concrete", "plaster", "steel"))
 STRESS_MODELS = (
-    ("halfspace", "Half-Space", "The exact stress of the contact load on a half-space (default)"),
+    ("auto", "Auto", "The body's own elasticity for slender bodies (plates, rods, rings), which break by "
+                     "bending; the half-space stress for compact ones (default)"),
+    ("halfspace", "Half-Space", "The exact stress of the contact load on a half-space (the paper's model)"),
     ("sph", "SPH", "The paper's SPH estimate of that stress"),
     ("fem", "FEM", "Linear elasticity on the body's own tets, its shape included (slower)"),
 )
@@ -57,14 +59,20 @@ class TaichiFracSimObject(bpy.types.PropertyGroup):
                                  description="Poisson's ratio [-]")
     tensile_strength: FloatProperty(name="Tensile Strength [Pa]", min=1.0, default=35.0e6,
                                     description="Largest principal stress it bears without cracking [Pa]")
+    fracture_toughness: FloatProperty(name="Fracture Toughness [Pa m^0.5]", min=1.0, default=1.0e6,
+                                      description="K_Ic: what new crack surface costs (G_c = K_Ic^2 / E); "
+                                                  "sets the automatic crack count [Pa m^0.5]")
     look: EnumProperty(name="Look", items=LOOKS, default="porcelain", description="How the pieces render")
     friction: FloatProperty(name="Friction", min=0.0, max=10.0, default=0.5, description="Coulomb friction [-]")
     restitution: FloatProperty(name="Restitution", min=0.0, max=1.0, default=0.2,
                                description="Coefficient of restitution [-]")
     # Fracture controls (docs/guide/fracture-controls.md).
     crack_count_auto: BoolProperty(
-        name="Auto Crack Count", default=False,
-        description="Let the engine choose the cracks per impact (its default); off: the count below")
+        name="Auto Crack Count", default=True,
+        description="Cracks per impact from the impact's energy against the material's fracture energy "
+                    "(the engine's default); off: the count below")
+    crack_scale: FloatProperty(name="Crack Scale", min=0.01, max=64.0, default=1.0,
+                               description="Multiplies the automatic crack count (Auto Crack Count only)")
     crack_count: IntProperty(name="Cracks per Impact", min=1, max=64, default=3,
                              description="Planar cracks through each cracking impact point (1: the physical answer)")
     seed: IntProperty(name="Seed", min=0, default=0, description="Seed of the random choices; runs repeat exactly")
@@ -77,7 +85,7 @@ class TaichiFracSimObject(bpy.types.PropertyGroup):
                                         description="Pieces with fewer particles are merged into a neighbour")
     refracture: BoolProperty(name="Pieces Break Again", default=True,
                              description="Fragments may break again on later impacts")
-    stress_model: EnumProperty(name="Stress Model", items=STRESS_MODELS, default="halfspace")
+    stress_model: EnumProperty(name="Stress Model", items=STRESS_MODELS, default="auto")
     crack_roughness: FloatProperty(name="Crack Roughness", min=0.0, default=0.0, unit="LENGTH",
                                    description="Amplitude of the noise on rendered crack faces (0: flat)")
     # Initial motion.

@@ -28,7 +28,7 @@ def draw_object(layout, obj) -> None:
     col = layout.column(align=True)
     col.prop(props, "material")
     if props.material == "custom":
-        for name in ("density", "young_modulus", "poisson_ratio", "tensile_strength", "look"):
+        for name in ("density", "young_modulus", "poisson_ratio", "tensile_strength", "fracture_toughness", "look"):
             col.prop(props, name)
     else:
         density, young, poisson, strength = MATERIAL_PRESETS[props.material]
@@ -45,6 +45,8 @@ def draw_object(layout, obj) -> None:
         sub = row.row(align=True)
         sub.enabled = not props.crack_count_auto
         sub.prop(props, "crack_count")
+        if props.crack_count_auto:
+            box.prop(props, "crack_scale")
         for name in ("seed", "crack_length", "impact_force_threshold", "min_fragment_particles", "refracture",
                      "stress_model", "crack_roughness"):
             box.prop(props, name)
