@@ -3,8 +3,10 @@
 ``report`` runs every part and writes docs/benchmarks.md, its plots in docs/benchmarks/ and
 a headline summary out/benchmarks_summary.md (``--quick``: a smoke version under
 out/bench_quick/). Each part runs alone too (``tables``, ``grouping``, ``sph``, ``scaling``,
-``stability``: prints its markdown, plots under ``--out``). ``dynamics`` prints the
-rigid-body table, ``meshes`` runs every mesh of a folder, ``sweep`` times variant sweeps.
+``stability``: prints its markdown, plots under ``--out``); ``pieces``, ``startup`` and
+``physics`` (the automatic fracture model against experiments) write their own pages
+(``taichi-frac bench physics --out docs``: docs/benchmarks/physics.md and its plots).
+``dynamics`` prints the rigid-body table, ``meshes`` runs every mesh of a folder, ``sweep`` times variant sweeps.
 """
 
 from __future__ import annotations
@@ -77,13 +79,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="taichi-frac bench", description=__doc__.split("\n\n")[0].replace("``", "'"))
     p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
     targets = p.add_subparsers(dest="target", metavar="TARGET")
-    r = targets.add_parser("report", help="run every part but those with their own page (pieces); write "
+    r = targets.add_parser("report", help="run every part but those with their own page (pieces, startup, "
+                                          "physics); write "
                                           "docs/benchmarks.md, its plots and out/benchmarks_summary.md")
     r.add_argument("--quick", action="store_true", help="fast smoke version, written under out/bench_quick/")
     r.add_argument("--out", type=Path, help="folder for benchmarks.md and benchmarks/*.png (default: docs/, "
                                              "or out/bench_quick/ with --quick)")
     r.add_argument("--parts", help="comma-separated subset: tables,grouping,sph,stress_models,scaling,stability "
-                                   "(pieces writes its own page: taichi-frac bench pieces --out docs)")
+                                   "(pieces, startup and physics write their own pages: taichi-frac bench "
+                                   "physics --out docs)")
     r.add_argument("--arch", default="cpu")
     r.set_defaults(func=_run_report)
     from .report import PARTS

@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from . import grouping, pieces, scaling, sph, stability, startup, stress_models, tables
+from . import grouping, physics, pieces, scaling, sph, stability, startup, stress_models, tables
 from .common import REPO, BenchContext, Section, load_average, machine_info, md_table, warm_up
 
 #: The parts in report order: key -> (module, one-line help).
@@ -24,11 +24,13 @@ PARTS = {
     "stability": (stability, "the hard cases of the dynamics and the fracture"),
     "pieces": (pieces, "broken pieces' render surfaces: closed, on their cracks, what a split costs"),
     "startup": (startup, "runs as a user runs them: a fresh process, the cache written, start to exit"),
+    "physics": (physics, "the automatic fracture model against experiments: star cracks, drop height, "
+                         "fragment masses"),
 }
 #: Parts that write their own page under ``docs/benchmarks/`` (``taichi-frac bench
 #: <part> --out docs``), which the report links to rather than repeats: two copies of one
 #: measurement made at different commits would disagree.
-OWN_PAGE = ("pieces", "startup")
+OWN_PAGE = ("pieces", "startup", "physics")
 
 #: The parts ``taichi-frac bench report`` runs by default.
 REPORT_PARTS = tuple(k for k in PARTS if k not in OWN_PAGE)
