@@ -68,8 +68,9 @@ from ..geometry import rows
 from ..model import BodyModel
 from ..options import AUTO, FractureOptions, Material
 from .crack_types import CrackPlane, ImpactAnalysis, RingCrack
-from .energy import crack_counts, energy_limited_extent, hertz_impact_energy, stress_model_of
-from .fem import elastic_body_of, fem_response
+from .energy import bent_force_scale, body_span, crack_counts, relief_length, energy_limited_extent, hertz_impact_energy, stress_model_of
+from .sites import site_cracks, stress_sites
+from .fem import contact_loads, elastic_body_of, fem_response, inertia_relief
 from .field import load_rows
 from .fused import stress_at as _stress_at
 from .halfspace import halfspace_stress_rows
@@ -130,6 +131,7 @@ def analyze_impact(
     *,
     full_field: bool = True,
     energy=None,
+    bending_share=None,
 ) -> ImpactAnalysis:
     """Stress and crack planes of one body's contacts in one step (body frame).
 
@@ -138,6 +140,8 @@ def analyze_impact(
     with |force| below ``options.impact_force_threshold`` are ignored. ``energy``: (K,) [J]
     each contact's approach energy, which sets the crack count under ``crack_count =
     "auto"`` (``energy.py``); None: the energy of the Hertz impact of each force.
+    ``bending_share``: (K,) in [0, 1], how much of the body's bending each contact's impact
+    loads (``energy.bent_force_scale``); None: 1 (the ground, a heavier body).
 
     ``full_field=False`` (the simulation's choice) first computes the stress only at the
     particles within reach of the contacts, which is all the Rankine test and the crack
@@ -151,15 +155,16 @@ def analyze_impact(
     the whole field: analyse again with ``full_field=True`` (the simulation does when it
     writes a cache, whose per-face stress reads it).
     """
-    contact, normal, force, energy = _analysed_contacts(contact_point_body, normal_in_body, force_body,
-                                                        options.impact_force_threshold, energy)
+    contact, normal, force, energy, bending_share = _analysed_contacts(
+        contact_point_body, normal_in_body, force_body, options.impact_force_threshold, energy, bending_share)
     h = smoothing_length(model, options)  # support radius
     points = np.ascontiguousarray(model.particle_position, dtype=np.float64)
     d2, nearest, radius = _load_patches(model, points, contact, options)
     if len(contact) == 0:
         return _no_contact(model, points, contact, normal, force, nearest, radius, h, material, options)
 
-    field = _StressField(model, points, material, options, contact, normal, force, radius, h)
+    field = _StressField(model, points, material, options, contact, normal, force, radius, h, energy,
+                         bending_share)
     in_reach = _analysis_reach(d2, nearest, h, field.kind)
     # (FEM solves the whole body at once: its field is always the full one.)
     local = None if full_field or field.kind == "fem" else np.nonzero(in_reach.any(axis=0))[0]
@@ -194,6 +199,15 @@ def analyze_impact(
     groups = _group_stresses(field, grouped, analysis, normal, displacement, stress, options, counts)
     reach = _energy_reach(options, energy, counts, material, thickness, force, model)
     cracks = _crack_shapes(points, analysis, cracking, groups, particle_peak, h, material, options, reach)
+    if options.crack_count == AUTO and local is None and np.any(cracking):
+        # Rankine away from the contacts: each other overloaded region cracks too (sites.py).
+        spacing = max(2.0 * h, float(np.nanmax(np.where(cracking, thickness, np.nan))))
+        relief = relief_length(model, material, force[cracking], energy[cracking] if energy is not None else None,
+                               None if bending_share is None else bending_share[cracking])
+        sites = stress_sites(model, particle_peak, material.tensile_strength, analysis[cracking], 2.0 * h, relief)
+        first = int(np.nonzero(cracking)[0][0])
+        cracks = cracks + tuple(site_cracks(model, stress, particle_peak, sites, h, spacing, first,
+                                            int(counts.max())))
     counts, group_stress, g_values, g_dirs = groups
     return ImpactAnalysis(
         contact_point=contact, normal_in=normal, force=force, analysis_particle=analysis,
@@ -205,22 +219,28 @@ def analyze_impact(
     )
 
 
-def _analysed_contacts(contact_point_body, normal_in_body, force_body, force_threshold: float, energy=None):
+def _analysed_contacts(contact_point_body, normal_in_body, force_body, force_threshold: float, energy=None,
+                       bending_share=None):
     """(K,3) contact points, unit normals and forces of the contacts at or over
-    ``force_threshold`` [N] (and not zero), and their energies (K,) [J] (None if not given)."""
+    ``force_threshold`` [N] (and not zero), and their energies (K,) [J] and bending shares
+    (K,) (each None if not given)."""
     contact = _as_rows(contact_point_body, "contact_point_body")
     normal = _as_rows(normal_in_body, "normal_in_body")
     force = _as_rows(force_body, "force_body")
     if not (len(contact) == len(normal) == len(force)):
         raise ValueError("contact points, normals and forces must have the same length")
-    if energy is not None:
-        energy = np.atleast_1d(np.asarray(energy, dtype=np.float64))
-        if energy.shape != (len(contact),):
-            raise ValueError(f"energy must hold one value per contact ({len(contact)}), got shape {energy.shape}")
+    per_contact = {}
+    for name, values in (("energy", energy), ("bending_share", bending_share)):
+        if values is not None:
+            values = np.atleast_1d(np.asarray(values, dtype=np.float64))
+            if values.shape != (len(contact),):
+                raise ValueError(f"{name} must hold one value per contact ({len(contact)}), got shape {values.shape}")
+        per_contact[name] = values
     normal = normal / np.linalg.norm(normal, axis=1, keepdims=True)
     keep = np.linalg.norm(force, axis=1) >= force_threshold
     keep &= np.linalg.norm(force, axis=1) > 0.0
-    return contact[keep], normal[keep], force[keep], (None if energy is None else energy[keep])
+    return (contact[keep], normal[keep], force[keep],
+            *(None if v is None else v[keep] for v in (per_contact["energy"], per_contact["bending_share"])))
 
 
 def _scatter(values: np.ndarray, where: np.ndarray, size: int, fill) -> np.ndarray:
@@ -290,10 +310,11 @@ class _StressField:
     come from them) and, under "fem", the whole body's solution (solved once)."""
 
     def __init__(self, model: BodyModel, points: np.ndarray, material: Material, options: FractureOptions,
-                 contact, normal, force, radius, h: float):
+                 contact, normal, force, radius, h: float, energy=None, bending_share=None):
         self.model, self.points, self.material, self.options, self.h = model, points, material, options, h
         self.volumes = np.ascontiguousarray(model.tet_volume, dtype=np.float64)
         self.contact, self.normal, self.force, self.radius = contact, normal, force, radius
+        self.energy, self.bending_share = energy, bending_share
         self.loads = load_rows(contact, normal, force, radius)
         kind = stress_model_of(model, options)
         if kind == "fem" and elastic_body_of(model, material) is None:
@@ -317,6 +338,8 @@ class _StressField:
             if self._fem is None:
                 body = elastic_body_of(model, material)
                 nodal, tet_stress = fem_response(body, self.contact, self.normal, self.force, self.radius)
+                scale = self._bent_scale(body, nodal)
+                nodal, tet_stress = scale * nodal, scale * tet_stress
                 self._fem = (nodal[model.tets].mean(axis=1), tet_stress, largest_principal_stress(tet_stress))
             displacement, stress, peak = self._fem
             return displacement, stress[q_ids], peak[q_ids]
@@ -331,6 +354,21 @@ class _StressField:
         stress, peak = _stress_at(self.points, self.volumes, displacement, self.loads, where, q_ids, q_off, q_idx,
                                   self.h, self.options.corrected_gradient, material)
         return displacement, stress, peak
+
+    def _bent_scale(self, body, nodal) -> float:
+        """``energy.bent_force_scale`` of this step's impacts on the body (their energies and
+        bending shares summed, the bending energy of the joint solution)."""
+        loads = contact_loads(body, self.contact, self.normal, self.force, self.radius)
+        bending = 0.5 * float(np.sum((loads + inertia_relief(body, loads)) * nodal))
+        if self.energy is None:
+            energies = np.array([hertz_impact_energy(float(np.linalg.norm(f)), self.model, self.material)
+                                 for f in self.force])
+        else:
+            energies = self.energy
+        share = np.ones(len(energies)) if self.bending_share is None else self.bending_share
+        total = float(np.sum(energies))
+        weight = float(np.sum(energies * share) / total) if total > 0.0 else 1.0
+        return bent_force_scale(total, bending, weight)
 
     def neighbours_of(self, i: int) -> np.ndarray:
         """Particle i's SPH neighbours (from the rows in hand when the field read them)."""
@@ -435,7 +473,7 @@ def _crack_shapes(points, analysis, cracking, groups, particle_peak, h: float, m
                 reach = np.linalg.norm(rel[near_plane], axis=1)
                 extent = max(h, float(reach.max()) if reach.size else 0.0)
             if np.isfinite(energy_reach[k]):
-                extent = max(h, float(energy_reach[k]))
+                extent = max(h, min(float(energy_reach[k]), body_span(points, origin, crack_normal, h)))
             cracks.append(CrackPlane(point=origin.copy(), normal=crack_normal, extent=extent,
                                      peak_stress=peak, impact_index=k, group_index=g))
         planes = [c for c in cracks if isinstance(c, CrackPlane) and c.impact_index == k]

@@ -5,8 +5,9 @@ approach (1/2 m* v^2, the reduced mass of the touching pair and their approach s
 A crack through the body costs its area times the fracture energy G_c = K_Ic^2 / E_Young
 (Griffith; ``Material.fracture_energy``), and the scale of that cost is one crack right
 through the struck body: E_1 = G_c d L, with d the body's thickness under the contact,
-along the contact normal, and L = sqrt(V / (pi d)) the radius of a disc of that thickness
-holding the body's volume V (a pane's half-width, a ring's tube-and-a-half). The count is
+along the contact normal (the wall it strikes: a ring's tube, not the ring), and
+L = sqrt(V / (pi d)) the radius of a disc of that thickness holding the body's volume V (a
+pane's half-width). The count is
 
     n = crack_scale x (E / E_1)^(1/4), rounded, 1 to 64.
 
@@ -19,8 +20,17 @@ K_Ic) more. Once the stress at the hit exceeds the strength, the cracks run as f
 energy pays for (a brittle crack, once started, runs until the energy it releases no longer
 covers its new surface): n cracks through thickness d cost n G_c d per metre, so each runs
 E / (n G_c d) from the analysis point, across the whole body unless the hit is barely over
-the threshold. With a number for ``crack_count`` they run as far as the stress exceeds the
+the threshold; and no further than the body reaches without a break in the crack's plane
+(:func:`body_span`: a crack cannot run across a hole). With a number for ``crack_count`` they run as far as the stress exceeds the
 strength (or ``crack_length``): the artist then sets the pattern.
+
+**The force a bending body meets.** The contact force is the peak of a Hertz impact
+(``dynamics/impacts.py``), which assumes a rigid body behind the contact. A body that bends
+under the hit (the "fem" model) is softer: its bending takes part of the approach energy,
+and the peak force is lower. Under "fem" the stress field is scaled by the factor
+:func:`bent_force_scale` finds from the energy balance (linear elasticity: the field is
+proportional to the force), for impacts with the ground or heavier bodies in full and for
+light projectiles in proportion to their mass.
 
 **Which stress model** (``stress_model = "auto"``). A slender body -- a plate, a rod, a
 ring, a shell -- breaks by bending: tension on the far side of the hit, which the
@@ -74,8 +84,9 @@ def stress_model_of(model: BodyModel, options: FractureOptions) -> str:
 
 def thickness_under(model: BodyModel, point, normal, radius: float) -> float:
     """d [m]: the body's extent along ``normal`` through ``point`` (body frame): the spread of
-    the particles within ``radius`` of that line, plus one particle spacing (the particles
-    are tet centroids, half a spacing inside each face). At least one spacing."""
+    the particles within ``radius`` of that line, from the first to the last before a gap of
+    more than ``radius`` (the wall the line enters first), plus one particle spacing (the
+    particles are tet centroids, half a spacing inside each face). At least one spacing."""
     x = np.asarray(model.particle_position, dtype=np.float64)
     n = np.asarray(normal, dtype=np.float64)
     n = n / np.linalg.norm(n)
@@ -86,7 +97,11 @@ def thickness_under(model: BodyModel, point, normal, radius: float) -> float:
     spacing = float(np.mean(model.tet_volume)) ** (1.0 / 3.0)
     if np.count_nonzero(near) < 2:
         return spacing
-    return float(along[near].max() - along[near].min()) + spacing
+    # From the contact's side to the first gap (a hole: a ring's far side is another wall).
+    run = np.sort(along[near])
+    gaps = np.nonzero(np.diff(run) > radius)[0]
+    end = run[gaps[0]] if gaps.size else run[-1]
+    return float(end - run[0]) + spacing
 
 
 def crack_energy_scale(model: BodyModel, material: Material, thickness: float) -> float:
@@ -129,6 +144,67 @@ def crack_counts(model: BodyModel, material: Material, options: FractureOptions,
              else float(energy[i]))
         counts[i] = auto_crack_count(e, crack_energy_scale(model, material, thickness[i]), options.crack_scale)
     return counts, thickness
+
+
+def body_span(points: np.ndarray, origin, normal, h: float) -> float:
+    """[m] how far the body reaches, without a break, from ``origin`` in the plane through it
+    normal to ``normal``: the distance to the last particle within ``h`` of the plane before
+    the first gap of more than ``h`` between particles' distances (a hole, the body's edge).
+    A crack cannot run across empty space: a crack through a ring's tube stops at the hole,
+    and does not cut the far side of the ring."""
+    rel = np.asarray(points, dtype=np.float64) - np.asarray(origin, dtype=np.float64)
+    off = rel @ np.asarray(normal, dtype=np.float64)
+    near = np.abs(off) <= h
+    r = np.sort(np.sqrt(np.maximum(np.einsum("ij,ij->i", rel[near], rel[near]) - off[near] ** 2, 0.0)))
+    if r.size == 0:
+        return h
+    gaps = np.nonzero(np.diff(r) > h)[0]
+    if r[0] > h:
+        return h
+    return float(r[gaps[0]] if gaps.size else r[-1]) + 0.5 * h
+
+
+def bent_force_scale(impact_energy: float, bending_energy: float, share: float = 1.0) -> float:
+    """s in (0, 1]: the peak force of an impact on a body that bends, as a fraction of the
+    Hertz force F_H that a rigid body behind the contact would meet (module docstring).
+
+    A Hertz impact stores all its approach energy E in the contact's indentation at its
+    peak, W = 2/5 F delta(F) with delta ~ F^(2/3), so W(s F_H) = s^(5/3) E. A body that also
+    bends (quasi-statically, as its own elasticity answers: ``bending_energy`` U = 1/2 u.K u
+    under F_H) stores s^2 U more, of which ``share`` [0, 1] is loaded: the struck body's
+    share of the pair's mass, m_other / (m_body + m_other) (1 against the ground). A light
+    projectile's short contact is over before a heavy body bends as a whole (the impact is
+    wave-controlled; Olsson, Composites A 31, 2000), a heavy one's or the ground's is not.
+    Energy: s^(5/3) E + share s^2 U = E, solved for s."""
+    if not (impact_energy > 0.0) or not (bending_energy > 0.0) or not (share > 0.0):
+        return 1.0
+    ratio = share * bending_energy / impact_energy
+    low, high = 0.0, 1.0
+    for _ in range(60):  # (monotone in s: bisection to double precision)
+        mid = 0.5 * (low + high)
+        if mid ** (5.0 / 3.0) + ratio * mid * mid > 1.0:
+            high = mid
+        else:
+            low = mid
+    return 0.5 * (low + high)
+
+
+def relief_length(model: BodyModel, material: Material, force, energy=None, share=None) -> float:
+    """[m] c t_c / 2 of a step's cracking impacts (``sites.py``): the bar wave speed
+    c = sqrt(E / rho) times half the longest Hertz contact time, t_c = 2.94 delta / v with
+    delta = 5 W / (2 F) (W = 2/5 F delta, the approach energy) and v = sqrt(2 W / m*), m* the
+    body's mass times its ``share`` (the reduced mass; 1 against the ground)."""
+    force = np.linalg.norm(np.atleast_2d(np.asarray(force, dtype=np.float64)), axis=1)
+    if energy is None:
+        energy = np.array([hertz_impact_energy(float(f), model, material) for f in force])
+    share = np.ones(len(force)) if share is None else np.asarray(share, dtype=np.float64)
+    mass = float(model.mass)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        depth = 2.5 * energy / force
+        speed = np.sqrt(2.0 * energy / (mass * np.maximum(share, 1e-12)))
+        duration = np.where((force > 0) & (speed > 0), 2.94 * depth / speed, 0.0)
+    wave = math.sqrt(material.young_modulus / material.density)
+    return wave * 0.5 * float(np.max(duration, initial=0.0))
 
 
 def energy_limited_extent(energy: float, count: int, material: Material, thickness: float) -> float:

@@ -179,7 +179,8 @@ class FractureStage:
             rows = self._rows_to_analyse(body, rows, impacts)
             if rows is None:
                 continue
-            found = self._analyse(body, rows, impacts, frame, touch_energies(masses, body, rows, impacts))
+            found = self._analyse(body, rows, impacts, frame, touch_energies(masses, body, rows, impacts),
+                                  bending_shares(masses, body, rows, impacts))
             if found is None:
                 continue
             analysis, split = found
@@ -213,7 +214,8 @@ class FractureStage:
             p = (body, int(o))
             self._analysed[p] = max(self._analysed.get(p, 0.0), float(size[i]))
 
-    def _analyse(self, body: int, rows: np.ndarray, impacts: dict, frame: int, energies: np.ndarray):
+    def _analyse(self, body: int, rows: np.ndarray, impacts: dict, frame: int, energies: np.ndarray,
+                 shares: np.ndarray):
         """(analysis, split) of ``body``'s touches ``rows`` when they break it in two or
         more, else None. The stress is computed near the contacts only; the whole field
         only when the cracks do split the body and ``field_stress`` asks for it (in the 13
@@ -227,7 +229,7 @@ class FractureStage:
         points_b, normals_b = impacts["point_body"][rows], impacts["normal_body"][rows]
         force_b = impacts["force_body"][rows]
         analysis = analyze_impact(rec.model, points_b, normals_b, force_b, rec.material, rec.fracture,
-                                  full_field=False, energy=energies)
+                                  full_field=False, energy=energies, bending_share=shares)
         if self.first_analysis_seconds is None:  # (in a new process: its kernels' first launch)
             self.first_analysis_seconds = time.perf_counter() - t
         times.fracture_analysis += time.perf_counter() - t
@@ -244,7 +246,7 @@ class FractureStage:
         if analysis.field_particles is not None and self.field_stress:
             t = time.perf_counter()
             analysis = analyze_impact(rec.model, points_b, normals_b, force_b, rec.material, rec.fracture,
-                                      full_field=True, energy=energies)
+                                      full_field=True, energy=energies, bending_share=shares)
             split = dataclasses.replace(split, fragment_peak_stress=fragment_peak_stress(
                 split.fragment_tets, analysis.particle_principal_stress))
             times.fracture_analysis += time.perf_counter() - t
@@ -301,6 +303,15 @@ def touch_energies(masses: dict, body: int, rows: np.ndarray, impacts: dict) -> 
     other = np.array([masses.get(int(o), np.inf) for o in impacts["other"][rows]], dtype=np.float64)
     reduced = np.where(np.isfinite(other), mass * other / (mass + np.where(np.isfinite(other), other, 0.0)), mass)
     return 0.5 * reduced * speeds**2
+
+
+def bending_shares(masses: dict, body: int, rows: np.ndarray, impacts: dict) -> np.ndarray:
+    """(R,) how much of ``body``'s bending each touch loads (``energy.bent_force_scale``): the
+    other's share of the pair's mass, m_other / (m_body + m_other); 1 for the ground or a
+    static box."""
+    mass = masses[body]
+    other = np.array([masses.get(int(o), np.inf) for o in impacts["other"][rows]], dtype=np.float64)
+    return np.where(np.isfinite(other), other / (mass + np.where(np.isfinite(other), other, 0.0)), 1.0)
 
 
 def impact_event(masses: dict, rows: np.ndarray, impacts: dict, fracture: Fracture) -> dict:
