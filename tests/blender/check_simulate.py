@@ -78,13 +78,14 @@ def cube_and_sphere(scene):
 
 
 def statue(scene):
-    """A porcelain block landing flat at 4.43 m/s (a 1 m drop), which holds."""
+    """A porcelain block landing flat at about 2.9 m/s (a 0.4 m drop), which holds: its peak
+    stress reaches about 28 MPa of porcelain's 35 (it breaks from about 3.8 m/s)."""
     bpy.ops.mesh.primitive_cube_add(size=1.0, location=(-0.6, 0.0, 0.2))
     block = bpy.context.active_object
     block.name = "Statue"
     block.scale = (0.1, 0.1, 0.15)
     block.taichi_frac_sim.role = "BREAKABLE"
-    block.taichi_frac_sim.linear_velocity = (0.0, 0.0, -4.43)
+    block.taichi_frac_sim.linear_velocity = (0.0, 0.0, -2.5)
     return block
 
 
@@ -123,7 +124,7 @@ def section_simulate(workdir: Path):
     check(0.0 < held.result_peak_stress < held.result_strength == 35.0e6,
           f"statue peak {held.result_peak_stress} strength {held.result_strength}")
     check(held.result_frame >= scene.frame_start, f"statue peak frame {held.result_frame}")
-    check(held.result_break_speed > held.result_impact_speed > 4.0,
+    check(held.result_break_speed > held.result_impact_speed > 2.5,
           f"statue speeds {held.result_impact_speed} -> {held.result_break_speed}")
     check(abs(held.result_point[2]) < 0.12 and "MPa" in held.result_note, f"statue point {tuple(held.result_point)}")
     stats = json.loads(Path(os.path.splitext(scene.taichi_frac_sim.cache_path)[0] + ".stats.json").read_text())
