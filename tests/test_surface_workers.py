@@ -168,3 +168,23 @@ def test_a_bad_worker_count_is_one_clear_error(capsys):
     assert main(["run", "single_ring", "--no-output", "--surface-workers", "-1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--surface-workers -1" in err[0] and "0" in err[0], err
+
+
+def test_a_repeated_run_in_the_process_takes_its_cuts_and_writes_the_same_cache(tmp_path, monkeypatch):
+    """The ring cracked three ways, run twice in one process: the second run meets the same
+    splits and cuts none of them again, and its cache is the first's, sample for sample."""
+    from taichi_frac.surfaces import cut as cut_module
+
+    scene = load_scene(SCENES / "single_ring.toml", ["ring.fracture.crack_count=3", "ring.fracture.seed=5"])
+    first = tmp_path / "first.usdc"
+    Simulation(scene, output=first, frames=40).run()
+    real, calls = cut_module.cut_render_solid, []
+    monkeypatch.setattr(cut_module, "cut_render_solid", lambda *a, **k: calls.append(1) or real(*a, **k))
+    second = tmp_path / "second.usdc"
+    summary = Simulation(scene, output=second, frames=40).run()
+    assert summary.fragments >= 3 and calls == []
+    assert cache_digest(first) == cache_digest(second)
+    # Another crack count: other splits, cut afresh.
+    Simulation(load_scene(SCENES / "single_ring.toml", ["ring.fracture.crack_count=2"]), output=tmp_path / "o.usdc",
+               frames=40).run()
+    assert calls

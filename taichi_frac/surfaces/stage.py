@@ -10,6 +10,7 @@ shading of its source surface; a split cuts the parent's render solid along the 
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import time
 from dataclasses import dataclass
@@ -28,6 +29,13 @@ from .solid import render_solid_from_surface, render_solid_from_tets
 #: are most of a body's set-up. The oldest go first past this many.
 ROOT_SURFACES_KEPT = 64
 _ROOT_SURFACES: dict[str, tuple] = {}
+#: Splits cut in this process, by what they cut (``_cut_key``): (the cut render solid, the
+#: pieces' render solids, the cut's counts), all read-only. A run repeated in one process (a
+#: second ``Simulation(scene).run()``, a sweep's variant that changes what does not touch
+#: the splits) meets the same splits and takes their pieces made once: the cuts are most of
+#: what a run with a cache costs besides the physics. The oldest go first past this many.
+CUTS_KEPT = 512
+_CUTS: dict[tuple, tuple] = {}
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,6 +131,26 @@ def _content_key(model: BodyModel, surface) -> str:
     return digest.hexdigest()
 
 
+def _cut_key(render, request: CutRequest) -> tuple:
+    """What a split's cut depends on: the render solid cut (by identity: the memo keeps it
+    alive, and a repeated run's parents are the same objects, from ``_ROOT_SURFACES`` and
+    earlier cuts), the parent's particles, the pieces' tets and origins, the cracks and the
+    options the cut reads."""
+    digest = hashlib.sha256()
+    arrays = [request.model.particle_position, *request.fragment_tets, *[m.com_in_source for m in request.models]]
+    for crack in request.cracks:
+        digest.update(type(crack).__name__.encode())
+        arrays.append(np.concatenate([np.ravel(np.asarray(getattr(crack, f.name), dtype=np.float64))
+                                      for f in dataclasses.fields(crack)]))
+    for array in arrays:
+        array = np.ascontiguousarray(array)
+        digest.update(f"{array.dtype}{array.shape}".encode())
+        digest.update(array.tobytes())
+    o = request.options
+    return (id(render), digest.hexdigest(), o.crack_roughness, o.crack_roughness_scale, o.seed, o.crack_fit_rounds,
+            o.crack_fit_min_tets)
+
+
 class SurfaceStage:
     """Holds each live body's render solid and shading, and cuts them when a body breaks.
 
@@ -177,11 +205,18 @@ class SurfaceStage:
         if render is not None:
             options = request.options
             t = time.perf_counter()
-            renders, counts = _cut.cut_render_solid(
-                render, request.model, request.fragment_tets, request.cracks,
-                [m.com_in_source for m in request.models], roughness=options.crack_roughness,
-                roughness_scale=options.crack_roughness_scale, seed=options.seed,
-                fit_rounds=options.crack_fit_rounds, fit_min_tets=options.crack_fit_min_tets)
+            key = _cut_key(render, request)
+            if key not in _CUTS:
+                renders, counts = _cut.cut_render_solid(
+                    render, request.model, request.fragment_tets, request.cracks,
+                    [m.com_in_source for m in request.models], roughness=options.crack_roughness,
+                    roughness_scale=options.crack_roughness_scale, seed=options.seed,
+                    fit_rounds=options.crack_fit_rounds, fit_min_tets=options.crack_fit_min_tets)
+                while len(_CUTS) >= CUTS_KEPT:
+                    del _CUTS[next(iter(_CUTS))]
+                _CUTS[key] = (render, renders, counts)
+            _render, renders, counts = _CUTS[key]
+            renders = list(renders)
             seconds = time.perf_counter() - t
             self.cuts.append((seconds, counts))
         surfaces = []
