@@ -75,7 +75,7 @@ def test_rolling_sphere_slows_as_rolling_resistance_says(rolling):
 
 
 def test_ring_dropped_on_ground_comes_to_rest():
-    world = fresh_world()
+    world = fresh_world(surface_contact=False)  # its collision spheres held out of the floor
     model = torus_model()
     world.add_ground(0.0, friction=0.5, restitution=0.2)
     tilt = (math.cos(0.15), math.sin(0.15), 0.0, 0.0)
@@ -101,7 +101,7 @@ def test_ring_dropped_on_ground_comes_to_rest():
 
 
 def test_impacts_sum_to_the_momentum_change():
-    world = fresh_world(record_force_threshold=0.0)
+    world = fresh_world(record_force_threshold=0.0, surface_contact=False)  # (its spheres reach the floor)
     model = box_model(0.1, 0.1, 0.1, pieces=200)
     world.add_ground(0.0, restitution=0.0)
     body = world.add_body(model, (0, 0, 0.1), (1, 0, 0, 0), (0, 0, -2.0), (0, 0, 0))
@@ -122,8 +122,9 @@ def test_impact_force_is_the_hertz_peak_whatever_the_substep(substeps):
     # A box dropped flat at 2 m/s on the rigid ground impacts like the sphere of its volume
     # (radius R): Hertz's peak force F = 4/3 E* sqrt(R) d^(3/2), d = (15 m v^2 /
     # (16 E* sqrt(R)))^(2/5), E* = E / (1 - nu^2), and duration 2.94 d / v. The strongest
-    # row of the frame carries them, whatever the substep.
-    world = fresh_world(record_force_threshold=0.0)
+    # row of the frame carries them, whatever the substep. (Sphere contacts: the arrival
+    # speed below is the spheres'.)
+    world = fresh_world(record_force_threshold=0.0, surface_contact=False)
     model = box_model(0.1, 0.1, 0.1, pieces=200)
     world.add_ground(0.0, restitution=0.0)
     e_modulus, nu, speed = 70e9, 0.2, 2.0
@@ -167,7 +168,8 @@ def test_struck_resting_body_is_not_driven_into_the_ground():
 
 
 def test_five_stacked_rings_stay_stacked():
-    world = fresh_world()
+    """On their collision spheres (on their surfaces: test_contact_surface.py)."""
+    world = fresh_world(surface_contact=False)
     model = torus_model()
     world.add_ground(0.0)
     thickness = -2 * lowest_point(model)
@@ -252,8 +254,8 @@ def test_loose_pile_falls_asleep():
     woken by a touch was woken after the substep's contacts were made, so it fell through
     its sleeping supports for a substep, hit them at g dt and woke them in turn; and a
     slowly turning small piece never passed an absolute spin threshold (the test is now on
-    the fastest point, |v| + |w| R). At 2 substeps a frame the pile needs the scenes' 24
-    sweeps: with 10 it creeps for seconds.
+    the fastest point, |v| + |w| R). At 2 substeps a frame the pile needs 24 sweeps: with
+    10 it creeps for seconds.
     How many sleep by 3 s depends on the drop and on the order the solver visits the
     contacts (seeds 0-5, blocks asleep of 64: contacts in the narrowphase's thread order
     64, 63, 53, 64, 58, 41; sorted by particle 59, 53, 56, 47, 57, 51; with rolling
@@ -292,8 +294,9 @@ def test_touching_bodies_sleep_together():
     """A body slow for sleep_time sleeps only when every awake body it touches has been
     slow that long too (then they sleep in the same substep); one settling next to it
     keeps it awake. (Slept alone, its contacts turned rigid under the settling neighbour,
-    whose jolt woke it again: three ring pieces kept each other awake for 1.5 s.)"""
-    world = fresh_world()
+    whose jolt woke it again: three ring pieces kept each other awake for 1.5 s.)
+    The blocks touch on their collision spheres (sphere contacts)."""
+    world = fresh_world(surface_contact=False)
     world.add_ground(0.0)
     block = box_model(0.1, 0.1, 0.05)
     half = -lowest_point(block)  # (the collision spheres stand out of the box)

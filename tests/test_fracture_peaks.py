@@ -1,5 +1,7 @@
 """Why a body did not break (``fracture/peaks.py``, ``taichi-frac run``'s "did not break"
-lines and the stats file's ``unbroken``): a porcelain cube landing on a corner at 12 m/s.
+lines and the stats file's ``unbroken``): a porcelain cube landing on a corner at 12 m/s,
+on its collision spheres (``surface_contact`` off: struck on its true corner, the cube
+breaks at 12 m/s, and at 7 m/s already).
 
 The strength estimate is checked against the simulation itself: the same run with the
 strength just under the reported peak breaks the cube, just over it does not and reports
@@ -32,7 +34,7 @@ def cube_scene(strength: float = 35.0e6, speed: float = CUBE_SPEED) -> Scene:
         fracture=FractureOptions(crack_count=3, crack_length=0.4),
     )
     return Scene(name="cube", objects=[cube], colliders=[Collider.ground(0.0)],
-                 simulation=SimulationOptions(fps=24.0, duration=0.25, substeps=10))
+                 simulation=SimulationOptions(fps=24.0, duration=0.25, substeps=10, surface_contact=False))
 
 
 def unbroken(scene, world):
@@ -83,7 +85,7 @@ def test_run_prints_and_writes_why_it_did_not_break(tmp_path, scene_world, monke
     monkeypatch.setattr(simulation, "Simulation", functools.partial(Simulation, world=scene_world))
     scene = tmp_path / "cube.toml"
     scene.write_text(
-        'name = "cube"\n[simulation]\nfps = 24\nduration = 0.25\n[output]\npath = "cube.usdc"\n'
+        'name = "cube"\n[simulation]\nfps = 24\nduration = 0.25\nsurface_contact = false\n[output]\npath = "cube.usdc"\n'
         '[[colliders]]\ntype = "ground"\n[[objects]]\nname = "cube"\nprimitive = "box:x=0.2,y=0.2,z=0.2"\n'
         'material = "porcelain"\nposition = [0.0, 0.0, 0.3]\neuler_deg = [45.0, 35.0, 0.0]\n'
         'linear_velocity = [0.0, 0.0, -12.0]\n[objects.particles]\ntarget_particles = 400\n')
