@@ -127,7 +127,7 @@ def _check_arguments(args) -> None:
 def run(args) -> int:
     from ..geometry.prepare import prepare_body
     from ..geometry.validate import MeshError
-    from ..options import OptionError, ParticleOptions
+    from ..options import OptionError, ParticleOptions, SimulationOptions
 
     try:
         _check_arguments(args)
@@ -136,7 +136,9 @@ def run(args) -> int:
         _, report = prepare_body(args.source, scale=args.scale, units=args.units, material=args.material,
                                  particles=particles, repair=args.repair, max_volume=args.max_volume,
                                  backend=args.backend, use_cache=not args.no_cache, time_limit=args.time_limit,
-                                 thickness=args.thickness, up_axis=args.up_axis)
+                                 thickness=args.thickness, up_axis=args.up_axis,
+                                 # (the boundary grouping a run gets: its default contact)
+                                 surface_contact=SimulationOptions().surface_contact)
     except (MeshError, OptionError) as exc:
         print(f"taichi-frac info: error: {exc}", file=sys.stderr)
         return 2
