@@ -226,9 +226,72 @@ def test_winding_solid_lattice_of_overlapping_spheres_is_their_union():
     assert np.all(signed_volumes(vertices, tets) > 0)
     assert _in_band(float(signed_volumes(vertices, tets).sum()), union, 0.02)
     extents = np.ptp(vertices, axis=0) / np.array([2 * radius + distance, 2 * radius, 2 * radius])
-    assert np.all(np.abs(extents - 1) <= 0.03), extents
+    assert np.all(np.abs(extents - 1) <= 0.02), extents
     kept, volume = kept_share(pair, vertices, boundary_faces(tets)[0])
-    assert kept >= 0.95 and _in_band(volume, union, 0.03)
+    assert kept >= 0.98 and _in_band(volume, union, 0.03)
+
+
+def _thin_torus():
+    """A torus whose tube (30 mm across) is about 3 particle spacings of 2,000 particles: its
+    copy's chords cut the tube short all round, and 2 % of its height is 0.06 spacings."""
+    return trimesh.creation.torus(0.1, 0.015, major_sections=128, minor_sections=64)
+
+
+def _hand():
+    """A 40 mm ball with five rounded fingers 14 mm thick (about 2 particle spacings of 2,000
+    particles) fanned out in the z = 0 plane: thin parts and tips that set the extents."""
+    from taichi_frac.geometry.repair import _manifold_union
+
+    parts = [trimesh.creation.icosphere(subdivisions=4, radius=0.04)]
+    for angle in np.radians([-60.0, -30.0, 0.0, 30.0, 60.0]):
+        direction = np.array([np.cos(angle), np.sin(angle), 0.0])
+        finger = trimesh.creation.capsule(height=0.06, radius=0.007, count=[32, 32])
+        finger.apply_transform(trimesh.geometry.align_vectors([0.0, 0.0, 1.0], direction))
+        finger.apply_translation(0.06 * direction)
+        parts.append(finger)
+    vertices, faces = _manifold_union([(part.vertices, part.faces) for part in parts])
+    return trimesh.Trimesh(vertices, faces, process=True)
+
+
+DETAILED = {"thin torus": _thin_torus, "hand": _hand}
+
+
+@pytest.mark.parametrize("shape", sorted(DETAILED))
+def test_a_detailed_shape_keeps_its_solid_and_its_extents(shape):
+    """Dense clean surfaces whose copy at the target's spacing has to follow thin, curved parts
+    and tips: 98 % of the solid inside the tets, the box within 2 %, the volume within 0.5 %,
+    at the target count. A quadric copy given its volume back by a uniform offset, or the
+    lattice when that copy misses the count, keeps 97.0 % of the torus and makes it 5.8 % too
+    tall, and 97.4 % of the hand."""
+    mesh = DETAILED[shape]()
+    assert mesh.is_watertight and len(mesh.faces) > 10_000
+    _, report = _prepare(mesh, repair=True)
+    assert report.backend == "tetgen" and report.tet_surface is not None  # the copy, not the lattice
+    assert report.kept_volume_fraction >= 0.98, report.kept_volume_fraction
+    extents = np.asarray(report.tet_extents) / np.asarray(report.input_extents)
+    assert np.all(np.abs(extents - 1) <= 0.02), extents
+    assert abs(report.volume_error) <= 0.005, report.volume_error
+    assert _in_band(report.physics_particles, TARGET, 0.15), report.physics_particles
+
+
+@pytest.mark.parametrize("shape", sorted(DETAILED))
+def test_the_lattice_of_a_detailed_shape_keeps_its_solid_and_its_extents(shape):
+    """The winding-number path's lattice on the same shapes: the boundary fitted to the contour
+    inside the input's box keeps 97.5 % of the solid and the box within 2 % (given its
+    volume back by a uniform offset instead: 97.0 % of the torus, 5.8 % too tall)."""
+    from taichi_frac.geometry.lattice_tets import lattice_tets
+    from taichi_frac.geometry.topology import boundary_faces, signed_volumes
+    from taichi_frac.geometry.winding_solid import winding_solid
+
+    mesh = DETAILED[shape]()
+    solid = winding_solid(mesh, TARGET)
+    vertices, tets, _ = lattice_tets(solid.values, solid.origin, solid.cell, solid.surface, TARGET, mesh.bounds)
+    assert _in_band(len(tets), TARGET, 0.15) and np.all(signed_volumes(vertices, tets) > 0)
+    assert _in_band(float(signed_volumes(vertices, tets).sum()), solid.volume, 0.01)
+    kept, _ = kept_share(mesh, vertices, boundary_faces(tets)[0])
+    assert kept >= 0.975, kept
+    extents = np.ptp(vertices, axis=0) / mesh.extents
+    assert np.all(np.abs(extents - 1) <= 0.02), extents
 
 
 def test_a_crashing_native_step_is_an_error_not_the_end_of_the_process():
@@ -239,3 +302,18 @@ def test_a_crashing_native_step_is_an_error_not_the_end_of_the_process():
 
     with pytest.raises(MeshError, match="crashed"):
         StepClock(seconds=None).run("a native call", crash)
+
+
+def test_the_kept_share_is_measured_at_20000_points_inside_a_slender_solid():
+    """A rod along the box's diagonal fills 4 % of its box: 40,000 points in the box put about
+    1,600 inside it (a standard error of 0.35 % on a kept share of 98 %); the points are drawn
+    until 20,000 lie inside, so the error is 0.1 % whatever the shape."""
+    from taichi_frac.geometry.winding_solid import KEPT_INSIDE, sampled_kept
+
+    rod = trimesh.creation.cylinder(radius=0.02, height=0.3, sections=64)
+    rod.apply_transform(trimesh.geometry.align_vectors([0.0, 0.0, 1.0], [1.0, 1.0, 1.0]))
+    lo, hi = rod.bounds
+    assert rod.volume / np.prod(hi - lo) < 0.05
+    points, held, volume = sampled_kept(rod.vertices, rod.faces, rod.vertices, rod.faces, lo, hi - lo)
+    assert len(points) >= 0.95 * KEPT_INSIDE and held.all()
+    assert _in_band(volume, rod.volume, 0.03), (volume, rod.volume)

@@ -109,16 +109,16 @@ def _share_clock(clock: StepClock, share: float) -> StepClock:
                      step_seconds=clock.step_seconds, crash_hint=clock.crash_hint)
 
 
-def _lattice_mesh(solid, count: int, clock: StepClock):
+def _lattice_mesh(solid, count: int, clock: StepClock, bounds=None):
     """(tet surface, TetMesh, False, step) of the winding-number solid from a cube lattice
-    (``lattice_tets``)."""
+    (``lattice_tets``), inside ``bounds`` ((2,3) [m], the input's box)."""
     from .lattice_tets import lattice_tets
     from .tetra import TetMesh
     from .topology import boundary_faces, dihedral_angles_deg, signed_volumes
 
     start = time.perf_counter()
     vertices, tets, cube = clock.inline("tets from a cube lattice", lattice_tets, solid.values, solid.origin,
-                                        solid.cell, solid.surface, count)
+                                        solid.cell, solid.surface, count, bounds)
     dihedral = dihedral_angles_deg(vertices, tets).min(axis=1)
     volume = float(signed_volumes(vertices, tets).sum())
     tm = TetMesh(vertices=vertices, tets=tets.astype(np.int32), backend="lattice", max_volume=None,
@@ -127,7 +127,7 @@ def _lattice_mesh(solid, count: int, clock: StepClock):
                  seconds=time.perf_counter() - start)
     tet_surface = trimesh.Trimesh(vertices, boundary_faces(tets)[0], process=False)
     return tet_surface, tm, False, (f"filled it with the Kuhn tets of a lattice of {cube:.3g} m cubes, boundary "
-                                    f"vertices moved onto the contour: {len(tets):,} tets")
+                                    f"vertices fitted to the contour: {len(tets):,} tets")
 
 
 def _clean_path(surface, count, kwargs, clock, mesh_surface, check_count=True):
@@ -196,7 +196,7 @@ def solid_of_input(raw: trimesh.Trimesh, name: str, *, count: int, kwargs: dict,
             steps.append("meshed the solid of its winding number")
     solid = winding_solid(raw, count, thickness=thickness, name=name, clock=clock)
     steps.extend(solid.steps)
-    tet_surface, tm, hit, step = _lattice_mesh(solid, count, clock)
+    tet_surface, tm, hit, step = _lattice_mesh(solid, count, clock, _box(raw, thickness))
     steps.append(step)
     if surface is None:
         surface = solid.surface
@@ -205,6 +205,17 @@ def solid_of_input(raw: trimesh.Trimesh, name: str, *, count: int, kwargs: dict,
     kept, volume = kept_share(raw, tm.vertices, _boundary(tm.tets), clock)
     return InputSolid(surface=surface, tet_surface=tet_surface, tets=tm, cache_hit=hit, steps=steps,
                       kept_fraction=kept, input_volume=volume, input_extents=extents, path="winding number")
+
+
+def _box(raw: trimesh.Trimesh, thickness: float | None):
+    """(2,3) [m] the box of the input's faces of positive area (grown by half of
+    ``thickness``), which the winding-number solid's tets stay inside; None without faces."""
+    used = usable_faces(raw.vertices, raw.faces)
+    if len(used) == 0:
+        return None
+    corners = np.asarray(raw.vertices, dtype=np.float64)[np.unique(used)]
+    grow = 0.5 * thickness if thickness else 0.0
+    return np.stack([corners.min(axis=0) - grow, corners.max(axis=0) + grow])
 
 
 def _boundary(tets: np.ndarray) -> np.ndarray:

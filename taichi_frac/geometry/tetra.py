@@ -9,7 +9,9 @@ Backends are plain functions ``(vertices, faces, max_volume, min_dihedral_deg) -
   genus, sharp features kept), ~0.1 s for 5,000 tets. Its quality refinement overshoots a
   volume bound (``maxvolume`` needs ``fixedvolume=True``), so :func:`tetrahedralize`
   calibrates: it starts from an empirical ratio and, if the count misses the target by more
-  than ``tolerance``, re-runs once with the bound scaled by the miss (count ~ 1/max_volume).
+  than ``tolerance``, re-runs with the bound scaled by the miss (count ~ 1/max_volume), and
+  where that misses too (a surface that sets part of the count), once more on the line
+  count = floor + slope / max_volume the two runs fix.
 - ``wildmeshing`` (fTetWild, MPL-2.0, optional): robust to dirty input, but ~50x slower
   and it approximates the surface within an envelope (volume off by ~0.2 %).
 """
@@ -199,7 +201,7 @@ def tetrahedralize(
 ) -> TetMesh:
     """Fill the closed surface ``mesh`` [m] with tets.
 
-    Give ``target_tets`` (calibrated to land within ``tolerance`` where one re-run can do
+    Give ``target_tets`` (calibrated to land within ``tolerance`` where two re-runs can do
     it) or ``max_volume`` [m^3] (handed to the mesher as is; tetgen's final optimisation
     may leave under 1 % of the tets up to ~15 % above it), or neither (the mesher's coarsest quality
     mesh). ``min_dihedral_deg`` is the quality bound handed to the mesher; the result
@@ -251,8 +253,16 @@ def tetrahedralize(
             # Count ~ 1/bound away from the surface-resolution floor: one proportional step.
             retry_bound = bound * miss
             v2, t2 = mesh_once(retry_bound)
+            seen = [(bound, len(t)), (retry_bound, len(t2))]
             if abs(len(t2) / target_tets - 1.0) < abs(miss - 1.0):
                 v, t, bound = v2, t2, retry_bound
+            # Where the surface sets part of the count (fine copies of artists' surfaces), the
+            # proportional step falls short: the two counts fix the floor and the slope.
+            third = _next_bound(seen, target_tets) if abs(len(t) / target_tets - 1.0) > tolerance else None
+            if third is not None:
+                v2, t2 = mesh_once(third)
+                if abs(len(t2) / target_tets - 1.0) < abs(len(t) / target_tets - 1.0):
+                    v, t, bound = v2, t2, third
         if relaxed_tetgen and len(t) > (1.0 + count_tolerance) * target_tets:
             # The quality bound forces small tets along short surface features or thin parts
             # whatever the volume bound: trade quality for the count, reported as the min

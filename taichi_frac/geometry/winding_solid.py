@@ -12,9 +12,11 @@ the target (so about 8 x target cells lie inside: its cost is set by the target 
 bounding box's fill, not by the input), makes it a signed distance near the surface (the
 sign from w, the size from the distance to the input's triangles, libigl's AABB tree), and
 contours the zero level with scikit-image's marching cubes (Lewiner et al. 2003), whose
-output on a grid padded with outside cells is closed and manifold by construction. That
-surface is then meshed like a clean one. No step can refuse an input with a volume, and the
-time is bounded by the grid size (capped at :data:`MAX_GRID_POINTS`).
+output on a grid padded with outside cells is closed and manifold by construction. Marching
+cubes interpolates between samples, which cuts sharp edges and tapered parts: contour
+vertices within a quarter cell of the input move onto it (:func:`_snap_to_input`). No step
+can refuse an input with a volume, and the time is bounded by the grid size (capped at
+:data:`MAX_GRID_POINTS`).
 
 Parts thinner than a grid cell (a blade, a fin) fall between the samples. Points on the
 input's surface whose inner side is clearly inside (|w| >= 3/4 just behind the surface, which
@@ -146,24 +148,38 @@ def winding_numbers(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray,
     return clock.run(step, _winding_numbers, vertices, faces, points)
 
 
-#: Random points in the input's box at which a kept share is measured (:func:`sampled_kept`):
-#: its standard error is about sqrt(p (1 - p) / n) of the box, under 0.3 % of the solid for
-#: solids filling over 5 % of their box.
+#: A kept share (:func:`sampled_kept`) is measured at random points of the input's box, drawn
+#: :data:`KEPT_SAMPLES` at a time until :data:`KEPT_INSIDE` of them lie inside the input's
+#: solid (or :data:`KEPT_MAX_SAMPLES` are drawn): its standard error is then about
+#: sqrt(k (1 - k) / 20,000), 0.1 % at a share k of 98 %, whatever share of its box the solid
+#: fills. A fixed 40,000 points in the box leave a slender solid (a scorpion, 4 % of its box)
+#: about 1,600 inside, an error of 0.35 %.
 KEPT_SAMPLES = 40_000
+KEPT_INSIDE = 20_000
+KEPT_MAX_SAMPLES = 1_000_000
 
 
 def sampled_kept(input_vertices, input_faces, vertices, faces, lo: np.ndarray, size: np.ndarray, *,
-                 samples: int = KEPT_SAMPLES, seed: int = 0, clock: StepClock | None = None,
-                 step: str = "winding numbers (libigl)"):
-    """The input surface's winding-number solid sampled at ``samples`` random points of the
-    box ``lo`` + [0, ``size``] [m], and which of its points the closed surface (``vertices``,
+                 samples: int = KEPT_SAMPLES, inside: int = KEPT_INSIDE, max_samples: int = KEPT_MAX_SAMPLES,
+                 seed: int = 0, clock: StepClock | None = None, step: str = "winding numbers (libigl)"):
+    """The input surface's winding-number solid sampled at random points of the box ``lo`` +
+    [0, ``size``] [m] (``samples`` at a time until ``inside`` lie in the solid or
+    ``max_samples`` are drawn), and which of its points the closed surface (``vertices``,
     ``faces``) holds: (the points inside the input (K,3), held (K,) bool, the input solid's
     volume [m^3])."""
-    points = lo + size * np.random.default_rng(seed).random((samples, 3))
-    inside = np.abs(winding_numbers(input_vertices, input_faces, points, clock, step)) >= 0.5
-    points = points[inside]
-    held = np.abs(winding_numbers(vertices, faces, points, clock, step)) >= 0.5 if len(points) else np.zeros(0, bool)
-    return points, held, float(np.prod(size) * len(points) / samples)
+    rng = np.random.default_rng(seed)
+    batch = lo + size * rng.random((samples, 3))
+    found = batch[np.abs(winding_numbers(input_vertices, input_faces, batch, clock, step)) >= 0.5]
+    drawn = samples
+    if 0 < len(found) < inside and samples < max_samples:
+        # The rest in one call, as many as the first batch's share inside asks for (+10 %).
+        more = min(int(1.1 * (inside - len(found)) * samples / len(found)) + 1, max_samples - samples)
+        batch = lo + size * rng.random((more, 3))
+        found = np.concatenate([found, batch[np.abs(winding_numbers(input_vertices, input_faces, batch, clock,
+                                                                    step)) >= 0.5]])
+        drawn += more
+    held = np.abs(winding_numbers(vertices, faces, found, clock, step)) >= 0.5 if len(found) else np.zeros(0, bool)
+    return found, held, float(np.prod(size) * len(found) / drawn)
 
 
 def _grid(lo: np.ndarray, hi: np.ndarray, cell: float, pad: int = 2):
@@ -300,14 +316,70 @@ def winding_solid(mesh: trimesh.Trimesh, target_particles: int, *, thickness: fl
     values[[0, -1], :, :] = values[:, [0, -1], :] = values[:, :, [0, -1]] = -cell  # a closed contour
     surface = clock.inline("contour (marching cubes)", _contour, values, origin, cell)
     surface, dropped = _drop_specks(surface)
+    snapped = 0
+    if not thickness:
+        surface, snapped = clock.inline("contour onto the input", _snap_to_input, surface, vertices, faces, cell,
+                                        clock)
     steps.append(f"built the solid from the input's generalized winding number on a {shape[0]}x{shape[1]}x{shape[2]} "
                  f"grid of {cell:.3g} m and contoured it (marching cubes): {len(surface.faces):,} faces, "
                  f"{surface.volume:.4g} m^3")
+    if snapped:
+        steps.append(f"moved {snapped:,} contour vertices within {SNAP_CELLS:g} grid cell of the input onto it")
     if dropped:
         steps.append(f"dropped {dropped} separate specks under {100 * SPECK_FRACTION:g} % of the solid's volume")
     return WindingSolid(surface=surface, volume=float(surface.volume), cell=float(cell), grid_points=len(points),
                         thickened_points=len(thin), dropped_parts=dropped, steps=steps, values=values,
                         origin=origin)
+
+
+#: Contour vertices within this many grid cells of the input move onto it
+#: (:func:`_snap_to_input`); the surface of a thin part kept a particle spacing thick lies a
+#: cell from the input, and stays.
+SNAP_CELLS = 0.25
+#: A snap that turns a contour triangle by more than this [degrees] is undone.
+SNAP_MAX_TURN_DEG = 60.0
+
+
+def _snap_to_input(surface: trimesh.Trimesh, vertices, faces, cell: float, clock=None):
+    """``surface`` (the contour) with each vertex within :data:`SNAP_CELLS` grid cells of the
+    input's triangles (``vertices``, ``faces``) moved onto its closest point there, and the
+    number moved. Marching cubes interpolates the sampled distance linearly between grid
+    points, which cuts sharp edges and thin tapered parts (a sword's edges: the contour keeps
+    97.1 % of the blade's solid, 98.0 % once snapped); the snap puts the contour on the input
+    where the input is its surface. Vertices of triangles the snap turns by more than
+    :data:`SNAP_MAX_TURN_DEG` go back."""
+    points = np.asarray(surface.vertices, dtype=np.float64)
+    if clock is not None:
+        closest = clock.run("closest points on the input (libigl)", _closest, vertices, faces, points)
+    else:
+        closest = _closest(vertices, faces, points)
+    near = np.linalg.norm(closest - points, axis=1) <= SNAP_CELLS * cell
+    if not near.any():
+        return surface, 0
+    snapped = surface.copy()
+    moved = points.copy()
+    moved[near] = closest[near]
+    snapped.vertices = moved
+    cos_turn = np.cos(np.radians(SNAP_MAX_TURN_DEG))
+    normals = surface.face_normals
+    for _ in range(5):
+        turned = np.einsum("ij,ij->i", snapped.face_normals, normals) < cos_turn
+        if not turned.any():
+            break
+        back = np.unique(np.asarray(surface.faces)[turned])
+        moved[back] = points[back]
+        near[back] = False
+        snapped.vertices = moved
+    return snapped, int(near.sum())
+
+
+def _closest(vertices, faces, points) -> np.ndarray:
+    import igl
+
+    _, _, closest = igl.point_mesh_squared_distance(np.ascontiguousarray(points, dtype=np.float64),
+                                                    np.ascontiguousarray(vertices, dtype=np.float64),
+                                                    np.ascontiguousarray(faces, dtype=np.int64))
+    return np.asarray(closest, dtype=np.float64)
 
 
 def _band(inside: np.ndarray) -> np.ndarray:
