@@ -204,3 +204,17 @@ def test_first_hits_against_a_box_and_brute_force(path, monkeypatch):
     assert np.array_equal(np.isinf(got), np.isinf(expected)) and np.isfinite(expected).sum() > 20
     np.testing.assert_allclose(got[np.isfinite(got)], expected[np.isfinite(expected)], rtol=1e-12)
 
+
+
+def test_a_refused_surface_leaves_no_files_in_the_working_directory(tmp_path, monkeypatch):
+    """TetGen writes the facets it skips ("_skipped.node", "_skipped.face") where it runs: a
+    self-intersecting pair of boxes must be refused without a file in the user's folder."""
+    from taichi_frac.geometry.validate import MeshError
+
+    a, b = trimesh.creation.box((1.0, 1.0, 1.0)), trimesh.creation.box((1.0, 1.0, 1.0))
+    b.apply_translation((0.5, 0.5, 0.5))
+    pair = trimesh.util.concatenate([a, b])
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(MeshError):
+        tetrahedralize(pair, max_volume=0.01)
+    assert list(tmp_path.iterdir()) == []

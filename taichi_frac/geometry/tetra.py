@@ -82,10 +82,24 @@ def _tetgen(vertices, faces, max_volume, min_dihedral_deg, minratio=1.5, optimis
     if max_volume is not None:
         kwargs.update(fixedvolume=True, maxvolume=float(max_volume))
     try:
-        out = tetgen.TetGen(vertices, faces).tetrahedralize(**kwargs)
+        with _in_scratch_dir():  # (where it refuses facets it writes "_skipped.node/.face")
+            out = tetgen.TetGen(vertices, faces).tetrahedralize(**kwargs)
     except RuntimeError as exc:  # tetgen reports self-intersections and bad PLCs this way
         raise MeshError(f"tetgen failed: {exc}; try repair=True or backend='wildmeshing'") from exc
     return np.asarray(out[0], dtype=np.float64), np.asarray(out[1], dtype=np.int64)
+
+
+@contextlib.contextmanager
+def _in_scratch_dir():
+    """Work in a scratch folder: the native meshers write files into the working directory
+    (TetGen the facets it skips, fTetWild its tracked surface), which is the user's."""
+    cwd = os.getcwd()
+    with tempfile.TemporaryDirectory() as scratch:
+        os.chdir(scratch)
+        try:
+            yield
+        finally:
+            os.chdir(cwd)
 
 
 @contextlib.contextmanager
@@ -93,11 +107,9 @@ def _native_stdout_silenced_in_scratch_dir():
     """fTetWild prints every pass with std::cout (it would corrupt `info --json`) and writes
     "__tracked_surface.stl" into the working directory: point file descriptor 1 at
     /dev/null and work in a scratch folder while it runs."""
-    cwd = os.getcwd()
     sys.stdout.flush()
     saved_stdout = os.dup(1)
-    with tempfile.TemporaryDirectory() as scratch, open(os.devnull, "w") as devnull:
-        os.chdir(scratch)
+    with _in_scratch_dir(), open(os.devnull, "w") as devnull:
         os.dup2(devnull.fileno(), 1)
         try:
             yield
@@ -107,7 +119,6 @@ def _native_stdout_silenced_in_scratch_dir():
             ctypes.CDLL(None).fflush(None)
             os.dup2(saved_stdout, 1)
             os.close(saved_stdout)
-            os.chdir(cwd)
 
 
 def _wildmeshing(vertices, faces, max_volume, min_dihedral_deg):
