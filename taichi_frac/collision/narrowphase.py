@@ -303,6 +303,14 @@ def _pair_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.
                                                wake_speed, dt, i, a, xi, ri, o, rot, local, closing, carried, k)
 
 
+#: Two collision spheres overlapping by more than this many times the larger radius belong to
+#: bodies that interpenetrate there (two bodies placed overlapping): their sphere contact is
+#: kept under surface contact too. The patches of such bodies meet only where their surfaces
+#: cross, a few millimetres deep, and would hold them together; a body resting on another
+#: overlaps its spheres by a fraction of a radius (they stand proud of its surface).
+INTERPENETRATING = 1.0
+
+
 @ti.func
 def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.template(), contacts: ti.template(),
                patches: ti.template(), margin, sleep_time, wake_speed, dt, i, a, xi, ri, o, rot, local, closing,
@@ -358,7 +366,10 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
                     _keep_hull(particles, i, j, rot.transpose() @ n_patch, simplex)
                 else:
                     n_patch, gap_patch, spot_a, spot_o = surface.pair(bodies, particles, a, i, o, j, n)
-                if gap_patch >= -ti.static(surface.TRUSTED_DEPTH) * ti.max(ri, rj):
+                # (spheres overlapping by more than the larger radius: bodies interpenetrating,
+                # whose patches meet only where the surfaces cross; the spheres push them apart)
+                if gap_patch >= -ti.static(surface.TRUSTED_DEPTH) * ti.max(ri, rj) \
+                        and gap >= -ti.static(INTERPENETRATING) * ti.max(ri, rj):
                     n, gap, x_a, x_o = n_patch, gap_patch, spot_a, spot_o
                     # Where along the surfaces: the smaller patch's spot (a chip on a wide
                     # patch touches under itself; the two spots' mean lay off the chip and
