@@ -139,7 +139,9 @@ def analyze_impact(
     body, [N]) are (3,) for one contact or (K,3) for several analysed together. Contacts
     with |force| below ``options.impact_force_threshold`` are ignored. ``energy``: (K,) [J]
     each contact's approach energy, which sets the crack count under ``crack_count =
-    "auto"`` (``energy.py``); None: the energy of the Hertz impact of each force.
+    "auto"`` (``energy.py``) and, under "fem", the force a bending body meets
+    (``energy.bent_force_scale``); None: the count from the energy of the Hertz impact of each
+    force, and the forces taken as they are.
     ``bending_share``: (K,) in [0, 1], how much of the body's bending each contact's impact
     loads (``energy.bent_force_scale``); None: 1 (the ground, a heavier body).
 
@@ -357,14 +359,13 @@ class _StressField:
 
     def _bent_scale(self, body, nodal) -> float:
         """``energy.bent_force_scale`` of this step's impacts on the body (their energies and
-        bending shares summed, the bending energy of the joint solution)."""
+        bending shares summed, the bending energy of the joint solution); 1 for forces given
+        without the impacts' energies (the stress of those forces as they are)."""
+        if self.energy is None:
+            return 1.0
         loads = contact_loads(body, self.contact, self.normal, self.force, self.radius)
         bending = 0.5 * float(np.sum((loads + inertia_relief(body, loads)) * nodal))
-        if self.energy is None:
-            energies = np.array([hertz_impact_energy(float(np.linalg.norm(f)), self.model, self.material)
-                                 for f in self.force])
-        else:
-            energies = self.energy
+        energies = self.energy
         share = np.ones(len(energies)) if self.bending_share is None else self.bending_share
         total = float(np.sum(energies))
         weight = float(np.sum(energies * share) / total) if total > 0.0 else 1.0
