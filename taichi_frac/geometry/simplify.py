@@ -174,7 +174,6 @@ def relax_tangentially(mesh: trimesh.Trimesh, iterations: int = 4, step: float =
     import scipy.sparse as sp
 
     relaxed = mesh.copy()
-    faces = np.asarray(mesh.faces)
     edges = np.asarray(mesh.edges_unique)
     n = len(mesh.vertices)
     rows = np.concatenate([edges[:, 0], edges[:, 1]])
@@ -198,14 +197,7 @@ def relax_tangentially(mesh: trimesh.Trimesh, iterations: int = 4, step: float =
         move -= np.einsum("ij,ij->i", move, normal)[:, None] * normal
         moved = onto(before + step * move)
         relaxed.vertices = np.where(movable[:, None], moved, before)
-        for _ in range(5):  # undo the moves around faces that turned too far
-            turned = np.einsum("ij,ij->i", relaxed.face_normals, normals_before) < cos_turn
-            if not turned.any():
-                break
-            undo = np.unique(faces[turned])
-            vertices = relaxed.vertices.copy()
-            vertices[undo] = before[undo]
-            relaxed.vertices = vertices
+        _undo_turned(relaxed, before, normals_before, cos_turn)  # (the moves around faces that turned too far)
     return relaxed
 
 
