@@ -33,8 +33,10 @@ _ROOT_SURFACES: dict[str, tuple] = {}
 #: pieces' render solids, the cut's counts), all read-only. A run repeated in one process (a
 #: second ``Simulation(scene).run()``, a sweep's variant that changes what does not touch
 #: the splits) meets the same splits and takes their pieces made once: the cuts are most of
-#: what a run with a cache costs besides the physics. The oldest go first past this many.
-CUTS_KEPT = 512
+#: what a run with a cache costs besides the physics. The oldest go first past this many
+#: (the 13 rings make about 30 splits a run; a sweep's worker, whose variants meet other
+#: splits, keeps no more than this many pieces' solids alive).
+CUTS_KEPT = 128
 _CUTS: dict[tuple, tuple] = {}
 
 
