@@ -40,6 +40,8 @@ import itertools
 import numpy as np
 import trimesh
 
+from .topology import signed_volumes
+
 #: A cube is kept when its centre lies inside the solid or within this many cubes of it.
 CENTRE_REACH = 0.2
 #: Tries of the cube size calibration.
@@ -119,11 +121,6 @@ def _largest_parts(vertices, tets, fraction: float = 0.002):
     return tets[sizes[label] >= fraction * len(tets)]
 
 
-def _signed_volumes(vertices, tets):
-    a, b, c, d = (vertices[tets[:, k]] for k in range(4))
-    return np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a)) / 6.0
-
-
 def _snap(vertices, tets, contour: trimesh.Trimesh, cube: float, lattice=None):
     """Boundary vertices moved onto ``contour`` (at most one cube from their ``lattice``
     places), no tet flattened."""
@@ -141,21 +138,7 @@ def _snap(vertices, tets, contour: trimesh.Trimesh, cube: float, lattice=None):
         reach = np.asarray(nearest) - lattice[boundary]
         length = np.linalg.norm(reach, axis=1, keepdims=True)
         move = reach * np.minimum(1.0, cube / np.maximum(length, 1e-300)) + lattice[boundary] - vertices[boundary]
-    scale = np.ones(len(boundary))
-    position = np.full(len(vertices), -1, dtype=np.int64)
-    position[boundary] = np.arange(len(boundary))
-    floor = MIN_VOLUME_FRACTION * cube**3 / 6.0
-    moved = vertices.copy()
-    for halving in range(MOVE_HALVINGS + 1):
-        moved[boundary] = vertices[boundary] + scale[:, None] * move
-        flat = _signed_volumes(moved, tets) < floor
-        if not flat.any():
-            return moved
-        at = position[np.unique(tets[flat])]
-        at = at[at >= 0]
-        scale[at] = 0.0 if halving == MOVE_HALVINGS - 1 else 0.5 * scale[at]
-    moved[boundary] = vertices[boundary] + scale[:, None] * move
-    return moved
+    return _move_guarded(vertices, tets, boundary, move, MIN_VOLUME_FRACTION * cube**3 / 6.0)
 
 
 #: Rounds of boundary moves and interior smoothing: the interior vertices make room, so the
@@ -183,7 +166,7 @@ def _settle(vertices, tets, contour, cube):
         smoothed = vertices.copy()
         inner = ~boundary
         smoothed[inner] = 0.5 * (vertices[inner] + (adjacency @ vertices)[inner] / degree[inner])
-        flat = _signed_volumes(smoothed, tets) < floor
+        flat = signed_volumes(smoothed, tets) < floor
         if flat.any():
             undo = np.unique(tets[flat])
             smoothed[undo] = vertices[undo]
@@ -205,7 +188,7 @@ def _build(values, origin, cell, contour, cube):
     vertices = _settle(vertices, tets, contour, cube)
     # A cube mostly outside the solid has its outer vertices pulled onto the contour: its
     # tets there are flat and hold no volume, so they go.
-    tets = tets[_signed_volumes(vertices, tets) >= FLAT_FRACTION * cube**3 / 6.0]
+    tets = tets[signed_volumes(vertices, tets) >= FLAT_FRACTION * cube**3 / 6.0]
     vertices, tets, _ = compact_vertices(vertices, tets)
     return vertices, np.asarray(tets, dtype=np.int64)
 
@@ -220,7 +203,7 @@ def _move_guarded(vertices, tets, at, move, floor):
     moved = vertices.copy()
     for halving in range(MOVE_HALVINGS + 1):
         moved[at] = vertices[at] + scale[:, None] * move
-        flat = _signed_volumes(moved, tets) < floor
+        flat = signed_volumes(moved, tets) < floor
         if not flat.any():
             return moved
         hit = position[np.unique(tets[flat])]
@@ -254,7 +237,7 @@ def _fit_boundary(vertices, tets, contour: trimesh.Trimesh, cube: float, bounds)
         target = np.clip(vertices[at] + move[at], lo, hi)
         vertices = _move_guarded(vertices, tets, at, target - vertices[at], floor)
     surface = trimesh.Trimesh(vertices, faces, process=False)
-    offset = (float(contour.volume) - float(_signed_volumes(vertices, tets).sum())) / max(float(surface.area), 1e-300)
+    offset = (float(contour.volume) - float(signed_volumes(vertices, tets).sum())) / max(float(surface.area), 1e-300)
     target = np.clip(vertices[at] + offset * surface.vertex_normals[at], lo, hi)
     vertices = _move_guarded(vertices, tets, at, target - vertices[at], floor)
     ends = np.asarray(contour.vertices, dtype=np.float64)
