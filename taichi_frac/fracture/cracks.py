@@ -68,7 +68,8 @@ from ..geometry import rows
 from ..model import BodyModel
 from ..options import AUTO, FractureOptions, Material
 from .crack_types import CrackPlane, ImpactAnalysis, RingCrack
-from .energy import bent_force_scale, body_span, crack_counts, relief_length, energy_limited_extent, hertz_impact_energy, stress_model_of
+from .energy import (bent_force_scale, body_span, crack_counts, energy_limited_extent, impact_energies,
+                     relief_length, stress_model_of)
 from .sites import site_cracks, stress_sites
 from .fem import contact_loads, elastic_body_of, fem_response, inertia_relief
 from .field import load_rows
@@ -195,16 +196,16 @@ def analyze_impact(
     # (the simulation's): only the crack directions read the groups, and most impacts crack
     # nothing, and each analysis skipped saves three launches.
     grouped = np.arange(len(contact)) if full_field else np.nonzero(cracking)[0]
-    counts, thickness = crack_counts(model, material, options, contact[grouped], normal[grouped], force[grouped],
-                                     None if energy is None else energy[grouped], h)
+    energies = impact_energies(model, material, force, energy)
+    counts, thickness = crack_counts(model, material, options, contact[grouped], normal[grouped], energies[grouped], h)
     counts, thickness = _scatter(counts, grouped, len(contact), 1), _scatter(thickness, grouped, len(contact), np.nan)
     groups = _group_stresses(field, grouped, analysis, normal, displacement, stress, options, counts)
-    reach = _energy_reach(options, energy, counts, material, thickness, force, model)
+    reach = _energy_reach(options, energies, counts, material, thickness)
     cracks = _crack_shapes(points, analysis, cracking, groups, particle_peak, h, material, options, reach)
     if options.crack_count == AUTO and local is None and np.any(cracking):
         # Rankine away from the contacts: each other overloaded region cracks too (sites.py).
         spacing = max(2.0 * h, float(np.nanmax(np.where(cracking, thickness, np.nan))))
-        relief = relief_length(model, material, force[cracking], energy[cracking] if energy is not None else None,
+        relief = relief_length(model, material, force[cracking], energies[cracking],
                                None if bending_share is None else bending_share[cracking])
         sites = stress_sites(model, particle_peak, material.tensile_strength, analysis[cracking], 2.0 * h, relief)
         first = int(np.nonzero(cracking)[0][0])
@@ -252,16 +253,14 @@ def _scatter(values: np.ndarray, where: np.ndarray, size: int, fill) -> np.ndarr
     return out
 
 
-def _energy_reach(options: FractureOptions, energy, counts, material: Material, thickness, force, model):
-    """(K,) [m] how far each contact's cracks run on its energy (``energy.py``); inf where
-    the count is the artist's (a number) or the length is given."""
+def _energy_reach(options: FractureOptions, energies, counts, material: Material, thickness):
+    """(K,) [m] how far each contact's cracks run on its energy ``energies`` (K,) [J]
+    (``energy.py``); inf where the count is the artist's (a number) or the length is given."""
     reach = np.full(len(counts), np.inf)
     if options.crack_count != AUTO or options.crack_length is not None:
         return reach
     for k in range(len(counts)):
-        e = (hertz_impact_energy(float(np.linalg.norm(force[k])), model, material) if energy is None
-             else float(energy[k]))
-        reach[k] = energy_limited_extent(e, int(counts[k]), material, float(thickness[k]))
+        reach[k] = energy_limited_extent(float(energies[k]), int(counts[k]), material, float(thickness[k]))
     return reach
 
 

@@ -129,10 +129,19 @@ def hertz_impact_energy(force: float, model: BodyModel, material: Material) -> f
     return 0.4 * force * delta
 
 
-def crack_counts(model: BodyModel, material: Material, options: FractureOptions, contact, normal, force,
-                 energy, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per contact (K,): the crack count and the thickness d [m] under it. ``energy`` (K,)
-    [J] or None (then each contact's Hertz energy from its force)."""
+def impact_energies(model: BodyModel, material: Material, force, energy=None) -> np.ndarray:
+    """(K,) [J] the approach energies of impacts of peak forces ``force`` (K,3) [N]:
+    ``energy`` where given, else each force's :func:`hertz_impact_energy`."""
+    if energy is not None:
+        return np.asarray(energy, dtype=np.float64)
+    return np.array([hertz_impact_energy(float(f), model, material)
+                     for f in np.linalg.norm(np.atleast_2d(np.asarray(force, dtype=np.float64)), axis=1)])
+
+
+def crack_counts(model: BodyModel, material: Material, options: FractureOptions, contact, normal, energy,
+                 radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per contact (K,): the crack count and the thickness d [m] under it; ``energy`` (K,)
+    [J] the impacts' (:func:`impact_energies`)."""
     k = len(contact)
     if options.crack_count != AUTO:
         return np.full(k, int(options.crack_count), dtype=np.int64), np.full(k, np.nan)
@@ -140,9 +149,8 @@ def crack_counts(model: BodyModel, material: Material, options: FractureOptions,
     thickness = np.zeros(k)
     for i in range(k):
         thickness[i] = thickness_under(model, contact[i], normal[i], radius)
-        e = (hertz_impact_energy(float(np.linalg.norm(force[i])), model, material) if energy is None
-             else float(energy[i]))
-        counts[i] = auto_crack_count(e, crack_energy_scale(model, material, thickness[i]), options.crack_scale)
+        counts[i] = auto_crack_count(float(energy[i]), crack_energy_scale(model, material, thickness[i]),
+                                     options.crack_scale)
     return counts, thickness
 
 
@@ -156,11 +164,9 @@ def body_span(points: np.ndarray, origin, normal, h: float) -> float:
     off = rel @ np.asarray(normal, dtype=np.float64)
     near = np.abs(off) <= h
     r = np.sort(np.sqrt(np.maximum(np.einsum("ij,ij->i", rel[near], rel[near]) - off[near] ** 2, 0.0)))
-    if r.size == 0:
+    if r.size == 0 or r[0] > h:
         return h
     gaps = np.nonzero(np.diff(r) > h)[0]
-    if r[0] > h:
-        return h
     return float(r[gaps[0]] if gaps.size else r[-1]) + 0.5 * h
 
 
@@ -189,14 +195,14 @@ def bent_force_scale(impact_energy: float, bending_energy: float, share: float =
     return 0.5 * (low + high)
 
 
-def relief_length(model: BodyModel, material: Material, force, energy=None, share=None) -> float:
+def relief_length(model: BodyModel, material: Material, force, energy, share=None) -> float:
     """[m] c t_c / 2 of a step's cracking impacts (``sites.py``): the bar wave speed
     c = sqrt(E / rho) times half the longest Hertz contact time, t_c = 2.94 delta / v with
-    delta = 5 W / (2 F) (W = 2/5 F delta, the approach energy) and v = sqrt(2 W / m*), m* the
-    body's mass times its ``share`` (the reduced mass; 1 against the ground)."""
+    delta = 5 W / (2 F) (W = 2/5 F delta, the approach energy ``energy`` (K,) [J]) and
+    v = sqrt(2 W / m*), m* the body's mass times its ``share`` (the reduced mass; 1 against
+    the ground)."""
     force = np.linalg.norm(np.atleast_2d(np.asarray(force, dtype=np.float64)), axis=1)
-    if energy is None:
-        energy = np.array([hertz_impact_energy(float(f), model, material) for f in force])
+    energy = np.asarray(energy, dtype=np.float64)
     share = np.ones(len(force)) if share is None else np.asarray(share, dtype=np.float64)
     mass = float(model.mass)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -294,14 +294,22 @@ class FractureStage:
                         pieces=pieces, children=list(children), children_records=children_records)
 
 
+def _other_masses(masses: dict, rows: np.ndarray, impacts: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(R,) [kg] each touch's other body's mass (0 for the ground or a static box, which
+    are no body) and (R,) bool, which others are bodies."""
+    other = np.array([masses.get(int(o), np.inf) for o in impacts["other"][rows]], dtype=np.float64)
+    finite = np.isfinite(other)
+    return np.where(finite, other, 0.0), finite
+
+
 def touch_energies(masses: dict, body: int, rows: np.ndarray, impacts: dict) -> np.ndarray:
     """(R,) [J] the kinetic energy of each touch's approach, 1/2 m* v^2 with m* the reduced
     mass of ``body`` and the other (the body's own mass against the ground or a static box).
     ``masses``: body id -> [kg] of the bodies alive when the impacts were recorded."""
     mass = masses[body]
     speeds = np.asarray(impacts["speed"][rows], dtype=np.float64)
-    other = np.array([masses.get(int(o), np.inf) for o in impacts["other"][rows]], dtype=np.float64)
-    reduced = np.where(np.isfinite(other), mass * other / (mass + np.where(np.isfinite(other), other, 0.0)), mass)
+    other, finite = _other_masses(masses, rows, impacts)
+    reduced = np.where(finite, mass * other / (mass + other), mass)
     return 0.5 * reduced * speeds**2
 
 
@@ -309,9 +317,8 @@ def bending_shares(masses: dict, body: int, rows: np.ndarray, impacts: dict) -> 
     """(R,) how much of ``body``'s bending each touch loads (``energy.bent_force_scale``): the
     other's share of the pair's mass, m_other / (m_body + m_other); 1 for the ground or a
     static box."""
-    mass = masses[body]
-    other = np.array([masses.get(int(o), np.inf) for o in impacts["other"][rows]], dtype=np.float64)
-    return np.where(np.isfinite(other), other / (mass + np.where(np.isfinite(other), other, 0.0)), 1.0)
+    other, finite = _other_masses(masses, rows, impacts)
+    return np.where(finite, other / (masses[body] + other), 1.0)
 
 
 def impact_event(masses: dict, rows: np.ndarray, impacts: dict, fracture: Fracture) -> dict:
