@@ -21,6 +21,7 @@ order, as testing every pair gives (tested), and the run is the same.
 import taichi as ti
 
 from .. import runtime
+from ..kinematics import linalg3 as la
 from ..kinematics.bounds import is_idle, motion_speed, near_static, pair_motion
 from ..kinematics.quaternion import quat_to_matrix
 
@@ -112,11 +113,12 @@ def _pair_grown_radius(bodies: ti.template(), statics: ti.template(), b, margin,
     (|w|^2 R dt^2 / 2) and gravity's |g| dt^2, so two bodies whose grown spheres do not
     meet fail the test (``bounds.pair_motion`` <= the sum of both sides' terms); a hair
     more, for the f32 cell bounds."""
-    reach = bodies.bounding_radius[b] + margin * bodies.max_particle_radius[b] + statics.gravity[None].norm() * dt * dt
+    reach = (bodies.bounding_radius[b] + margin * bodies.max_particle_radius[b]
+             + la.norm(statics.gravity[None]) * dt * dt)
     if not is_idle(bodies, b):
-        w = bodies.angular_velocity[b].norm()
+        w = la.norm(bodies.angular_velocity[b])
         radius = bodies.bounding_radius[b]
-        reach += (bodies.linear_velocity[b].norm() + w * radius) * dt + 0.5 * w * w * radius * dt * dt
+        reach += (la.norm(bodies.linear_velocity[b]) + w * radius) * dt + 0.5 * w * w * radius * dt * dt
     return reach * (1.0 + 1e-5) + 1e-7
 
 
@@ -126,7 +128,7 @@ def _test_neighbor(bodies: ti.template(), statics: ti.template(), b, o, xb, rb, 
     overlap; returns the new count (-1: the list overflowed)."""
     closing = pair_motion(bodies, statics, b, o, dt)
     reach = rb + bodies.bounding_radius[o] + margin * bodies.max_particle_radius[o] + closing
-    if (bodies.position[o] - xb).norm_sqr() < reach * reach:
+    if la.norm_sqr(bodies.position[o] - xb) < reach * reach:
         if count < bodies.max_neighbors:
             bodies.neighbors[b, count] = o
             bodies.neighbor_motion[b, count] = closing

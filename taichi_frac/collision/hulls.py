@@ -7,6 +7,7 @@ patch with a normal against one without, and ``surface.against`` the static coll
 
 import taichi as ti
 
+from ..kinematics import linalg3 as la
 from .surface import _facet_rows, contact_spot, has_facets, lowest3
 
 vec3 = ti.math.vec3
@@ -66,12 +67,12 @@ def _support_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, n
     id (``_corner``; -1 where a sphere has no patch and is its own surface)."""
     rot_a = bodies.rotation[a]
     rot_o = bodies.rotation[o]
-    p, row_a = _extreme(particles, i, rot_a.transpose() @ n)
-    q, row_o = _extreme(particles, j, -(rot_o.transpose() @ n))
+    p, row_a = _extreme(particles, i, la.mat_t_vec(rot_a, n))
+    q, row_o = _extreme(particles, j, -(la.mat_t_vec(rot_o, n)))
     packed = -1
     if row_a >= 0 and row_o >= 0:
         packed = row_a + row_o * ti.static(CORNER_BASE)
-    return bodies.position[a] + rot_a @ p, bodies.position[o] + rot_o @ q, packed
+    return bodies.position[a] + la.mat_vec(rot_a, p), bodies.position[o] + la.mat_vec(rot_o, q), packed
 
 
 #: Rows of two patches packed into one id: row in i's patch + CORNER_BASE x row in j's.
@@ -88,8 +89,10 @@ def _corner(bodies: ti.template(), particles: ti.template(), a, i, o, j, packed)
     valid = packed >= 0 and row_a < particles.point_count[i] and row_o < particles.point_count[j]
     point = vec3(0.0)
     if valid:
-        point = (bodies.position[a] + bodies.rotation[a] @ particles.surface_point[particles.point_start[i] + row_a]
-                 - bodies.position[o] - bodies.rotation[o] @ particles.surface_point[particles.point_start[j] + row_o])
+        point_a = particles.surface_point[particles.point_start[i] + row_a]
+        point_o = particles.surface_point[particles.point_start[j] + row_o]
+        point = (bodies.position[a] + la.mat_vec(bodies.rotation[a], point_a)
+                 - bodies.position[o] - la.mat_vec(bodies.rotation[o], point_o))
     return point, valid
 
 
@@ -104,10 +107,10 @@ def _extreme(particles: ti.template(), p, axis):
         start = particles.point_start[p]
         point = particles.surface_point[start]
         row = 0
-        low = point.dot(axis)  # (the best level kept: one dot product a point)
+        low = la.dot(point, axis)  # (the best level kept: one dot product a point)
         for k in range(start + 1, start + count):
             x = particles.surface_point[k]
-            level = x.dot(axis)
+            level = la.dot(x, axis)
             if level < low:
                 point = x
                 low = level
@@ -121,12 +124,12 @@ def _closest_on_triangle(a, b, c):
     Detection", 5.1.5: by the Voronoi regions of its corners and edges)."""
     ab = b - a
     ac = c - a
-    d1 = -ab.dot(a)
-    d2 = -ac.dot(a)
-    d3 = -ab.dot(b)
-    d4 = -ac.dot(b)
-    d5 = -ab.dot(c)
-    d6 = -ac.dot(c)
+    d1 = -la.dot(ab, a)
+    d2 = -la.dot(ac, a)
+    d3 = -la.dot(ab, b)
+    d4 = -la.dot(ac, b)
+    d5 = -la.dot(ab, c)
+    d6 = -la.dot(ac, c)
     va = d3 * d6 - d5 * d4
     vb = d5 * d2 - d1 * d6
     vc = d1 * d4 - d3 * d2
@@ -158,7 +161,8 @@ def _closest_on_triangle(a, b, c):
 def _faces(n, facets_i, facets_j):
     """Whether the contact normal ``n`` (from j's patch into i's) leaves j's patch or
     enters i's within ``HULL_CONE`` of one of its facets (rows of the world mat3s)."""
-    return (facets_j @ n).max() >= ti.static(HULL_CONE) or (-(facets_i @ n)).max() >= ti.static(HULL_CONE)
+    return (la.mat_vec(facets_j, n).max() >= ti.static(HULL_CONE)
+            or (-la.mat_vec(facets_i, n)).max() >= ti.static(HULL_CONE))
 
 
 @ti.func
@@ -168,12 +172,12 @@ def _better(bodies: ti.template(), particles: ti.template(), a, i, o, j, candida
     ``low_a``, ``low_o`` along it): (gap, n, low_a, low_o) of the widest gap."""
     rot_a = bodies.rotation[a]
     rot_o = bodies.rotation[o]
-    lows_a = lowest3(particles, i, candidates @ rot_a)
-    lows_o = lowest3(particles, j, -(candidates @ rot_o))
-    gaps = candidates @ (bodies.position[a] - bodies.position[o]) + lows_a + lows_o
+    lows_a = lowest3(particles, i, la.mat_mat(candidates, rot_a))
+    lows_o = lowest3(particles, j, -la.mat_mat(candidates, rot_o))
+    gaps = la.mat_vec(candidates, bodies.position[a] - bodies.position[o]) + lows_a + lows_o
     for c in ti.static(range(3)):
         row = vec3(candidates[c, 0], candidates[c, 1], candidates[c, 2])
-        if row.norm_sqr() > 0.25 and gaps[c] > best_gap:
+        if la.norm_sqr(row) > 0.25 and gaps[c] > best_gap:
             best_gap = gaps[c]
             low_a = lows_a[c]
             low_o = lows_o[c]
@@ -214,9 +218,9 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
     x_o = bodies.position[o]
     # (both patches have facets, ``by_hulls``: each is a candidate, the separating axes of
     # their planes; a patch's first facet is its normal where it has one)
-    facets_i = _facet_rows(particles, i) @ rot_a.transpose()
-    facets_j = _facet_rows(particles, j) @ rot_o.transpose()
-    warmed = warm.norm_sqr() > 0.25
+    facets_i = la.mat_mat_t(_facet_rows(particles, i), rot_a)
+    facets_j = la.mat_mat_t(_facet_rows(particles, j), rot_o)
+    warmed = la.norm_sqr(warm) > 0.25
     first = centre_line
     if warmed:
         first = warm
@@ -224,7 +228,7 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
     best_gap, n, low_a, low_o = _better(bodies, particles, a, i, o, j, ti.Matrix.rows(
         [first, vec3(facets_j[0, 0], facets_j[0, 1], facets_j[0, 2]),
          -vec3(facets_i[0, 0], facets_i[0, 1], facets_i[0, 2])]), -1e30, first, 0.0, 0.0)
-    if particles.patch_normal[i].norm_sqr() < 0.25 or particles.patch_normal[j].norm_sqr() < 0.25:
+    if la.norm_sqr(particles.patch_normal[i]) < 0.25 or la.norm_sqr(particles.patch_normal[j]) < 0.25:
         # A folded patch: its other facets too.
         best_gap, n, low_a, low_o = _better(bodies, particles, a, i, o, j, ti.Matrix.rows(
             [vec3(facets_j[1, 0], facets_j[1, 1], facets_j[1, 2]), vec3(facets_j[2, 0], facets_j[2, 1], facets_j[2, 2]),
@@ -263,22 +267,22 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
             ids = ti.Vector([first_id, first_id, first_id], dt=ti.i32)
     tolerance = ti.static(HULL_TOLERANCE) * ti.max(particles.radius[i], particles.radius[j])
     for step in range(steps):  # (dynamic: unrolled, each support pass was inlined)
-        length = x.norm()
+        length = la.norm(x)
         if searching and length > 1e-12:
             d = x / length
             p, q, new_id = _support_pair(bodies, particles, a, i, o, j, d)
-            gap = (p - q).dot(d)
+            gap = la.dot(p - q, d)
             if gap > best_gap:
                 best_gap = gap
-                low_a = (p - x_a).dot(d)
-                low_o = (x_o - q).dot(d)
+                low_a = la.dot(p - x_a, d)
+                low_o = la.dot(x_o - q, d)
                 n = d
             new = p - q + shift
             # (no support point nearer the origin than x along d: x is the closest point;
             # a gap past ``reach`` already rules the contact out, a longer search only widens it)
             # (x . (x - new) / |x| bounds how much nearer the hulls may be than |x|: under
             # the tolerance, x is their closest point)
-            searching = x.dot(x - new) > tolerance * length and best_gap <= reach and step + 1 < steps
+            searching = la.dot(x, x - new) > tolerance * length and best_gap <= reach and step + 1 < steps
             if searching:
                 # The nearest to the origin of the faces the new point makes with the simplex.
                 corners = (corner_a, corner_b, corner_c)
@@ -289,8 +293,8 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
                     u = corners[u_index]
                     v = corners[v_index]
                     y = _closest_on_triangle(new, u, v)  # (new first: exact on a segment when u = v)
-                    if y.norm_sqr() < near:
-                        near = y.norm_sqr()
+                    if la.norm_sqr(y) < near:
+                        near = la.norm_sqr(y)
                         closest = y
                         corner_a = u
                         corner_b = v
@@ -302,8 +306,8 @@ def hull_pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centr
     spot_a = x_a
     spot_o = x_o
     if best_gap <= reach:  # (past it the caller makes no contact: its spots are not needed)
-        spot_a = x_a + rot_a @ contact_spot(particles, i, rot_a.transpose() @ n, low_a)
-        spot_o = x_o + rot_o @ contact_spot(particles, j, -(rot_o.transpose() @ n), low_o)
+        spot_a = x_a + la.mat_vec(rot_a, contact_spot(particles, i, la.mat_t_vec(rot_a, n), low_a))
+        spot_o = x_o + la.mat_vec(rot_o, contact_spot(particles, j, -(la.mat_t_vec(rot_o, n)), low_o))
     return n, best_gap, spot_a, spot_o, ids
 
 

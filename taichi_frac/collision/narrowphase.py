@@ -18,6 +18,7 @@ never carry an impulse.
 
 import taichi as ti
 
+from ..kinematics import linalg3 as la
 from ..kinematics.bounds import fastest_point_speed, is_idle, pair_motion
 from . import hulls, surface
 from .grid import CELLS_PER_SPHERE
@@ -121,8 +122,8 @@ def _point_velocity(bodies: ti.template(), b, x):
     if not is_idle(bodies, b):
         arm = x - bodies.position[b]
         w = bodies.angular_velocity[b]
-        v = bodies.linear_velocity[b] + w.cross(arm)
-        curve = 0.5 * w.norm_sqr() * arm.norm()
+        v = bodies.linear_velocity[b] + la.cross(w, arm)
+        curve = 0.5 * la.norm_sqr(w) * la.norm(arm)
     return v, curve
 
 
@@ -138,9 +139,9 @@ def _speculative(bodies: ti.template(), statics: ti.template(), a, xa, b, xb, n,
     curve_b = 0.0
     if b >= 0:
         vb, curve_b = _point_velocity(bodies, b, xb)
-    approach = -(va - vb).dot(n)
+    approach = -la.dot(va - vb, n)
     return (ti.max(approach, 0.0) * dt
-            + (curve_a + curve_b + statics.gravity[None].norm()) * dt * dt)
+            + (curve_a + curve_b + la.norm(statics.gravity[None])) * dt * dt)
 
 
 @ti.func
@@ -265,18 +266,18 @@ def _pair_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.
     grow = (ri + bodies.max_particle_radius[o]) * (1.0 + 0.5 * margin) + closing
     gap = xi - bodies.position[o]
     bound = bodies.bounding_radius[o] + grow
-    if gap.norm_sqr() < bound * bound:
+    if la.norm_sqr(gap) < bound * bound:
         rot = bodies.rotation[o]
-        local = rot.transpose() @ gap
+        local = la.mat_t_vec(rot, gap)
         q = ti.math.clamp(local, bodies.local_lower[o], bodies.local_upper[o])
-        if (local - q).norm_sqr() < grow * grow:
+        if la.norm_sqr(local - q) < grow * grow:
             near = 0
             reach = ri * (1.0 + 0.5 * margin) + 0.5 * margin * bodies.max_particle_radius[o] + closing
             for m in range(bodies.cluster_count[o]):
                 if near == 0:
                     sphere = bodies.cluster[o, m]
                     limit = sphere[3] + reach
-                    if (local - vec3(sphere[0], sphere[1], sphere[2])).norm_sqr() < limit * limit:
+                    if la.norm_sqr(local - vec3(sphere[0], sphere[1], sphere[2])) < limit * limit:
                         near = 1
             if near == 1:
                 carried = False
@@ -296,7 +297,7 @@ def _pair_contacts(bodies: ti.template(), particles: ti.template(), statics: ti.
                         for cz in range(lo[2], hi[2] + 1):
                             corner = ti.math.vec3(cx, cy, cz) * edge
                             nearest = ti.math.clamp(rel, corner, corner + edge)
-                            if (nearest - rel).norm_sqr() < wide * wide:
+                            if la.norm_sqr(nearest - rel) < wide * wide:
                                 cell = (cx * dims[1] + cy) * dims[2] + cz
                                 for k in range(particles.cell_first[base + cell], particles.cell_first[base + cell + 1]):
                                     _test_pair(bodies, particles, statics, contacts, patches, margin, sleep_time,
@@ -330,7 +331,7 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
     d = local - vec3(sphere[0], sphere[1], sphere[2])
     mean_r = 0.5 * (ri + rj)
     limit = ri + rj + margin * mean_r + closing
-    d2 = d.norm_sqr()
+    d2 = la.norm_sqr(d)
     near = d2 < limit * limit
     if ti.static(patches):
         # A patch may stand out of its sphere (``Particles.overhang``): a pair that carried
@@ -342,11 +343,11 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
                 load, _ = _cached(particles, i, j)
                 near = load > 0.0
     if near:
-        dist = d.norm()
+        dist = la.norm(d)
         gap = dist - ri - rj
         n = vec3(0.0, 0.0, 1.0)
         if dist > 1e-9:
-            n = rot @ (d / dist)
+            n = la.mat_vec(rot, d / dist)
         xj = xi - n * dist
         point = xj + n * (rj + 0.5 * gap)
         x_a, x_o = xi, xj
@@ -362,8 +363,8 @@ def _test_pair(bodies: ti.template(), particles: ti.template(), statics: ti.temp
                 if on_hulls:
                     warm, simplex = _hull_warm(particles, i, j)
                     n_patch, gap_patch, spot_a, spot_o, simplex = hulls.hull_pair(
-                        bodies, particles, a, i, o, j, n, margin * mean_r + closing, rot @ warm, simplex)
-                    _keep_hull(particles, i, j, rot.transpose() @ n_patch, simplex)
+                        bodies, particles, a, i, o, j, n, margin * mean_r + closing, la.mat_vec(rot, warm), simplex)
+                    _keep_hull(particles, i, j, la.mat_t_vec(rot, n_patch), simplex)
                 else:
                     n_patch, gap_patch, spot_a, spot_o = surface.pair(bodies, particles, a, i, o, j, n)
                 # (spheres overlapping by more than the larger radius: bodies interpenetrating,
@@ -422,10 +423,10 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
             key = ti.static(BOX_KEYS) - k * ti.static(POINT_KEYS)
             rot = statics.box_rotation[k]
             half = statics.box_half_extents[k]
-            local = rot.transpose() @ (x - statics.box_center[k])
+            local = la.mat_t_vec(rot, x - statics.box_center[k])
             q = ti.math.clamp(local, -half, half)
             d = local - q
-            dist = d.norm()
+            dist = la.norm(d)
             n_local = vec3(0.0, 0.0, 1.0)
             if dist > 1e-9:  # centre outside the box
                 n_local = d / dist
@@ -444,9 +445,9 @@ def _static_contacts(bodies: ti.template(), particles: ti.template(), statics: t
                         n_local[m] = side
                         q[m] = half[m] * side
                         gap = -depth[m] - r
-            n = rot @ n_local
-            point = statics.box_center[k] + rot @ q
-            level = point.dot(n)
+            n = la.mat_vec(rot, n_local)
+            point = statics.box_center[k] + la.mat_vec(rot, q)
+            level = la.dot(point, n)
             mu = ti.sqrt(bodies.friction[a] * statics.box_friction[k])
             e = ti.max(bodies.restitution[a], statics.box_restitution[k])
         # A patch may stand out of its sphere (``Particles.overhang``): a chip's corner past
@@ -481,7 +482,8 @@ def _collider_contacts(bodies: ti.template(), particles: ti.template(), statics:
     ids = ti.Vector.zero(ti.i32, ti.static(surface.MANIFOLD_POINTS))
     if patch:
         v, _ = _point_velocity(bodies, a, x)
-        gap, count, points, levels, ids = surface.against(bodies, particles, a, i, n, level, -v.dot(n) > bounce_speed)
+        gap, count, points, levels, ids = surface.against(bodies, particles, a, i, n, level,
+                                                          -la.dot(v, n) > bounce_speed)
     r = particles.radius[i]
     for m in range(count):  # (a dynamic loop: unrolled, each _append was inlined four times)
         g = gap + levels[m]
@@ -516,7 +518,7 @@ def particle_contacts(bodies: ti.template(), particles: ti.template(), statics: 
         a = particles.body[i]
         if a >= 0:
             if not is_idle(bodies, a) and (bodies.near_body[a] == 1 or bodies.near_static[a] == 1):
-                xi = bodies.position[a] + bodies.rotation[a] @ particles.offset[i]
+                xi = bodies.position[a] + la.mat_vec(bodies.rotation[a], particles.offset[i])
                 ri = particles.radius[i]
                 if ti.static(patches):  # (this thread's rows of the hull searches kept for next substep)
                     following = 1 - particles.parity[None]

@@ -33,6 +33,7 @@ import math
 
 import taichi as ti
 
+from ..kinematics import linalg3 as la
 from ..kinematics.frames import tangent_basis
 
 
@@ -97,11 +98,11 @@ def _reduce_group(bodies: ti.template(), particles: ti.template(), contacts: ti.
             if contacts.separation[c] < contacts.separation[deepest]:
                 deepest = c
             p = contacts.point[c]
-            v = bodies.linear_velocity[a] + bodies.angular_velocity[a].cross(p - bodies.position[a])
+            v = bodies.linear_velocity[a] + la.cross(bodies.angular_velocity[a], p - bodies.position[a])
             o = contacts.body_b[c]
             if o >= 0:
-                v -= bodies.linear_velocity[o] + bodies.angular_velocity[o].cross(p - bodies.position[o])
-            if -v.dot(contacts.normal[c]) > bounce_speed:
+                v -= bodies.linear_velocity[o] + la.cross(bodies.angular_velocity[o], p - bodies.position[o])
+            if -la.dot(v, contacts.normal[c]) > bounce_speed:
                 landing = True
     low = contacts.separation[deepest]
     n = contacts.normal[deepest]
@@ -114,8 +115,8 @@ def _reduce_group(bodies: ti.template(), particles: ti.template(), contacts: ti.
             layer = _layer(contacts, c, low, margin)
             if layer < 2:
                 p = contacts.point[c]
-                u = p.dot(t1)
-                v = p.dot(t2)
+                u = la.dot(p, t1)
+                v = la.dot(p, t2)
                 for m in ti.static(range(DIRECTIONS)):
                     s = u * ti.static(math.cos(2.0 * math.pi * m / DIRECTIONS)) \
                         + v * ti.static(math.sin(2.0 * math.pi * m / DIRECTIONS))

@@ -29,6 +29,8 @@ its centre's less its radius, so a sphere body meets a patch body consistently.
 
 import taichi as ti
 
+from ..kinematics import linalg3 as la
+
 vec3 = ti.math.vec3
 
 #: A patch gap deeper than this fraction of the larger sphere's radius is not trusted: the
@@ -100,13 +102,13 @@ def lowest(particles: ti.template(), p, axis):
     """min over sphere ``p``'s patch points of point . ``axis`` (body frame) [m]; the
     sphere's own (centre . axis - radius |axis|) when it has no patch (``lowest3``'s
     arithmetic along one axis)."""
-    low = particles.offset[p].dot(axis) - particles.radius[p] * ti.sqrt(axis[0] ** 2 + axis[1] ** 2 + axis[2] ** 2)
+    low = la.dot(particles.offset[p], axis) - particles.radius[p] * ti.sqrt(axis[0] ** 2 + axis[1] ** 2 + axis[2] ** 2)
     count = particles.point_count[p]
     if count > 0:
         low = 1e30
         start = particles.point_start[p]
         for k in range(start, start + count):
-            low = ti.min(low, particles.surface_point[k].dot(axis))
+            low = ti.min(low, la.dot(particles.surface_point[k], axis))
     return low
 
 
@@ -118,12 +120,12 @@ def lowest3(particles: ti.template(), p, axes):
     reach = vec3(0.0)
     for r in ti.static(range(3)):
         reach[r] = ti.sqrt(axes[r, 0] ** 2 + axes[r, 1] ** 2 + axes[r, 2] ** 2)
-    low = axes @ particles.offset[p] - particles.radius[p] * reach
+    low = la.mat_vec(axes, particles.offset[p]) - particles.radius[p] * reach
     if count > 0:
         low = vec3(1e30)
         start = particles.point_start[p]
         for k in range(start, start + count):
-            low = ti.min(low, axes @ particles.surface_point[k])
+            low = ti.min(low, la.mat_vec(axes, particles.surface_point[k]))
     return low
 
 
@@ -141,7 +143,7 @@ def contact_spot(particles: ti.template(), p, axis, low, band_fraction=SUPPORT_B
         start = particles.point_start[p]
         for k in range(start, start + count):
             x = particles.surface_point[k]
-            if x.dot(axis) <= band:
+            if la.dot(x, axis) <= band:
                 total += x
                 weight += 1.0
         spot = total / weight
@@ -172,10 +174,10 @@ def manifold(particles: ti.template(), p, axis, low):
         band = low + SUPPORT_BAND * radius
         spread2 = (MANIFOLD_SPREAD * radius) ** 2
         first = particles.surface_point[start]
-        first_level = first.dot(axis)
+        first_level = la.dot(first, axis)
         for k in range(start, start + count):
             x = particles.surface_point[k]
-            level = x.dot(axis)
+            level = la.dot(x, axis)
             if level < first_level:
                 first = x
                 first_level = level
@@ -185,8 +187,8 @@ def manifold(particles: ti.template(), p, axis, low):
         best = spread2
         for k in range(start, start + count):
             x = particles.surface_point[k]
-            if x.dot(axis) <= band and (x - first).norm_sqr() > best:
-                best = (x - first).norm_sqr()
+            if la.dot(x, axis) <= band and la.norm_sqr(x - first) > best:
+                best = la.norm_sqr(x - first)
                 second = x
                 ids[1] = k - start
         edge = second - first
@@ -195,27 +197,27 @@ def manifold(particles: ti.template(), p, axis, low):
         if best > spread2:
             kept = 2
             # Third: farthest from the line first-second (largest triangle).
-            best3 = spread2 * edge.norm_sqr()
+            best3 = spread2 * la.norm_sqr(edge)
             for k in range(start, start + count):
                 x = particles.surface_point[k]
-                area = (x - first).cross(edge).norm_sqr()
-                if x.dot(axis) <= band and area > best3:
+                area = la.norm_sqr(la.cross(x - first, edge))
+                if la.dot(x, axis) <= band and area > best3:
                     best3 = area
                     third = x
                     ids[2] = k - start
-            if best3 > spread2 * edge.norm_sqr():
+            if best3 > spread2 * la.norm_sqr(edge):
                 kept = 3
                 # Fourth: farthest from that line on the other side of it.
-                side = (third - first).cross(edge)
-                best4 = spread2 * edge.norm() * side.norm()
+                side = la.cross(third - first, edge)
+                best4 = spread2 * la.norm(edge) * la.norm(side)
                 for k in range(start, start + count):
                     x = particles.surface_point[k]
-                    away = -(x - first).cross(edge).dot(side)
-                    if x.dot(axis) <= band and away > best4:
+                    away = -la.dot(la.cross(x - first, edge), side)
+                    if la.dot(x, axis) <= band and away > best4:
                         best4 = away
                         fourth = x
                         ids[3] = k - start
-                if best4 > spread2 * edge.norm() * side.norm():
+                if best4 > spread2 * la.norm(edge) * la.norm(side):
                     kept = 4
         rows = ti.Matrix.rows([first, second, third, fourth])
         for m in ti.static(range(MANIFOLD_POINTS)):
@@ -232,7 +234,7 @@ def manifold(particles: ti.template(), p, axis, low):
 def has_facets(particles: ti.template(), p):
     """Whether sphere ``p``'s patch lies in a few planes (``ContactPatches.facets``): a
     face's patch, or one folded round a block's edge or corner."""
-    return particles.point_count[p] > 0 and particles.patch_facet[p, 0].norm_sqr() > 0.25
+    return particles.point_count[p] > 0 and la.norm_sqr(particles.patch_facet[p, 0]) > 0.25
 
 
 @ti.func
@@ -260,15 +262,15 @@ def pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centre_lin
     usable = vec3(0.0)
     candidates = ti.Matrix.rows([centre_line, vec3(0.0), vec3(0.0)])
     if has_facets(particles, j):
-        candidates = _facet_rows(particles, j) @ rot_o.transpose()
+        candidates = la.mat_mat_t(_facet_rows(particles, j), rot_o)
     elif has_facets(particles, i):
-        candidates = -(_facet_rows(particles, i) @ rot_a.transpose())
+        candidates = -la.mat_mat_t(_facet_rows(particles, i), rot_a)
     for c in ti.static(range(3)):
         if candidates[c, 0] ** 2 + candidates[c, 1] ** 2 + candidates[c, 2] ** 2 > 0.25:
             usable[c] = 1.0
-    low_a = lowest3(particles, i, candidates @ rot_a)
-    low_o = lowest3(particles, j, -(candidates @ rot_o))
-    gaps = candidates @ (x_a - x_o) + low_a + low_o
+    low_a = lowest3(particles, i, la.mat_mat(candidates, rot_a))
+    low_o = lowest3(particles, j, -la.mat_mat(candidates, rot_o))
+    gaps = la.mat_vec(candidates, x_a - x_o) + low_a + low_o
     best = 0
     best_gap = -1e30
     for c in range(3):
@@ -277,11 +279,11 @@ def pair(bodies: ti.template(), particles: ti.template(), a, i, o, j, centre_lin
             best = c
     n = vec3(candidates[best, 0], candidates[best, 1], candidates[best, 2])
     # (the patches' gap along the centre line is a lower bound of their hulls' distance)
-    apart = centre_line.dot(x_a - x_o) + lowest(particles, i, rot_a.transpose() @ centre_line) \
-        + lowest(particles, j, -(rot_o.transpose() @ centre_line))
+    apart = la.dot(centre_line, x_a - x_o) + lowest(particles, i, la.mat_t_vec(rot_a, centre_line)) \
+        + lowest(particles, j, -(la.mat_t_vec(rot_o, centre_line)))
     best_gap = ti.max(best_gap, apart - ti.static(PLANE_REACH) * ti.min(particles.radius[i], particles.radius[j]))
-    spot_a = x_a + rot_a @ contact_spot(particles, i, rot_a.transpose() @ n, low_a[best])
-    spot_o = x_o + rot_o @ contact_spot(particles, j, -(rot_o.transpose() @ n), low_o[best])
+    spot_a = x_a + la.mat_vec(rot_a, contact_spot(particles, i, la.mat_t_vec(rot_a, n), low_a[best]))
+    spot_o = x_o + la.mat_vec(rot_o, contact_spot(particles, j, -(la.mat_t_vec(rot_o, n)), low_o[best]))
     return n, best_gap, spot_a, spot_o
 
 
@@ -308,7 +310,7 @@ def against(bodies: ti.template(), particles: ti.template(), a, i, n, level, lan
     Spread over four contacts, an impact's restitution was shared unevenly: the ring
     drop's rebound fell to 12.9 % under single-scale's, its first impulse to 4.1 % under."""
     rot_a = bodies.rotation[a]
-    axis = rot_a.transpose() @ n
+    axis = la.mat_t_vec(rot_a, n)
     low = lowest(particles, i, axis)
     count = 1
     points = ti.Matrix.zero(ti.f32, ti.static(MANIFOLD_POINTS), 3)
@@ -324,4 +326,4 @@ def against(bodies: ti.template(), particles: ti.template(), a, i, n, level, lan
     for m in ti.static(range(MANIFOLD_POINTS)):
         for c in ti.static(range(3)):
             points[m, c] += bodies.position[a][c]
-    return bodies.position[a].dot(n) + low - level, count, points, levels, ids
+    return la.dot(bodies.position[a], n) + low - level, count, points, levels, ids

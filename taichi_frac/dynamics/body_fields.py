@@ -5,6 +5,7 @@ import taichi as ti
 
 from .. import runtime
 from ..collision.grid import CELLS_PER_SPHERE
+from ..kinematics import linalg3 as la
 from .clusters import cluster_spheres
 from .layouts import BODY_STATE as S
 from .layouts import BODY_WRITE as W
@@ -76,7 +77,7 @@ def write_bodies(bodies: ti.template(), particles: ti.template(),
             sphere = _sphere_f32(spheres, k)
             offset = ti.math.vec3(sphere[0], sphere[1], sphere[2])
             r = sphere[3]
-            bounding = ti.max(bounding, offset.norm() + r)
+            bounding = ti.max(bounding, la.norm(offset) + r)
             largest = ti.max(largest, r)
             total += r
             lower = ti.min(lower, offset - r)
@@ -139,11 +140,11 @@ def write_patches(bodies: ti.template(), particles: ti.template(), ints: ti.type
             row = ints[s, 3] + k
             x = ti.math.vec3(points[row, 0], points[row, 1], points[row, 2])
             particles.surface_point[start + k] = x
-            reach = ti.max(reach, (x - centre).norm())
+            reach = ti.max(reach, la.norm(x - centre))
         over = reach - radius
         particles.overhang[p] = over
         b = particles.body[p]
-        ti.atomic_max(bodies.bounding_radius[b], centre.norm() + reach)
+        ti.atomic_max(bodies.bounding_radius[b], la.norm(centre) + reach)
         for d in ti.static(range(3)):
             ti.atomic_min(bodies.local_lower[b][d], centre[d] - reach)
             ti.atomic_max(bodies.local_upper[b][d], centre[d] + reach)

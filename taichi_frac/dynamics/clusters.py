@@ -5,6 +5,7 @@ comes near one of them (``narrowphase._pair_contacts``)."""
 
 import taichi as ti
 
+from ..kinematics import linalg3 as la
 from .state import MAX_CLUSTERS
 
 _vec3d = ti.types.vector(3, ti.f64)
@@ -33,14 +34,14 @@ def cluster_spheres(bodies: ti.template(), slot, spheres: ti.template(), begin, 
     far = ti.cast(-1.0, ti.f64)
     for k in range(begin, end):
         d = _centre(spheres, k) - mean
-        if d.dot(d) > far:
-            far = d.dot(d)
+        if la.dot(d, d) > far:
+            far = la.dot(d, d)
             first = k
     seed_index = ti.Vector([0] * MAX_CLUSTERS, dt=ti.i32)
     seed_index[0] = first
     for k in range(begin, end):
         d = _centre(spheres, k) - _centre(spheres, first)
-        nearest[k] = d.dot(d)
+        nearest[k] = la.dot(d, d)
     seeds = 1
     while seeds < wanted:
         pick = begin
@@ -53,15 +54,15 @@ def cluster_spheres(bodies: ti.template(), slot, spheres: ti.template(), begin, 
         seeds += 1
         for k in range(begin, end):
             d = _centre(spheres, k) - _centre(spheres, pick)
-            nearest[k] = ti.min(nearest[k], d.dot(d))
+            nearest[k] = ti.min(nearest[k], la.dot(d, d))
     # Each sphere's cluster (its nearest seed), then each cluster's mean, then its reach.
     for k in range(begin, end):
         label = 0
         best = ti.cast(1e300, ti.f64)
         for m in range(seeds):
             d = _centre(spheres, k) - _centre(spheres, seed_index[m])
-            if d.dot(d) < best:
-                best = d.dot(d)
+            if la.dot(d, d) < best:
+                best = la.dot(d, d)
                 label = m
         nearest[k] = label
     sums = ti.Matrix([[0.0] * 4 for _ in range(MAX_CLUSTERS)], ti.f64)  # centre sum, count; then centre, reach
@@ -77,7 +78,7 @@ def cluster_spheres(bodies: ti.template(), slot, spheres: ti.template(), begin, 
     for k in range(begin, end):
         m = ti.cast(nearest[k], ti.i32)
         centre = _vec3d(sums[m, 0], sums[m, 1], sums[m, 2])
-        sums[m, 3] = ti.max(sums[m, 3], (_centre(spheres, k) - centre).norm() + spheres[k, 3])
+        sums[m, 3] = ti.max(sums[m, 3], la.norm(_centre(spheres, k) - centre) + spheres[k, 3])
     for m in range(seeds):
         bodies.cluster[slot, m] = ti.Vector([ti.cast(sums[m, c], ti.f32) for c in ti.static(range(4))], dt=ti.f32)
     bodies.cluster_count[slot] = seeds

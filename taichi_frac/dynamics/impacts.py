@@ -25,6 +25,8 @@ count, not the table size.
 
 import taichi as ti
 
+from ..kinematics import linalg3 as la
+
 vec3 = ti.math.vec3
 
 
@@ -85,10 +87,10 @@ def _emit(bodies: ti.template(), impacts: ti.template(), body, other, point, nor
           speed, dt, substep):
     k = impacts.count[None]
     if k < impacts.capacity:
-        to_body = bodies.rotation[body].transpose()  # this substep's pose (broadphase)
-        impacts.point_body[k] = to_body @ (point - bodies.position[body])
-        impacts.normal_body[k] = to_body @ normal
-        impacts.force_body[k] = to_body @ force
+        rot = bodies.rotation[body]  # this substep's pose (broadphase)
+        impacts.point_body[k] = la.mat_t_vec(rot, point - bodies.position[body])
+        impacts.normal_body[k] = la.mat_t_vec(rot, normal)
+        impacts.force_body[k] = la.mat_t_vec(rot, force)
         impacts.body[k] = body
         impacts.other[k] = other
         impacts.point[k] = point
@@ -139,7 +141,7 @@ def record_impacts(bodies: ti.template(), contacts: ti.template(), impacts: ti.t
             c = contacts.order[m]  # (the solver's order: sums reproducible run to run)
             jn = contacts.normal_impulse[c]
             impulse = jn * contacts.normal[c] + contacts.tangent_impulse[c]
-            weight = impulse.norm()
+            weight = la.norm(impulse)
             if weight > 0.0:
                 a = contacts.body_a[c]
                 b = contacts.body_b[c]
@@ -186,7 +188,7 @@ def record_impacts(bodies: ti.template(), contacts: ti.template(), impacts: ti.t
             force = impulse / dt
             if duration > 0.0:
                 force = impulse.normalized(1e-30) * peak
-            if force.norm() > force_threshold:
+            if la.norm(force) > force_threshold:
                 point = impacts.pair_point_sum[slot] / impacts.pair_weight[slot]
                 normal = impacts.pair_normal[slot].normalized(1e-30)
                 _emit(bodies, impacts, a, b, point, normal, impulse, force, duration, speed, dt, substep)

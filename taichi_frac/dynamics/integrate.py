@@ -15,6 +15,7 @@ import taichi as ti
 
 from .. import runtime
 from ..collision import surface
+from ..kinematics import linalg3 as la
 from ..kinematics.bounds import anchor_drift, fastest_point_speed, is_idle, motion_speed, near_statics
 from ..kinematics.quaternion import quat_integrate, quat_to_matrix
 
@@ -34,7 +35,7 @@ def _integrate_velocity(bodies: ti.template(), gravity, b, dt):
         else:
             rot = quat_to_matrix(bodies.orientation[b])
             bodies.solver_inverse_mass[b] = bodies.inverse_mass[b]
-            bodies.solver_inverse_inertia[b] = rot @ bodies.inverse_inertia_body[b] @ rot.transpose()
+            bodies.solver_inverse_inertia[b] = la.mat_mat_t(la.mat_mat(rot, bodies.inverse_inertia_body[b]), rot)
             bodies.linear_velocity[b] += gravity * dt
 
 
@@ -64,7 +65,7 @@ def _integrate_position(bodies: ti.template(), gravity, b, dt, max_rotation, sle
         # that fight, and solving them can pump its pseudo velocity far past that speed.
         v_pseudo = bodies.pseudo_linear_velocity[b]
         w_pseudo = bodies.pseudo_angular_velocity[b]
-        fastest = v_pseudo.norm() + w_pseudo.norm() * bodies.bounding_radius[b]
+        fastest = la.norm(v_pseudo) + la.norm(w_pseudo) * bodies.bounding_radius[b]
         if fastest > max_correction_speed:
             v_pseudo *= max_correction_speed / fastest
             w_pseudo *= max_correction_speed / fastest
@@ -79,17 +80,17 @@ def _integrate_position(bodies: ti.template(), gravity, b, dt, max_rotation, sle
         # shortening every body's substep.
         q = bodies.orientation[b]
         rot = quat_to_matrix(q)
-        momentum = rot @ (bodies.inertia_body[b] @ (rot.transpose() @ w))
-        pieces = ti.max(1, ti.cast(ti.ceil((w + w_pseudo).norm() * dt / max_rotation), ti.i32))
+        momentum = la.mat_vec(rot, la.mat_vec(bodies.inertia_body[b], la.mat_t_vec(rot, w)))
+        pieces = ti.max(1, ti.cast(ti.ceil(la.norm(w + w_pseudo) * dt / max_rotation), ti.i32))
         h = dt / pieces
         for _ in range(pieces):
             # Trapezoidal rotation: predict the end-of-piece w from L, rotate with the mean
             # (first-order rotation with the start w drifts the energy steadily).
             rot_end = quat_to_matrix(quat_integrate(q, w + w_pseudo, h))
-            w_end = rot_end @ (bodies.inverse_inertia_body[b] @ (rot_end.transpose() @ momentum))
+            w_end = la.mat_vec(rot_end, la.mat_vec(bodies.inverse_inertia_body[b], la.mat_t_vec(rot_end, momentum)))
             q = quat_integrate(q, 0.5 * (w + w_end) + w_pseudo, h)
             rot = quat_to_matrix(q)
-            w = rot @ (bodies.inverse_inertia_body[b] @ (rot.transpose() @ momentum))
+            w = la.mat_vec(rot, la.mat_vec(bodies.inverse_inertia_body[b], la.mat_t_vec(rot, momentum)))
         bodies.orientation[b] = q
         bodies.angular_velocity[b] = w
         # Sleep test on the fastest point (|v| + |w| R), so a small piece turning slowly
@@ -101,7 +102,7 @@ def _integrate_position(bodies: ti.template(), gravity, b, dt, max_rotation, sle
         # as slow however fast it jitters: a resting contact made one substep and lost the
         # next drops a piece by one substep of free fall and lifts it back, and such jolts
         # would keep settled pieces awake to the end.
-        spin = w.norm()
+        spin = la.norm(w)
         speed = fastest_point_speed(bodies, b)
         still = anchor_drift(bodies, b) < STILL_FRACTION * bodies.mean_particle_radius[b]
         if not still:
@@ -196,8 +197,8 @@ def hold_above_ground(bodies: ti.template(), particles: ti.template(), statics: 
     ti.loop_config(serialize=True)
     for _ in range(1):
         for b in range(bodies.slot_end[None]):
-            moved = (bodies.linear_velocity[b].norm() + bodies.pseudo_linear_velocity[b].norm()
-                     + (bodies.angular_velocity[b].norm() + bodies.pseudo_angular_velocity[b].norm())
+            moved = (la.norm(bodies.linear_velocity[b]) + la.norm(bodies.pseudo_linear_velocity[b])
+                     + (la.norm(bodies.angular_velocity[b]) + la.norm(bodies.pseudo_angular_velocity[b]))
                      * bodies.bounding_radius[b]) * dt
             if bodies.active[b] == 1 and bodies.near_static[b] == 1 and not is_idle(bodies, b) \
                     and moved > 0.5 * GROUND_HOLD * bodies.mean_particle_radius[b]:
@@ -208,7 +209,7 @@ def hold_above_ground(bodies: ti.template(), particles: ti.template(), statics: 
                 start = bodies.particle_start[b]
                 for p in range(start, start + bodies.particle_count[b]):
                     r = particles.radius[p]
-                    bottom = z0 + up.dot(particles.offset[p]) - r
+                    bottom = z0 + la.dot(up, particles.offset[p]) - r
                     for k in range(statics.plane_count[None]):
                         if particles.point_count[p] > 0 and statics.plane_height[k] - bottom - GROUND_HOLD * r > 0.0:
                             # (the sphere's bottom may stand proud of its patch: the
@@ -232,7 +233,7 @@ def _is_near(bodies: ti.template(), statics: ti.template(), b, grow, frame_dt, m
             reach = grow + bodies.bounding_radius[o] + margin * bodies.max_particle_radius[o]
             if not is_idle(bodies, o):
                 reach += motion_speed(bodies, statics, o, frame_dt) * frame_dt
-            if (bodies.position[o] - xb).norm_sqr() < reach * reach:
+            if la.norm_sqr(bodies.position[o] - xb) < reach * reach:
                 near = 1
     if near == 0 and plane == 1:
         near = 2
@@ -270,8 +271,8 @@ def _substeps_of(bodies: ti.template(), statics: ti.template(), b, margin, frame
         if near != 0:
             closing = speed
             if near == 2:  # only a ground plane within reach: what closes on it is the fall
-                closing = ti.max(-bodies.linear_velocity[b][2], 0.0) + statics.gravity[None].norm() * frame_dt \
-                    + bodies.angular_velocity[b].norm() * bodies.bounding_radius[b]
+                closing = ti.max(-bodies.linear_velocity[b][2], 0.0) + la.norm(statics.gravity[None]) * frame_dt \
+                    + la.norm(bodies.angular_velocity[b]) * bodies.bounding_radius[b]
             ratio = closing * frame_dt / (motion_fraction * bodies.mean_particle_radius[b])
             count = ti.max(count, ti.max(substeps, ti.cast(ti.ceil(ratio), ti.i32)))
     return count

@@ -21,6 +21,7 @@ these sweeps include every other contact with its non-penetration target.
 import taichi as ti
 
 from ..collision.narrowphase import GROUND
+from ..kinematics import linalg3 as la
 from ..kinematics.frames import tangent_basis
 
 vec3 = ti.math.vec3
@@ -50,7 +51,7 @@ def _held_speed(contacts: ti.template(), c, dt):
 def _velocity_at(bodies: ti.template(), b, arm):
     v = vec3(0.0)
     if b >= 0:
-        v = bodies.linear_velocity[b] + bodies.angular_velocity[b].cross(arm)
+        v = bodies.linear_velocity[b] + la.cross(bodies.angular_velocity[b], arm)
     return v
 
 
@@ -58,7 +59,7 @@ def _velocity_at(bodies: ti.template(), b, arm):
 def _pseudo_velocity_at(bodies: ti.template(), b, arm):
     v = vec3(0.0)
     if b >= 0:
-        v = bodies.pseudo_linear_velocity[b] + bodies.pseudo_angular_velocity[b].cross(arm)
+        v = bodies.pseudo_linear_velocity[b] + la.cross(bodies.pseudo_angular_velocity[b], arm)
     return v
 
 
@@ -66,7 +67,7 @@ def _pseudo_velocity_at(bodies: ti.template(), b, arm):
 def _apply(bodies: ti.template(), b, arm, impulse):
     if b >= 0:
         bodies.linear_velocity[b] += bodies.solver_inverse_mass[b] * impulse
-        bodies.angular_velocity[b] += bodies.solver_inverse_inertia[b] @ arm.cross(impulse)
+        bodies.angular_velocity[b] += la.mat_vec(bodies.solver_inverse_inertia[b], la.cross(arm, impulse))
 
 
 @ti.func
@@ -82,14 +83,14 @@ def _body_response(bodies: ti.template(), b, arm, n, t1, t2):
     k = vec3(0.0)
     if b >= 0:
         inverse_inertia = bodies.solver_inverse_inertia[b]
-        cn = arm.cross(n)
-        c1 = arm.cross(t1)
-        c2 = arm.cross(t2)
-        rn = inverse_inertia @ cn
-        r1 = inverse_inertia @ c1
-        r2 = inverse_inertia @ c2
+        cn = la.cross(arm, n)
+        c1 = la.cross(arm, t1)
+        c2 = la.cross(arm, t2)
+        rn = la.mat_vec(inverse_inertia, cn)
+        r1 = la.mat_vec(inverse_inertia, c1)
+        r2 = la.mat_vec(inverse_inertia, c2)
         m = bodies.solver_inverse_mass[b]
-        k = vec3(m + cn.dot(rn), m + c1.dot(r1), m + c2.dot(r2))
+        k = vec3(m + la.dot(cn, rn), m + la.dot(c1, r1), m + la.dot(c2, r2))
     return rn, r1, r2, k
 
 
@@ -129,10 +130,10 @@ def _warm_start(bodies: ti.template(), contacts: ti.template(), c, warm_start):
     n = contacts.normal[c]
     jn = ti.max(contacts.normal_impulse[c], 0.0) * warm_start
     jt = contacts.tangent_impulse[c] * warm_start
-    jt -= jt.dot(n) * n
+    jt -= la.dot(jt, n) * n
     limit = contacts.friction[c] * jn
-    if jt.norm() > limit:
-        jt *= limit / jt.norm()
+    if la.norm(jt) > limit:
+        jt *= limit / la.norm(jt)
     contacts.normal_impulse[c] = jn
     contacts.tangent_impulse[c] = jt
     impulse = jn * n + jt
@@ -194,7 +195,7 @@ def _prepare_contact(bodies: ti.template(), contacts: ti.template(), c):
     k = ka + kb  # inverse effective masses along n, t1, t2
     contacts.normal_mass[c] = 1.0 / k[0] if k[0] > 0.0 else 0.0
     contacts.tangent_mass[c] = ti.math.vec2(1.0 / k[1] if k[1] > 0.0 else 0.0, 1.0 / k[2] if k[2] > 0.0 else 0.0)
-    contacts.approach_speed[c] = (_velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b)).dot(n)
+    contacts.approach_speed[c] = la.dot(_velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b), n)
     contacts.pseudo_impulse[c] = 0.0
     contacts.rolling_impulse[c] = vec3(0.0)
 
@@ -203,7 +204,7 @@ def _prepare_contact(bodies: ti.template(), contacts: ti.template(), c):
 def _inverse_inertia_times(bodies: ti.template(), b, u):
     r = vec3(0.0)
     if b >= 0:
-        r = bodies.solver_inverse_inertia[b] @ u
+        r = la.mat_vec(bodies.solver_inverse_inertia[b], u)
     return r
 
 
@@ -215,15 +216,15 @@ def _roll(bodies: ti.template(), contacts: ti.template(), c, a, b, limit):
     w_rel = bodies.angular_velocity[a]
     if b >= 0:
         w_rel -= bodies.angular_velocity[b]
-    speed = w_rel.norm()
+    speed = la.norm(w_rel)
     if speed > 0.0:
         u = w_rel / speed
         ia = _inverse_inertia_times(bodies, a, u)
         ib = _inverse_inertia_times(bodies, b, u)
-        k = u.dot(ia) + u.dot(ib)  # relative angular speed change per unit angular impulse
+        k = la.dot(u, ia) + la.dot(u, ib)  # relative angular speed change per unit angular impulse
         old_r = contacts.rolling_impulse[c]
         new_r = old_r - (speed / k) * u
-        size = new_r.norm()
+        size = la.norm(new_r)
         if size > limit:
             new_r *= limit / size
         contacts.rolling_impulse[c] = new_r
@@ -249,7 +250,7 @@ def _solve_contact(bodies: ti.template(), contacts: ti.template(), c, dt, positi
     v_rel = _velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b)
     target = _held_speed(contacts, c, dt)
     old = contacts.normal_impulse[c]
-    new = ti.max(old + mass_n * (target - v_rel.dot(n)), 0.0)
+    new = ti.max(old + mass_n * (target - la.dot(v_rel, n)), 0.0)
     contacts.normal_impulse[c] = new
     dj = new - old
     if dj != 0.0:  # (most contacts are speculative ones that stay at zero: 70-85 % in the 13 rings' pile)
@@ -259,13 +260,13 @@ def _solve_contact(bodies: ti.template(), contacts: ti.template(), c, dt, positi
     # Skipped while the contact carries no impulse at all (most speculative
     # contacts: their cone is a point and they hold no friction to undo).
     old_t = contacts.tangent_impulse[c]
-    if new > 0.0 or old_t.norm_sqr() > 0.0:
+    if new > 0.0 or la.norm_sqr(old_t) > 0.0:
         v_rel = _velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b)
         t1 = contacts.tangent1[c]
         t2 = contacts.tangent2[c]
         m_t = contacts.tangent_mass[c]
-        l1 = old_t.dot(t1) - m_t[0] * v_rel.dot(t1)
-        l2 = old_t.dot(t2) - m_t[1] * v_rel.dot(t2)
+        l1 = la.dot(old_t, t1) - m_t[0] * la.dot(v_rel, t1)
+        l2 = la.dot(old_t, t2) - m_t[1] * la.dot(v_rel, t2)
         limit = contacts.friction[c] * new
         mag = ti.sqrt(l1 * l1 + l2 * l2)
         if mag > limit:
@@ -273,8 +274,8 @@ def _solve_contact(bodies: ti.template(), contacts: ti.template(), c, dt, positi
             l2 *= limit / mag
         new_t = l1 * t1 + l2 * t2
         contacts.tangent_impulse[c] = new_t
-        d1 = l1 - old_t.dot(t1)
-        d2 = l2 - old_t.dot(t2)
+        d1 = l1 - la.dot(old_t, t1)
+        d2 = l2 - la.dot(old_t, t2)
         _push(bodies, a, new_t - old_t, d1 * contacts.response_a[c, 1] + d2 * contacts.response_a[c, 2])
         _push(bodies, b, old_t - new_t, -d1 * contacts.response_b[c, 1] - d2 * contacts.response_b[c, 2])
     if rolling_resistance > 0.0 and new > 0.0:
@@ -287,7 +288,7 @@ def _solve_contact(bodies: ti.template(), contacts: ti.template(), c, dt, positi
     # dropped into a box of four walls settle less well with the walls holding too.
     depth = -gap - allowed_penetration * contacts.radius[c]
     if depth > 0.0 or b == GROUND:
-        vp = (_pseudo_velocity_at(bodies, a, arm_a) - _pseudo_velocity_at(bodies, b, arm_b)).dot(n)
+        vp = la.dot(_pseudo_velocity_at(bodies, a, arm_a) - _pseudo_velocity_at(bodies, b, arm_b), n)
         target_p = ti.select(depth > 0.0, ti.min(position_correction * depth / dt, max_correction_speed),
                              -ti.max(gap, 0.0) / dt)
         old_p = contacts.pseudo_impulse[c]
@@ -348,7 +349,7 @@ def solve_contacts(bodies: ti.template(), contacts: ti.template(), iterations,
                     n = contacts.normal[c]
                     arm_a = contacts.arm_a[c]
                     arm_b = contacts.arm_b[c]
-                    vn = (_velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b)).dot(n)
+                    vn = la.dot(_velocity_at(bodies, a, arm_a) - _velocity_at(bodies, b, arm_b), n)
                     old = contacts.normal_impulse[c]
                     new = ti.max(old + contacts.normal_mass[c] * (contacts.restitution_target[c] - vn), 0.0)
                     contacts.normal_impulse[c] = new

@@ -38,6 +38,7 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
+from ..kinematics import linalg3 as la
 
 # Floor on rho [m] used only when contact_radius = 0 (the exact, singular point load), so a
 # particle lying exactly on the load point gives a huge but finite displacement, not NaN.
@@ -120,10 +121,10 @@ def displacement_at(points: ti.template(), i, loads: ti.template(), shear_modulu
         e2 = _vec3(loads[k, 6], loads[k, 7], loads[k, 8])
         e3 = _vec3(loads[k, 9], loads[k, 10], loads[k, 11])
         d = _vec3(points[i, 0], points[i, 1], points[i, 2]) - origin
-        x = d.dot(e1)
-        y = d.dot(e2)
+        x = la.dot(d, e1)
+        y = la.dot(d, e2)
         # Load moved to depth -a (module docstring); points above the tangent plane clamped.
-        z = ti.max(d.dot(e3), 0.0) + loads[k, 15]
+        z = ti.max(la.dot(d, e3), 0.0) + loads[k, 15]
         u = _local_displacement(x, y, z, loads[k, 12], loads[k, 13], loads[k, 14], shear_modulus, poisson_ratio)
         total += u[0] * e1 + u[1] * e2 + u[2] * e3
     return total

@@ -25,6 +25,7 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
+from ..kinematics import linalg3 as la
 from .field import _check_material, _as_points, load_rows
 from .stress import lame_parameters, stress_of, store_principal, sym_eig3_extremes_f64
 
@@ -39,7 +40,7 @@ def _local_gradient(x: ti.f64, y: ti.f64, z: ti.f64, normal_load: ti.f64, load_x
     """grad u (3,3) [-] in the local frame, G[a, b] = d u_a / d x_b, of field.py's
     ``_local_displacement`` (BRIEF.md §2 corrected) at (x, y, z), z > 0."""
     p = _vec3(x, y, z)
-    rho = ti.max(p.norm(), ti.f64(_RHO_FLOOR))
+    rho = ti.max(la.norm(p), ti.f64(_RHO_FLOOR))
     big_r = rho + z
     a = 1.0 - 2.0 * poisson_ratio
     c = 1.0 / (4.0 * ti.f64(math.pi) * shear_modulus)
@@ -98,7 +99,7 @@ def halfspace_gradient_at(points: ti.template(), i, loads: ti.template(), shear_
         for r, col in ti.static(ti.ndrange(3, 3)):
             frame[r, col] = loads[k, 3 + 3 * r + col]
         d = _vec3(points[i, 0], points[i, 1], points[i, 2]) - origin
-        local = frame @ d
+        local = la.mat_vec(frame, d)
         depth = local[2]
         z = ti.max(depth, 0.0) + loads[k, 15]
         g = _local_gradient(local[0], local[1], z, loads[k, 12], loads[k, 13], loads[k, 14], shear_modulus,

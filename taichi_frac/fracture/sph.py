@@ -22,6 +22,7 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
+from ..kinematics import linalg3 as la
 from .stress import sym_eig3_extremes_f64
 
 _vec3 = ti.types.vector(3, ti.f64)
@@ -129,7 +130,7 @@ def _walk_neighbors(
                 for s in range(cell_start[cell], cell_start[cell + 1]):
                     j = sorted_points[s]
                     d = _vec3(points[j, 0], points[j, 1], points[j, 2]) - xi
-                    if j != i and d.dot(d) < r2:
+                    if j != i and la.dot(d, d) < r2:
                         if fill != 0:
                             indices_out[slot] = j
                         slot += 1
@@ -221,7 +222,7 @@ def gradient_at(points: ti.template(), volumes: ti.template(), i, begin, end, in
     for k in range(begin, end):
         j = indices[k]
         d = _vec3(points[j, 0], points[j, 1], points[j, 2]) - xi
-        r = d.norm()
+        r = la.norm(d)
         if j != i and r > 0.0 and r < smoothing_length:
             # grad_i W(x_i - x_j, h) = W'(r) (x_i - x_j) / r
             grad_w = -cubic_spline_dwdr(r, smoothing_length) / r * d

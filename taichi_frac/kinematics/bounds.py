@@ -4,6 +4,7 @@ around it reaches a static collider."""
 
 import taichi as ti
 
+from . import linalg3 as la
 from .quaternion import quat_mul
 
 vec3 = ti.math.vec3
@@ -19,7 +20,7 @@ def is_idle(bodies: ti.template(), b):
 def fastest_point_speed(bodies: ti.template(), b):
     """|v| + |w| x bounding radius [m/s]: no point of body ``b`` moves faster now (the sleep
     test, and whether a touch wakes a sleeping body)."""
-    return bodies.linear_velocity[b].norm() + bodies.angular_velocity[b].norm() * bodies.bounding_radius[b]
+    return la.norm(bodies.linear_velocity[b]) + la.norm(bodies.angular_velocity[b]) * bodies.bounding_radius[b]
 
 
 @ti.func
@@ -31,16 +32,16 @@ def anchor_drift(bodies: ti.template(), b):
     qa = bodies.sleep_anchor_orientation[b]
     turn = quat_mul(ti.math.vec4(qa[0], -qa[1], -qa[2], -qa[3]), bodies.orientation[b])
     # (|vector part| = sin(angle / 2): twice it is the angle to within 1 % up to 0.5 rad)
-    angle = 2.0 * ti.math.vec3(turn[1], turn[2], turn[3]).norm()
-    return (bodies.position[b] - bodies.sleep_anchor[b]).norm() + angle * bodies.bounding_radius[b]
+    angle = 2.0 * la.norm(ti.math.vec3(turn[1], turn[2], turn[3]))
+    return la.norm(bodies.position[b] - bodies.sleep_anchor[b]) + angle * bodies.bounding_radius[b]
 
 
 @ti.func
 def motion_speed(bodies: ti.template(), statics: ti.template(), b, dt):
     """Bound on the speed of any point of body ``b`` over a step of ``dt`` [s]:
     |v| + |g| dt + |w| x bounding radius [m/s]."""
-    return (bodies.linear_velocity[b].norm() + statics.gravity[None].norm() * dt
-            + bodies.angular_velocity[b].norm() * bodies.bounding_radius[b])
+    return (la.norm(bodies.linear_velocity[b]) + la.norm(statics.gravity[None]) * dt
+            + la.norm(bodies.angular_velocity[b]) * bodies.bounding_radius[b])
 
 
 @ti.func
@@ -57,15 +58,15 @@ def pair_motion(bodies: ti.template(), statics: ti.template(), a, b, dt):
     curve = 0.0
     if not is_idle(bodies, a):
         va = bodies.linear_velocity[a]
-        w = bodies.angular_velocity[a].norm()
+        w = la.norm(bodies.angular_velocity[a])
         spin += w * bodies.bounding_radius[a]
         curve += 0.5 * w * w * bodies.bounding_radius[a]
     if not is_idle(bodies, b):
         vb = bodies.linear_velocity[b]
-        w = bodies.angular_velocity[b].norm()
+        w = la.norm(bodies.angular_velocity[b])
         spin += w * bodies.bounding_radius[b]
         curve += 0.5 * w * w * bodies.bounding_radius[b]
-    return ((va - vb).norm() + spin) * dt + (curve + statics.gravity[None].norm()) * dt * dt
+    return (la.norm(va - vb) + spin) * dt + (curve + la.norm(statics.gravity[None])) * dt * dt
 
 
 @ti.func
@@ -78,9 +79,9 @@ def near_statics(statics: ti.template(), x, radius):
         if x[2] - radius < statics.plane_height[k]:
             plane = 1
     for k in range(statics.box_count[None]):
-        local = statics.box_rotation[k].transpose() @ (x - statics.box_center[k])
+        local = la.mat_t_vec(statics.box_rotation[k], x - statics.box_center[k])
         q = ti.math.clamp(local, -statics.box_half_extents[k], statics.box_half_extents[k])
-        if (local - q).norm_sqr() < radius * radius:
+        if la.norm_sqr(local - q) < radius * radius:
             box = 1
     return plane, box
 

@@ -2,6 +2,8 @@
 
 import taichi as ti
 
+from . import linalg3 as la
+
 vec3 = ti.math.vec3
 
 
@@ -14,5 +16,5 @@ def tangent_basis(n):
     t1 = vec3(1.0, 0.0, 0.0)
     if ti.abs(n[0]) > 0.57735:
         t1 = vec3(0.0, 1.0, 0.0)
-    t1 = (t1 - t1.dot(n) * n).normalized()
-    return t1, n.cross(t1)
+    t1 = (t1 - la.dot(t1, n) * n).normalized()
+    return t1, la.cross(n, t1)

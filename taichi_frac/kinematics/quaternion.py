@@ -6,6 +6,8 @@ language: a Taichi function cannot be called from numpy code, nor numpy from a k
 import numpy as np
 import taichi as ti
 
+from . import linalg3 as la
+
 
 @ti.func
 def quat_mul(a, b):
@@ -33,7 +35,7 @@ def quat_to_matrix(q):
 def quat_integrate(q, omega, dt):
     """q advanced by a constant world angular velocity omega over dt: the exact rotation
     exp(omega dt) applied on the left (renormalised against round-off)."""
-    angle = omega.norm() * dt
+    angle = la.norm(omega) * dt
     axis = omega.normalized(1e-30)
     half = 0.5 * angle
     s = ti.sin(half)
