@@ -33,7 +33,7 @@ from .topology import boundary_faces, dihedral_angles_deg, signed_volumes
 from .validate import MeshError
 
 #: Bump when meshing changes so old cache entries are not reused.
-CACHE_VERSION = 3
+CACHE_VERSION = 4
 
 #: A primitive's surface edge = this x the edge of a regular tet of the target particle
 #: volume. Finer surfaces push the tet count above the target (the surface alone forces
