@@ -34,6 +34,10 @@ face scan gave 316,218 particles for a target of 5,000). When the surface has mo
    is too small for any volume check to see (the cow's tail: 7 % of its length, 0.01 % of
    its volume); the distance sees it. A copy that fails is replaced by a finer one.
 
+Where the copy of the shortest edges holds too little of the input's solid (parts thinner
+than the tets, whose rims and tips the midpoint collapses cut back), the copies are made by
+quadric-error collapses instead (``copy_kept``), through the same fit and checks.
+
 The full-resolution surface stays the artist's (``PrepareReport.surface``); only the
 simulation sees the copy.
 """
@@ -45,6 +49,7 @@ import math
 import numpy as np
 import trimesh
 
+from .copy_kept import MIN_COPY_KEPT, QUADRIC_MIN_GAIN, HeldShare, decimate_qslim
 from .validate import self_intersections
 
 #: A triangle of the simplified copy has edges about this many times the edge of a regular tet
@@ -367,7 +372,8 @@ def _copy_at(mesh: trimesh.Trimesh, count: int, volume: float, near, clock=None,
     and given ``volume`` [m^3] back: (copy, how) when it comes out closed, non-crossing,
     within :data:`VOLUME_TOLERANCE` of ``volume`` and ``near`` the input, else None."""
     decimate = decimate or _decimate
-    step = "simplify (fast-simplification)" if decimate is _decimate_quadric else "simplify (libigl)"
+    step = ("simplify (fast-simplification)" if decimate is _decimate_quadric else
+            "simplify (libigl qslim)" if decimate is decimate_qslim else "simplify (libigl)")
     if clock is not None:
         v, f = clock.run(step, decimate, mesh.vertices, mesh.faces, count)
     else:
@@ -389,10 +395,17 @@ def _copy_at(mesh: trimesh.Trimesh, count: int, volume: float, near, clock=None,
         candidate.vertices = np.clip(candidate.vertices, lo, hi)
         return candidate
 
-    candidates = [(lambda: fit_to_surface(copy, reference, volume), "fitted to the input")] if fit else []
+    fits = {}
+
+    def fitted(start):  # (each fit once: the MeshFix fall-back below starts from one of them)
+        if id(start) not in fits:
+            fits[id(start)] = fit_to_surface(start, reference, volume)
+        return fits[id(start)]
+
+    candidates = [(lambda: fitted(copy), "fitted to the input")] if fit else []
     if relax:
         if fit:
-            candidates[:0] = [(lambda: fit_to_surface(relaxed, reference, volume), "relaxed, fitted to the input")]
+            candidates[:0] = [(lambda: fitted(relaxed), "relaxed, fitted to the input")]
         candidates += [(lambda: in_box(restore_volume(relaxed, volume)), "relaxed, volume restored"),
                        (lambda: relaxed, "relaxed")]
     candidates += [(lambda: in_box(restore_volume(copy, volume)), "volume restored"), (lambda: copy, "as decimated")]
@@ -404,8 +417,7 @@ def _copy_at(mesh: trimesh.Trimesh, count: int, volume: float, near, clock=None,
             return candidate, how
     # Thin parts (legs, ears) decimated into each other: MeshFix removes the crossings (and,
     # when it cuts a thin part away, the distance bound refuses the result).
-    cleaned = _meshfix_copy(fit_to_surface(relaxed, reference, volume) if fit else restore_volume(relaxed, volume),
-                            clock)
+    cleaned = _meshfix_copy(fitted(relaxed) if fit else restore_volume(relaxed, volume), clock)
     if cleaned is not None and abs(cleaned.volume / volume - 1.0) < 0.05:
         cleaned = in_box(restore_volume(cleaned, volume))
         if (abs(cleaned.volume / volume - 1.0) <= VOLUME_TOLERANCE
@@ -473,7 +485,10 @@ def simplified_tet_surfaces(mesh: trimesh.Trimesh, target_particles: int, clock=
     than 15 % (thin parts, many sharp features), the next is a copy with fewer faces, by the
     overshoot to the 2/3 (tets ~ faces^(3/2) where the surface sets the count); three copies
     at most. A large input is first decimated once to 8x the wanted faces, so later copies
-    start small. Every copy lies within :data:`MAX_DEVIATION` tet edges of every point of
+    start small. A first copy that holds under :data:`MIN_COPY_KEPT` of ``mesh``'s solid is
+    replaced by a quadric-error copy (:func:`_quadric_copy`) where that holds more, and the
+    later copies are made that way too (by the overshoot to the power 1: a thin part one tet
+    thick has tets ~ faces). Every copy lies within :data:`MAX_DEVIATION` tet edges of every point of
     ``mesh`` and is fitted to it (:func:`fit_to_surface`).
     """
     wanted = target_face_count(mesh.volume, mesh.area, target_particles)
@@ -496,18 +511,46 @@ def simplified_tet_surfaces(mesh: trimesh.Trimesh, target_particles: int, clock=
                                    **bound)
         if staged is not None:
             source = staged[0]
+    # Which decimation the copies take: shortest edges first; quadric errors from the first
+    # copy on whose shortest-edge copy holds less than MIN_COPY_KEPT of the solid and whose
+    # quadric copy holds QUADRIC_MIN_GAIN more (thin parts; see copy_kept).
+    held, quadric = HeldShare(mesh, clock), None
     for _ in range(3):
-        copy = simplify_to_faces(source, count, clock, reference_volume=volume,
-                                 finer=None if source is mesh else mesh, **bound)
+        copy = None if quadric else simplify_to_faces(source, count, clock, reference_volume=volume,
+                                                      finer=None if source is mesh else mesh, **bound)
+        if copy is not None:
+            copy, how = copy[0], f"shortest edges collapsed, {copy[1]}"
+        if quadric is None and copy is not None:
+            share = held(copy)
+            if share < MIN_COPY_KEPT:
+                other = _quadric_copy(source, mesh, count, volume, clock, bound)
+                other_share = held(other[0]) if other is not None else 0.0
+                quadric = other_share > share + QUADRIC_MIN_GAIN
+                if quadric:
+                    copy, how = other[0], (f"quadric-error collapses, {other[1]}: it holds {100 * other_share:.1f} % "
+                                           f"of the solid, the copy of the shortest edges {100 * share:.1f} %")
+        elif quadric:
+            other = _quadric_copy(source, mesh, count, volume, clock, bound)
+            copy, how = (other[0], f"quadric-error collapses, {other[1]}") if other is not None else (None, None)
         if copy is None:
             return
-        tets = yield copy[0], (f"tetrahedralized a copy simplified to the particle spacing: {len(mesh.faces):,} -> "
-                               f"{len(copy[0].faces):,} faces (shortest edges collapsed, {copy[1]})")
+        tets = yield copy, (f"tetrahedralized a copy simplified to the particle spacing: {len(mesh.faces):,} -> "
+                            f"{len(copy.faces):,} faces ({how})")
         if tets is None or tets <= 1.15 * target_particles:
             return
-        if len(copy[0].faces) <= MIN_FACES * 1.05:
+        if len(copy.faces) <= MIN_FACES * 1.05:
             return
-        count = max(int(len(copy[0].faces) * (target_particles / tets) ** (2 / 3) * 0.95), MIN_FACES)
+        # Where the surface sets the count, tets ~ faces^(3/2); a quadric copy's thin parts are
+        # one tet thick under the mesher's unsplit surface, where tets ~ faces.
+        power = 1.0 if quadric else 2 / 3
+        count = max(int(len(copy.faces) * (target_particles / tets) ** power * 0.95), MIN_FACES)
+
+
+def _quadric_copy(source, mesh, count: int, volume: float, clock, bound: dict):
+    """(copy, how) of ``source`` with ``count`` faces by quadric-error collapses
+    (``copy_kept.decimate_qslim``), fitted to ``mesh``, or None."""
+    return simplify_to_faces(source, count, clock, reference_volume=volume, finer=None if source is mesh else mesh,
+                             relax=False, decimate=decimate_qslim, **bound)
 
 
 def simplify_for_target(mesh: trimesh.Trimesh, target_particles: int, clock=None):
