@@ -171,20 +171,44 @@ def test_a_bad_worker_count_is_one_clear_error(capsys):
 
 
 def test_a_repeated_run_in_the_process_takes_its_cuts_and_writes_the_same_cache(tmp_path, monkeypatch):
-    """The ring cracked three ways, run twice in one process: the second run meets the same
-    splits and cuts none of them again, and its cache is the first's, sample for sample."""
+    """The ring cracked three ways, run twice in one process cutting in it: the second run
+    meets the same splits and cuts none of them again, and its cache is the first's, sample
+    for sample."""
     from taichi_frac.surfaces import cut as cut_module
 
     scene = load_scene(SCENES / "single_ring.toml", ["ring.fracture.crack_count=3", "ring.fracture.seed=5"])
     first = tmp_path / "first.usdc"
-    Simulation(scene, output=first, frames=40).run()
+    Simulation(scene, output=first, frames=40, surface_workers=0).run()
     real, calls = cut_module.cut_render_solid, []
     monkeypatch.setattr(cut_module, "cut_render_solid", lambda *a, **k: calls.append(1) or real(*a, **k))
     second = tmp_path / "second.usdc"
-    summary = Simulation(scene, output=second, frames=40).run()
+    summary = Simulation(scene, output=second, frames=40, surface_workers=0).run()
     assert summary.fragments >= 3 and calls == []
     assert cache_digest(first) == cache_digest(second)
     # Another crack count: other splits, cut afresh.
     Simulation(load_scene(SCENES / "single_ring.toml", ["ring.fracture.crack_count=2"]), output=tmp_path / "o.usdc",
-               frames=40).run()
+               frames=40, surface_workers=0).run()
     assert calls
+
+
+def test_a_second_run_takes_the_idle_workers_and_writes_the_same_cache(tmp_path):
+    """Workers left idle by one run serve the next run in the process (its splits from their
+    memos), started afresh for it (body ids of its own): the ring cracked three ways, then the
+    ring cracked once (other bodies, other splits), then three ways again, all equal to the
+    caches cut in this process."""
+    from taichi_frac.surfaces import pool
+
+    digests, pids = {}, []
+    for label, count, workers in (("3", 3, 0), ("1", 1, 0), ("3w", 3, 2), ("1w", 1, 2), ("3w again", 3, 2)):
+        scene = load_scene(SCENES / "single_ring.toml", [f"ring.fracture.crack_count={count}"])
+        path = tmp_path / f"ring_{label.replace(' ', '_')}.usdc"
+        sim = Simulation(scene, output=path, frames=40, surface_workers=workers)
+        if workers:
+            pids.append(sorted(w.process.pid for w in sim.surfaces._workers))
+        sim.run()
+        digests[label] = cache_digest(path)
+    assert digests["3w"] == digests["3"] == digests["3w again"] and digests["1w"] == digests["1"]
+    assert digests["1"] != digests["3"]
+    assert pids[0] == pids[1] == pids[2]  # (the same processes, idle between the runs)
+    pool.close_idle_workers()
+    assert not pool._IDLE

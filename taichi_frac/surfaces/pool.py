@@ -3,23 +3,33 @@
 :class:`SurfaceWorkers` runs :class:`~taichi_frac.surfaces.stage.SurfaceStage` in worker
 processes (``worker.py``): a body and every piece of it go to one worker, which keeps their
 render solids; requests return futures at once, so the frame loop goes on while a split's
-pieces are cut, and the recorder writes them when they are done. :class:`InProcessSurfaces`
-is the same interface in this process (futures already done). Both give the same surfaces:
-the same code runs on the same arrays.
+pieces are cut, and the recorder writes them when they are done. Workers are forked from
+this process (no imports to wait for) and, after a run, stay idle for the next run in this
+process, which takes their memos of root surfaces and cuts with them; they end with it.
+:class:`InProcessSurfaces` is the same interface in this process (futures already done).
+Both give the same surfaces: the same code runs on the same arrays.
 """
 
 from __future__ import annotations
 
+import atexit
 import itertools
 import os
 import queue
+import signal
 import subprocess
 import sys
 import threading
+import time
 from concurrent.futures import Future
 
 from .stage import CutRequest, SurfaceStage
 from .worker import read_frame, write_frame
+
+
+#: Workers are forked from the run's process where the platform forks (Linux: macOS' system
+#: libraries do not survive a fork that is not followed by exec), else started as interpreters.
+FORK = sys.platform.startswith("linux")
 
 
 class SurfaceWorkerError(RuntimeError):
@@ -28,12 +38,16 @@ class SurfaceWorkerError(RuntimeError):
 
 def default_worker_count(breakable_bodies: int) -> int:
     """Workers for a run with ``breakable_bodies`` scene bodies that may break: one for every
-    two cores past the first two, no more than there are such bodies. None on a machine of
-    two or three cores, nor when nothing breaks: there each worker's start (its imports) and
-    its share of the cores cost the frame loop more than the cuts it takes off it (the
-    13 rings on 2 cores ran slower with 1 or 2 workers than without, ``bench startup``)."""
-    spare = max(0, (os.cpu_count() or 1) - 2) // 2
-    return min(spare, max(0, breakable_bodies))
+    two cores and at least two where workers are forked, no more than there are such bodies
+    (none when nothing breaks). A run cutting its pieces in this process leaves the second
+    core idle (the cut is single-threaded and every piece's cut waits for its parent's), so
+    two forked workers ran the 13 rings and the glass walls about 11 % faster on 2 cores,
+    the single ring as fast (``bench startup``). Where a worker is a new interpreter (no
+    fork), one for every two cores past the first two: its imports cost the frame loop more
+    on fewer cores than the cuts it takes off it."""
+    cores = os.cpu_count() or 1
+    wanted = max(2, cores // 2) if FORK else max(0, cores - 2) // 2
+    return min(wanted, max(0, breakable_bodies))
 
 
 def _done(value) -> Future:
@@ -67,6 +81,78 @@ class InProcessSurfaces:
         pass
 
 
+class _Forked:
+    """A worker forked from this process, behind the part of ``subprocess.Popen``'s
+    interface ``_Worker`` uses (``pid``, ``returncode``, ``poll``, ``wait``, ``kill``)."""
+
+    def __init__(self, pid: int):
+        self.pid = pid
+        self.returncode = None
+        self._lock = threading.Lock()
+
+    def poll(self):
+        return self._reap(os.WNOHANG)
+
+    def wait(self):
+        return self._reap(0)
+
+    def kill(self) -> None:
+        if self.returncode is None:
+            try:
+                os.kill(self.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+
+    def _reap(self, flags: int):
+        with self._lock:
+            if self.returncode is None:
+                try:
+                    pid, status = os.waitpid(self.pid, flags)
+                except ChildProcessError:
+                    pid, status = self.pid, 0
+                if pid:
+                    self.returncode = os.waitstatus_to_exitcode(status)
+            return self.returncode
+
+
+def _fork_worker(request_read: int, answer_write: int) -> _Forked:
+    """A worker forked from this process: it starts with this process' modules imported (a
+    started interpreter spends about 0.8 s importing them), and never touches what it
+    inherited of the simulation (Taichi's runtime, the other workers' pipes: closed)."""
+    parent = os.getpid()
+    pid = os.fork()
+    if pid:
+        return _Forked(pid)
+    code = 1
+    try:
+        from ..geometry.workers import die_with_parent
+
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        die_with_parent(parent)
+        devnull = os.open(os.devnull, os.O_RDWR)
+        os.dup2(devnull, 0)
+        os.dup2(devnull, 1)
+        keep = sorted({request_read, answer_write})
+        os.closerange(3, keep[0])
+        os.closerange(keep[0] + 1, keep[1])
+        os.closerange(keep[1] + 1, _max_fd())
+        from .worker import serve
+
+        serve(os.fdopen(request_read, "rb"), os.fdopen(answer_write, "wb"))
+        code = 0
+    finally:
+        # Without the parent's exit handlers and buffers (Taichi's, the terminal's).
+        os._exit(code)
+
+
+def _max_fd() -> int:
+    try:
+        return os.sysconf("SC_OPEN_MAX")
+    except (ValueError, OSError):
+        return 65536
+
+
 class _Worker:
     """One worker process: a writer thread feeds it requests (a large request must not hold
     up the frame loop while the worker is busy), a reader thread settles their futures."""
@@ -77,10 +163,13 @@ class _Worker:
         request_read, request_write = os.pipe()
         answer_read, answer_write = os.pipe()
         try:
-            self.process = subprocess.Popen(
-                [sys.executable, "-m", "taichi_frac.surfaces.worker", str(os.getpid()), str(request_read),
-                 str(answer_write)], pass_fds=(request_read, answer_write), stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL)
+            if FORK:
+                self.process = _fork_worker(request_read, answer_write)
+            else:
+                self.process = subprocess.Popen(
+                    [sys.executable, "-m", "taichi_frac.surfaces.worker", str(os.getpid()), str(request_read),
+                     str(answer_write)], pass_fds=(request_read, answer_write), stdin=subprocess.DEVNULL,
+                    stdout=subprocess.DEVNULL)
         finally:
             os.close(request_read)
             os.close(answer_write)
@@ -102,6 +191,10 @@ class _Worker:
             self.pending[task] = future
         self.outbox.put((task, kind, payload))
         return future
+
+    def tell(self, kind: str, payload) -> None:
+        """A request the worker does not answer."""
+        self.outbox.put((-1, kind, payload))
 
     def close(self) -> None:
         self.outbox.put(None)
@@ -143,6 +236,27 @@ class _Worker:
                                   + (f" ({reason})" if reason else "") + " before it answered")
 
 
+#: Worker processes idle between runs of this process, for the next run to take: their
+#: memos (``stage._ROOT_SURFACES``, ``stage._CUTS``) serve a repeated run's bodies and splits
+#: as this process' own serve a run without workers. They end with this process.
+_IDLE: list = []
+
+
+def _take_workers(count: int) -> list:
+    """``count`` workers: idle ones first (in the order they were first started, so that a
+    repeated run routes its bodies as before), then new ones."""
+    alive = [w for w in _IDLE if w.process.poll() is None]
+    _IDLE.clear()
+    taken, spare = alive[:count], alive[count:]
+    for worker in spare:
+        worker.close()
+    taken += [_Worker() for _ in range(count - len(taken))]
+    for worker in taken:
+        worker.load = 0
+        worker.tell("reset", None)  # (a new run's body ids: nothing of the last run's bodies)
+    return taken
+
+
 class SurfaceWorkers:
     """The surface stage in ``count`` worker processes (each body and its pieces in one).
 
@@ -154,11 +268,10 @@ class SurfaceWorkers:
         if count < 1:
             raise ValueError(f"count = {count}: at least one worker")
         self.count = count
-        self._workers = [_Worker() for _ in range(count)]
+        self._workers = _take_workers(count)
         self._route: dict[int, _Worker] = {}
         self._tasks = itertools.count()
         self._cut_futures: list[Future] = []
-
     def add_body(self, body: int, model, surface) -> Future:
         worker = min(self._workers, key=lambda w: w.load)
         worker.load += model.tet_count
@@ -185,6 +298,29 @@ class SurfaceWorkers:
         return [(r.seconds, r.counts) for r in done if r.counts]
 
     def close(self, cancel: bool = False) -> None:
-        """End the workers: once their queued work is done, or at once (``cancel``)."""
+        """Leave the workers idle for the next run in this process once their queued work is
+        done, or end them at once (``cancel``: their results are no longer wanted)."""
         for worker in self._workers:
-            worker.kill() if cancel else worker.close()
+            if cancel:
+                worker.kill()
+            elif worker.process.poll() is None:
+                _IDLE.append(worker)
+        self._workers = []
+
+
+def close_idle_workers(timeout: float = 5.0) -> None:
+    """End the workers left idle for a next run, and wait up to ``timeout`` seconds for them
+    to exit (at this process' exit: none outlives it, not even by the moment the kernel's
+    parent-death signal takes)."""
+    idle, _IDLE[:] = list(_IDLE), []
+    for worker in idle:
+        worker.close()
+    deadline = time.monotonic() + timeout
+    for worker in idle:
+        while worker.process.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.005)
+        if worker.process.poll() is None:
+            worker.kill()
+
+
+atexit.register(close_idle_workers)

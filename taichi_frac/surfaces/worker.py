@@ -1,11 +1,13 @@
-"""A piece-surface worker process: ``python -m taichi_frac.surfaces.worker PARENT_PID
-REQUESTS_FD ANSWERS_FD``.
+"""A piece-surface worker process: forked from the run's process (``pool.py``), or
+``python -m taichi_frac.surfaces.worker PARENT_PID REQUESTS_FD ANSWERS_FD`` where there is
+no fork.
 
 It holds a :class:`~taichi_frac.surfaces.stage.SurfaceStage` for the bodies sent to it and
 answers the requests read from one pipe with results written to another, one pickled frame
 each way (an 8-byte length, then the pickle): ``(task id, "add_body", (body, model,
 surface))`` or ``(task id, "cut", CutRequest)`` in, ``(task id, True, result)`` or
-``(task id, False, the error's traceback)`` out. It ends at the end of its input, and with
+``(task id, False, the error's traceback)`` out; ``(task id, "reset", None)`` (no answer)
+starts a new run's stage, the memos of earlier runs kept. It ends at the end of its input, and with
 its parent however that ends (a parent-death signal); Ctrl-C in the terminal is the
 parent's to handle.
 """
@@ -44,19 +46,25 @@ def main(parent_pid: int, requests_fd: int, answers_fd: int) -> int:
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     die_with_parent(parent_pid)
-    requests = os.fdopen(requests_fd, "rb")
-    answers = os.fdopen(answers_fd, "wb")
+    serve(os.fdopen(requests_fd, "rb"), os.fdopen(answers_fd, "wb"))
+    return 0
+
+
+def serve(requests, answers) -> None:
+    """Answer the requests read from ``requests`` on ``answers`` until the input ends."""
     from .stage import SurfaceStage
 
     stage = SurfaceStage()
     while (request := read_frame(requests)) is not None:
         task, kind, payload = request
+        if kind == "reset":  # (a new run: its body ids are not the last run's; no answer)
+            stage = SurfaceStage()
+            continue
         try:
             result = stage.add_body(*payload) if kind == "add_body" else stage.cut(payload)
             write_frame(answers, (task, True, result))
         except Exception:  # noqa: BLE001 (the parent raises it, with this traceback)
             write_frame(answers, (task, False, traceback.format_exc()))
-    return 0
 
 
 if __name__ == "__main__":
