@@ -10,6 +10,7 @@ shading of its source surface; a split cuts the parent's render solid along the 
 
 from __future__ import annotations
 
+import atexit
 import dataclasses
 import hashlib
 import time
@@ -38,6 +39,14 @@ _ROOT_SURFACES: dict[str, tuple] = {}
 #: splits, keeps no more than this many pieces' solids alive).
 CUTS_KEPT = 128
 _CUTS: dict[tuple, tuple] = {}
+
+
+@atexit.register
+def _forget_made() -> None:
+    # The memos' solids go before the interpreter takes manifold3d down: nanobind counts
+    # those still alive then as leaked, and says so on stderr.
+    _ROOT_SURFACES.clear()
+    _CUTS.clear()
 
 
 @dataclass(frozen=True, eq=False)
