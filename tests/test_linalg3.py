@@ -113,26 +113,29 @@ def test_vector_helpers_match_taichi_bit_for_bit(data, name, ours, theirs):
 
 def test_matrix_products_match_taichi_bit_for_bit(data):
     a, b, _, _, arrays = data
-    outs = {k: ti.Matrix.field(3, 3, ti.f32, shape=N) for k in ("mm", "mm_ti", "mmt", "mmt_ti")}
+    outs = {k: ti.Matrix.field(3, 3, ti.f32, shape=N) for k in ("mm", "mm_ti", "mmt", "mmt_ti", "mtm", "mtm_ti")}
 
     @ti.kernel
     def ours(a: ti.template(), b: ti.template()):
         for i in range(N):
             outs["mm"][i] = la.mat_mat(a[i], b[i])
             outs["mmt"][i] = la.mat_mat_t(a[i], b[i])
+            outs["mtm"][i] = la.mat_t_mat(a[i], b[i])
 
     @ti.kernel
     def theirs(a: ti.template(), b: ti.template()):
         for i in range(N):
             outs["mm_ti"][i] = a[i] @ b[i]
             outs["mmt_ti"][i] = a[i] @ b[i].transpose()
+            outs["mtm_ti"][i] = a[i].transpose() @ b[i]
 
     ours(a, b)
     theirs(a, b)
     got = {k: f.to_numpy() for k, f in outs.items()}
     assert np.array_equal(got["mm"].view(np.uint32), got["mm_ti"].view(np.uint32))
     assert np.array_equal(got["mmt"].view(np.uint32), got["mmt_ti"].view(np.uint32))
+    assert np.array_equal(got["mtm"].view(np.uint32), got["mtm_ti"].view(np.uint32))
     a64, b64 = arrays["a"].astype(np.float64), arrays["b"].astype(np.float64)
-    for key, exact in (("mm", a64 @ b64), ("mmt", a64 @ np.swapaxes(b64, 1, 2))):
+    for key, exact in (("mm", a64 @ b64), ("mmt", a64 @ np.swapaxes(b64, 1, 2)), ("mtm", np.swapaxes(a64, 1, 2) @ b64)):
         scale = np.abs(exact).max(axis=(1, 2), keepdims=True) + 1e-30
         assert np.max(np.abs(got[key] - exact) / scale) < 1e-5

@@ -107,7 +107,7 @@ def halfspace_gradient_at(points: ti.template(), i, loads: ti.template(), shear_
         if depth < 0.0:  # z clamped there (field.py): the field does not vary with depth
             for r in ti.static(range(3)):
                 g[r, 2] = 0.0
-        total += frame.transpose() @ g @ frame
+        total += la.mat_mat(la.mat_t_mat(frame, g), frame)
     return total
 
 

@@ -26,6 +26,7 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
+from ..kinematics import linalg3 as la
 
 _vec3 = ti.types.vector(3, ti.f64)
 _mat3 = ti.types.matrix(3, 3, ti.f64)
@@ -138,7 +139,7 @@ def _sym_eig_kernel(matrices: ti.types.ndarray(dtype=ti.f64, ndim=3),
 @ti.func
 def _green_strain(g):
     # 1/2 (G + G^T + G^T G) == 1/2 (F^T F - I), F = I + G, without cancellation.
-    return 0.5 * (g + g.transpose() + g.transpose() @ g)
+    return 0.5 * (g + g.transpose() + la.mat_t_mat(g, g))
 
 
 @ti.kernel
