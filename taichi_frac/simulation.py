@@ -156,15 +156,19 @@ class Simulation:
         self.output_path = None if output is False else output
         self._lock = None
         self._prepare = prepare
-        if self.output_path is not None:
-            from .io.output import OutputLock, check_output_path
-
-            check_output_path(self.output_path)
-            self._lock = OutputLock(self.output_path)
-            self._lock.acquire(overwrite=overwrite)
         self.world = None
         t_build = time.perf_counter()
         try:
+            if self.output_path is not None:
+                from .io.output import OutputLock, check_output_path
+
+                check_output_path(self.output_path)
+                lock = OutputLock(self.output_path)
+                # A Ctrl-C between the lock file's writing and its holder knowing it would
+                # leave the file behind: it is raised once the lock is ours to give back.
+                with interrupts.deferred():
+                    lock.acquire(overwrite=overwrite)
+                    self._lock = lock
             self._build(scene, arch, single_scale, world)
             self.setup_seconds = time.perf_counter() - t_build - self.prepare_seconds
         except BaseException:
@@ -358,9 +362,9 @@ class Simulation:
         failed = True  # until the loop ends: an exception leaves the cache incomplete
         frame_ms: list[float] = []
         done = 0  # frames simulated and written (a Ctrl-C may land anywhere in a frame)
-        gc.collect()
-        gc.freeze()
-        try:
+        try:  # (from here on, a Ctrl-C ends in the finally below, which gives the lock back)
+            gc.collect()
+            gc.freeze()
             if self.recorder is not None:
                 self._open_cache()
             for frame in range(1, self.frame_count + 1):
@@ -405,15 +409,17 @@ class Simulation:
         """The output's lock, and the World for the next run in this process."""
         from .scene_setup import release_world
 
-        if self.surfaces is not None:
-            # Workers whose results can no longer be written are killed; the others end with
-            # their input.
-            recorder = self.recorder
-            self.surfaces.close(cancel=recorder is None or recorder.writer is None or recorder.pending)
-        if self._lock is not None:
-            self._lock.release()
-        if self.world is not None:
-            release_world(self.world)
+        try:
+            if self.surfaces is not None:
+                # Workers whose results can no longer be written are killed; the others wait
+                # for the next run in this process.
+                recorder = self.recorder
+                self.surfaces.close(cancel=recorder is None or recorder.writer is None or recorder.pending)
+        finally:
+            if self._lock is not None:
+                self._lock.release()
+            if self.world is not None:
+                release_world(self.world)
 
     def _summary(self, frames: int, frame_ms: list[float], wall: float, interrupted: bool) -> RunSummary:
         ws = self.world.stats

@@ -91,3 +91,52 @@ def test_another_arch_than_the_running_one_is_refused(capsys):
     with pytest.raises(runtime.ArchError, match="cuda"):
         Simulation(load_scene(SCENES / "single_ring.toml"), output=False, arch="cuda")
     assert runtime.init("cpu") == "cpu"
+
+
+def test_a_ctrl_c_as_the_run_starts_gives_the_output_lock_back(tmp_path, monkeypatch, scene_world):
+    """The first thing a run does (its garbage collection) interrupted: the run stops with
+    nothing simulated and the lock file beside the cache is gone."""
+    import taichi_frac.simulation as simulation
+
+    class _InterruptedGc:
+        @staticmethod
+        def collect():
+            raise KeyboardInterrupt
+
+        freeze = unfreeze = staticmethod(lambda: None)
+
+    out = tmp_path / "ring.usdc"
+    sim = Simulation(load_scene(SCENES / "single_ring.toml"), output=out, frames=2, world=scene_world,
+                     surface_workers=0)
+    assert (tmp_path / ".ring.usdc.lock").exists()
+    monkeypatch.setattr(simulation, "gc", _InterruptedGc)
+    try:
+        summary = sim.run()
+    except KeyboardInterrupt:
+        pytest.fail("the Ctrl-C escaped the run")
+    assert summary.interrupted and summary.frames == 0
+    assert not (tmp_path / ".ring.usdc.lock").exists()
+
+
+def test_a_ctrl_c_while_the_lock_is_taken_gives_it_back(tmp_path, monkeypatch):
+    """SIGINT landing just after the lock file is written (the command's handler installed):
+    the interrupt comes once the lock is the run's, and the run gives it back."""
+    import signal
+
+    from taichi_frac import interrupts
+    from taichi_frac.io.output import OutputLock
+
+    real = OutputLock.acquire
+
+    def acquire_then_sigint(self, **kwargs):
+        real(self, **kwargs)
+        interrupts._handler(signal.SIGINT, None)  # (what the signal would run here)
+
+    monkeypatch.setattr(OutputLock, "acquire", acquire_then_sigint)
+    interrupts.install()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            Simulation(load_scene(SCENES / "single_ring.toml"), output=tmp_path / "ring.usdc", frames=2)
+    finally:
+        interrupts.restore()
+    assert not (tmp_path / ".ring.usdc.lock").exists()
