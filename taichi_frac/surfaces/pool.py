@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import atexit
 import itertools
+import multiprocessing
 import os
 import queue
 import signal
@@ -29,7 +30,7 @@ from .worker import read_frame, write_frame
 
 #: Workers are forked from the run's process where the platform forks (Linux: macOS' system
 #: libraries do not survive a fork that is not followed by exec), else started as interpreters.
-FORK = sys.platform.startswith("linux")
+FORK = sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
 
 
 class SurfaceWorkerError(RuntimeError):
@@ -84,68 +85,57 @@ class InProcessSurfaces:
 
 
 class _Forked:
-    """A worker forked from this process, behind the part of ``subprocess.Popen``'s
-    interface ``_Worker`` uses (``pid``, ``returncode``, ``poll``, ``wait``, ``kill``)."""
+    """A worker forked from this process (``multiprocessing``'s fork context, as
+    ``geometry.bounded`` forks its steps), behind the part of ``subprocess.Popen``'s
+    interface ``_Worker`` uses."""
 
-    def __init__(self, pid: int):
-        self.pid = pid
-        self.returncode = None
-        self._lock = threading.Lock()
+    def __init__(self, process):
+        self._process = process
+        self.pid = process.pid
+
+    @property
+    def returncode(self):
+        return self._process.exitcode
 
     def poll(self):
-        return self._reap(os.WNOHANG)
+        return self._process.exitcode  # (None while it runs)
 
     def wait(self):
-        return self._reap(0)
+        self._process.join()
+        return self._process.exitcode
 
     def kill(self) -> None:
-        if self.returncode is None:
-            try:
-                os.kill(self.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-
-    def _reap(self, flags: int):
-        with self._lock:
-            if self.returncode is None:
-                try:
-                    pid, status = os.waitpid(self.pid, flags)
-                except ChildProcessError:
-                    pid, status = self.pid, 0
-                if pid:
-                    self.returncode = os.waitstatus_to_exitcode(status)
-            return self.returncode
+        self._process.kill()
 
 
 def _fork_worker(request_read: int, answer_write: int) -> _Forked:
     """A worker forked from this process: it starts with this process' modules imported (a
-    started interpreter spends about 0.8 s importing them), and never touches what it
-    inherited of the simulation (Taichi's runtime, the other workers' pipes: closed)."""
-    parent = os.getpid()
-    pid = os.fork()
-    if pid:
-        return _Forked(pid)
-    code = 1
-    try:
-        from ..geometry.workers import die_with_parent
+    started interpreter spends about 0.8 s importing them). A daemon: an idle one left at
+    exit is ended, not waited for."""
+    process = multiprocessing.get_context("fork").Process(
+        target=_serve_forked, args=(request_read, answer_write, os.getpid()), daemon=True)
+    process.start()
+    return _Forked(process)
 
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
-        die_with_parent(parent)
-        devnull = os.open(os.devnull, os.O_RDWR)
-        os.dup2(devnull, 0)
-        os.dup2(devnull, 1)
-        keep = sorted({request_read, answer_write})
-        os.closerange(3, keep[0])
-        os.closerange(keep[0] + 1, keep[1])
-        os.closerange(keep[1] + 1, _max_fd())
-        from .worker import serve
 
-        serve(os.fdopen(request_read, "rb"), os.fdopen(answer_write, "wb"))
-        code = 0
-    finally:
-        # Without the parent's exit handlers and buffers (Taichi's, the terminal's).
-        os._exit(code)
+def _serve_forked(request_read: int, answer_write: int, parent: int) -> None:
+    """The forked worker's life: it never touches what it inherited of the simulation
+    (Taichi's runtime, the other workers' pipes: closed), and leaves without the parent's
+    exit handlers (multiprocessing ends a forked child with os._exit)."""
+    from ..geometry.workers import die_with_parent
+    from .worker import serve
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    die_with_parent(parent)
+    devnull = os.open(os.devnull, os.O_RDWR)
+    os.dup2(devnull, 0)
+    os.dup2(devnull, 1)
+    keep = sorted({request_read, answer_write})
+    os.closerange(3, keep[0])
+    os.closerange(keep[0] + 1, keep[1])
+    os.closerange(keep[1] + 1, _max_fd())
+    serve(os.fdopen(request_read, "rb"), os.fdopen(answer_write, "wb"))
 
 
 def _max_fd() -> int:
@@ -274,6 +264,7 @@ class SurfaceWorkers:
         self._route: dict[int, _Worker] = {}
         self._tasks = itertools.count()
         self._cut_futures: list[Future] = []
+
     def add_body(self, body: int, model, surface) -> Future:
         worker = min(self._workers, key=lambda w: w.load)
         worker.load += model.tet_count

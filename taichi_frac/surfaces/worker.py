@@ -7,9 +7,9 @@ answers the requests read from one pipe with results written to another, one pic
 each way (an 8-byte length, then the pickle): ``(task id, "add_body", (body, model,
 surface))`` or ``(task id, "cut", CutRequest)`` in, ``(task id, True, result)`` or
 ``(task id, False, the error's traceback)`` out; ``(task id, "reset", None)`` (no answer)
-starts a new run's stage, the memos of earlier runs kept. It ends at the end of its input, and with
-its parent however that ends (a parent-death signal); Ctrl-C in the terminal is the
-parent's to handle.
+starts a new run's stage, the memos of earlier runs kept. It ends at the end of its input,
+and with its parent however that ends (a parent-death signal); Ctrl-C in the terminal is
+the parent's to handle.
 """
 
 from __future__ import annotations
