@@ -116,17 +116,19 @@ def run(ctx: BenchContext, repeat: int | None = None) -> Section:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         env = dict(os.environ)
-        for scene in ("single_ring", "thirteen_rings"):
-            ctx.progress(f"startup: {scene}, warm ({repeat} runs after one)")
-            _timed_run(scene, folder, env)
-            runs = sorted((_timed_run(scene, folder, env) for _ in range(repeat)), key=lambda r: r["wall"])
-            rows.append(_breakdown(f"{scene}, warm", runs[len(runs) // 2]))
-            headline[f"{scene}_warm_s"] = statistics.median(r["wall"] for r in runs)
-        ctx.progress(f"startup: thirteen_rings, a quick look ({repeat} runs)")
-        quick = [arg for k in range(13) for arg in ("--set", f"ring{k:02d}.fracture.crack_fit_rounds=0")]
-        runs = sorted((_timed_run("thirteen_rings", folder, env, quick) for _ in range(repeat)), key=lambda r: r["wall"])
-        rows.append(_breakdown(f"thirteen_rings, a quick look ({QUICK_LOOK}), warm", runs[len(runs) // 2]))
-        headline["thirteen_rings_quick_look_s"] = statistics.median(r["wall"] for r in runs)
+        from taichi_frac.scenes import load_scene
+
+        quick = [arg for o in load_scene("thirteen_rings").breakable_objects
+                 for arg in ("--set", f"{o.name}.fracture.{QUICK_LOOK.replace(' ', '')}")]
+        for scene, label, key, extra in (("single_ring", "single_ring", "single_ring_warm_s", ()),
+                                         ("thirteen_rings", "thirteen_rings", "thirteen_rings_warm_s", ()),
+                                         ("thirteen_rings", f"thirteen_rings, a quick look ({QUICK_LOOK})",
+                                          "thirteen_rings_quick_look_s", quick)):
+            ctx.progress(f"startup: {label}, warm ({repeat} runs after one)")
+            _timed_run(scene, folder, env, extra)
+            runs = sorted((_timed_run(scene, folder, env, extra) for _ in range(repeat)), key=lambda r: r["wall"])
+            rows.append(_breakdown(f"{label}, warm", runs[len(runs) // 2]))
+            headline[key] = statistics.median(r["wall"] for r in runs)
         ctx.progress("startup: an empty cache (a fresh machine): the demo, then a new scene")
         empty = env | {"TAICHI_FRAC_CACHE": str(folder / "empty_cache")}
         demo = _timed_run("single_ring", folder, empty)
