@@ -39,16 +39,9 @@ def decimate_qslim(vertices: np.ndarray, faces: np.ndarray, face_count: int):
     decimation where libigl fails or stops short of the count."""
     import igl
 
-    from .simplify import _decimate_quadric
+    from .simplify import libigl_decimation
 
-    try:
-        v, f, _, _ = igl.qslim(np.asarray(vertices, dtype=np.float64, order="F"),
-                               np.asarray(faces, dtype=np.int32, order="F"), int(face_count))
-    except (RuntimeError, ValueError):
-        return _decimate_quadric(vertices, faces, face_count)
-    if len(f) == 0 or len(f) > 1.1 * face_count:
-        return _decimate_quadric(vertices, faces, face_count)
-    return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64)
+    return libigl_decimation(igl.qslim, vertices, faces, face_count)
 
 
 class HeldShare:

@@ -144,9 +144,16 @@ def _decimate(vertices: np.ndarray, faces: np.ndarray, face_count: int):
     quadric decimation when libigl stops short of the count."""
     import igl
 
+    return libigl_decimation(lambda v, f, n: igl.decimate(v, f, n, True), vertices, faces, face_count)
+
+
+def libigl_decimation(collapse, vertices: np.ndarray, faces: np.ndarray, face_count: int):
+    """``face_count`` triangles of (``vertices``, ``faces``) by one of libigl's collapses
+    (``collapse(V, F, n)`` returning its (V, F, ...) tuple), or by :func:`_decimate_quadric`
+    where libigl fails or stops short of the count."""
     try:
-        v, f, _, _ = igl.decimate(np.asarray(vertices, dtype=np.float64, order="F"),
-                                  np.asarray(faces, dtype=np.int32, order="F"), int(face_count), True)
+        v, f, _, _ = collapse(np.asarray(vertices, dtype=np.float64, order="F"),
+                              np.asarray(faces, dtype=np.int32, order="F"), int(face_count))
     except (RuntimeError, ValueError):
         return _decimate_quadric(vertices, faces, face_count)
     if len(f) == 0 or len(f) > 1.1 * face_count:
