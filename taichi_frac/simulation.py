@@ -25,7 +25,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import interrupts, runtime
-from .blas_threads import single_blas_thread
 from .fracture.stage import BodyRecord, FractureStage
 from .options import LOOKS, OptionError
 
@@ -158,12 +157,8 @@ class Simulation:
         self._lock = None
         self._prepare = prepare
         self.world = None
-        self._blas = None
         t_build = time.perf_counter()
         try:
-            # One BLAS thread from here to the run's end (blas_threads), set before the surface
-            # workers fork: a worker forked from a process whose BLAS has one thread starts none.
-            self._blas = single_blas_thread()
             if self.output_path is not None:
                 from .io.output import OutputLock, check_output_path
 
@@ -368,8 +363,6 @@ class Simulation:
         frame_ms: list[float] = []
         done = 0  # frames simulated and written (a Ctrl-C may land anywhere in a frame)
         try:  # (from here on, a Ctrl-C ends in the finally below, which gives the lock back)
-            if self._blas is None:  # (a second run of this Simulation)
-                self._blas = single_blas_thread()
             gc.collect()
             gc.freeze()
             if self.recorder is not None:
@@ -427,9 +420,6 @@ class Simulation:
                 self._lock.release()
             if self.world is not None:
                 release_world(self.world)
-            if self._blas is not None:  # (the caller's BLAS thread counts back)
-                self._blas.restore_original_limits()
-                self._blas = None
 
     def _summary(self, frames: int, frame_ms: list[float], wall: float, interrupted: bool) -> RunSummary:
         ws = self.world.stats

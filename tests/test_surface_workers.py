@@ -212,26 +212,3 @@ def test_a_second_run_takes_the_idle_workers_and_writes_the_same_cache(tmp_path)
     assert pids[0] == pids[1] == pids[2]  # (the same processes, idle between the runs)
     pool.close_idle_workers()
     assert not pool._IDLE
-
-
-def test_a_run_holds_blas_to_one_thread_and_gives_the_callers_count_back(tmp_path):
-    """OpenBLAS's idle threads spin beside the frames and the workers (blas_threads): from the
-    Simulation's construction (before its workers fork) to its run's end the process's BLAS
-    libraries have one thread each, a worker forked then starts with one, and the caller's
-    count comes back after the run."""
-    from threadpoolctl import threadpool_info, threadpool_limits
-
-    def counts():
-        return [info["num_threads"] for info in threadpool_info() if info["user_api"] == "blas"]
-
-    with threadpool_limits(limits=2, user_api="blas"):
-        before = counts()
-        assert before and all(n == 2 for n in before)
-        scene = load_scene(SCENES / "single_ring.toml", ["ring.fracture.crack_count=3"])
-        seen = []
-        sim = Simulation(scene, output=tmp_path / "ring.usdc", frames=30, surface_workers=1,
-                         progress=lambda *args: seen.append(counts()))
-        assert all(n == 1 for n in counts())
-        sim.run()
-        assert seen and all(n == 1 for frame in seen for n in frame)
-        assert counts() == before

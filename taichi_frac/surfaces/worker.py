@@ -52,10 +52,8 @@ def main(parent_pid: int, requests_fd: int, answers_fd: int) -> int:
 
 def serve(requests, answers) -> None:
     """Answer the requests read from ``requests`` on ``answers`` until the input ends."""
-    from ..blas_threads import single_blas_thread
     from .stage import SurfaceStage
 
-    single_blas_thread()  # (for the worker's life: see blas_threads)
     stage = SurfaceStage()
     while (request := read_frame(requests)) is not None:
         task, kind, payload = request
