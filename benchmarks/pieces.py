@@ -82,7 +82,7 @@ def measure_pieces(pieces) -> dict:
     """Totals over pieces ((model, root model, render solid or None) each) of the render
     surfaces' and the tets' boundary faces' measures."""
     from taichi_frac.surfaces.checks import edge_counts, piece_quality
-    from taichi_frac.surfaces.cut import piece_mesh
+    from taichi_frac.surfaces.mesh import piece_mesh
     from taichi_frac.surfaces.mesh import fragment_surface
 
     rows, before = [], []

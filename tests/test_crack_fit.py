@@ -9,7 +9,7 @@ import pytest
 from taichi_frac.fracture.cracks import CrackPlane
 from taichi_frac.fracture.fragments import split_body
 from taichi_frac.surfaces.checks import crack_deviation, piece_quality
-from taichi_frac.surfaces.cut import piece_mesh
+from taichi_frac.surfaces.mesh import piece_mesh
 from taichi_frac.surfaces.solid import render_solid_from_surface
 from taichi_frac.options import FractureOptions
 
@@ -376,14 +376,17 @@ def test_a_whole_plane_fit_that_fails_a_piece_no_move_can_free_stops_cleanly():
     """The whole-plane fit (no ``near``): a cut that fails a piece whose cracks no move row
     names freezes nothing more and gives the kept cut back, rather than failing on the
     empty set of jumped pieces."""
-    from taichi_frac.surfaces.cut import _fit_rounds, _Kept
+    from taichi_frac.surfaces.cut import _fit_rounds, _Kept, _Parts
 
-    kept = _Kept([None], [None], {"fallback_ids": np.zeros(0, dtype=np.int64)}, np.zeros(0), 1.0)
+    def parts(failed):
+        return _Parts(None, (), [None], {"fallback_ids": failed}, np.zeros(0), np.zeros(0))
+
+    kept = _Kept(parts(np.zeros(0, dtype=np.int64)), 1.0)
     tried = []
 
     def cut(moves):
         tried.append(moves.copy())
-        return [None], {"fallback_ids": np.array([0])}, None, np.zeros(0)
+        return parts(np.array([0]))
 
     def freeze(pieces):
         assert isinstance(pieces, np.ndarray), pieces  # (the cut's freeze reads pieces.tolist())

@@ -17,7 +17,8 @@ from taichi_frac.surfaces.crack_fit import FITTED_PIECE_TETS
 from taichi_frac.surfaces.checks import crack_deviation, edge_counts, inside, piece_quality, signed_volume
 from taichi_frac.surfaces.parts import LOST_VOLUME_SHARE
 from taichi_frac.surfaces.reach import BALL_BOUND, REACH_FACTOR
-from taichi_frac.surfaces.cut import cut_render_solid, piece_mesh
+from taichi_frac.surfaces.cut import cut_render_solid
+from taichi_frac.surfaces.mesh import piece_mesh
 from taichi_frac.surfaces.solid import render_solid_from_surface
 from taichi_frac.geometry.prepare import prepare_body
 from taichi_frac.options import FractureOptions, material_preset
@@ -76,7 +77,7 @@ def test_face_with_corners_of_two_origins_gets_the_crack_it_lies_on():
     them where a cut meets a face): a face on crack 0's plane gets 0, one on crack 1's plane
     (corners -1, 1, 0) gets 1, one on neither gets the artist's surface (-1), one with a hull
     corner and on no crack the hull's index."""
-    from taichi_frac.surfaces.cut import _face_cracks
+    from taichi_frac.surfaces.mesh import _face_cracks
     from taichi_frac.surfaces.layout import HULL_FACE
     from taichi_frac.surfaces.solid import CrackSurface
 
@@ -94,7 +95,7 @@ def test_a_sliver_with_no_uv_takes_its_nearest_corner_s():
     """Hand-made: an outer sliver whose corners the booleans left without UVs (NaN) takes,
     corner by corner, the UV of the nearest outer corner that has one; an inner face's
     NaN corners stay (their UVs come from their crack)."""
-    from taichi_frac.surfaces.cut import _outer_uvs
+    from taichi_frac.surfaces.mesh import _outer_uvs
 
     triangles = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]],
                           [[1.0, 0, 1e-9], [0, 1, 1e-9], [0.5, 0.5, 0]],

@@ -16,7 +16,7 @@ they hold. So:
   (``crack_offsets``, ``crack_slabs``);
 - the outside is the artist's triangles clipped at the crack faces, keeping their UVs and
   normals (interpolated where a triangle is cut); inner faces get a planar projection along
-  their crack as UVs and their own flat normal;
+  their crack as UVs and their own flat normal (``mesh.piece_mesh``);
 - the tip of a wedge a piece's flat faces run past its tets, into a neighbour's, is cut
   away at ``piece_reach.REACH_FACTOR`` spacings from its tets (``reach.py``);
 - every piece is closed, manifold and outward wound (the boolean library guarantees it);
@@ -63,14 +63,14 @@ import numpy as np
 from ..fracture.crack_types import CrackPlane, RingCrack
 from .crack_fit import (FITTED_PIECE_TETS, MOVES, crack_segments, moved_crack, piece_target_volumes,
                         segment_shifts, tilt_frames, volume_errors, volume_misfit, volume_offsets)
-from .layout import CRACK, HULL_FACE, NORMAL, UV
+from .layout import HULL_FACE
 from .parts import (assign_parts, carve_lost_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
                     overfull_pieces, overreaching_pieces)
 from .reach import KEPT_SHARE, trim_overreach
-from .shells import join_stray_shells, without_crumbs
+from .shells import join_planned_shells, plan_stray_shells, planned_solids, without_crumbs
 from .slabs import SLAB_PAST_FACTOR, plane_slab, segment_slabs, sphere_shell
-from .solid import (DUST_VOLUME_FACTOR, SPHERE_SAGITTA_FACTOR, WELD_REACH_FACTOR, WELD_THICKNESS_FACTOR, PieceMesh,
-                    RenderSolid, tangent_frame, with_crack_index, without_dust)
+from .solid import (DUST_VOLUME_FACTOR, WELD_REACH_FACTOR, WELD_THICKNESS_FACTOR, RenderSolid, with_crack_index,
+                    without_dust)
 
 #: The shares of the fitted plane offsets tried in turn until a cut's pieces come nearer their
 #: tets' volumes than the first cut's: a moved plane can hand a small part where cracks meet
@@ -187,16 +187,22 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     frames = tilt_frames(cracks, [None if sites is None else sites[cut & (inside < 0)]
                                   for sites, cut, inside, _ in per_crack], spacing)
     scale = render.volume_scale if render.volume_scale is not None else render.solid.volume() / model.volume
-    args = (render, model, fragment_tets, labels, cracks, per_crack, frames, piece_origins, roughness,
-            roughness_scale, seed, scale)
-    pieces, stats, index_of, sources = _cut(*args, np.zeros((len(cracks), MOVES)))
-    stats.update(moved_cracks=0, largest_offset=0.0, fit_cuts=0, moved_segments=0, largest_segment_shift=0.0)
+    args = (render, model, fragment_tets, labels, cracks, per_crack, frames, roughness, roughness_scale, seed)
+
+    def finished(kept: _Parts, **counts):
+        pieces, stats = _pieces(render, kept, piece_origins, scale)
+        return _trimmed(pieces, dict(stats, **counts), model, labels, piece_origins)
+
+    first = _cut_parts(*args, np.zeros((len(cracks), MOVES)))
+    index_of = first.index_of
     if not fit_rounds:
-        return _trimmed(pieces, stats, model, labels, piece_origins)
+        return finished(first, moved_cracks=0, largest_offset=0.0, fit_cuts=0, moved_segments=0,
+                        largest_segment_shift=0.0)
     targets = piece_target_volumes(scale, model, fragment_tets)
-    solids = [p.solid if p is not None else None for p in pieces]
     plane_min_tets = max(int(fit_min_tets), FITTED_PIECE_TETS)
-    kept = _Kept(pieces, solids, stats, sources, volume_misfit(solids, targets, fragment_tets, plane_min_tets))
+    # (the fit reads the cuts' parts in the body's frame, before the welds: see _Parts)
+    kept = _Kept(first, volume_misfit(first.solids, targets, fragment_tets, plane_min_tets))
+    origins = np.zeros((len(fragment_tets), 3))
     # The whole cracks first: a crack is frozen when a piece on it fails.
     touching = [set(ends[cut & (inside < 0)].ravel().tolist()) if sites is not None else set()
                 for sites, cut, inside, ends in per_crack]
@@ -207,9 +213,9 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     kept, moved, cuts = _fit_rounds(
         fit_rounds, kept, np.zeros((len(cracks), MOVES)), targets, fragment_tets, plane_min_tets,
         fit=lambda solids, _, moves, frozen: volume_offsets(solids, index_of, cracks, targets, fragment_tets, spacing,
-                                                            moves, frames, piece_origins, frozen=frozen,
+                                                            moves, frames, origins, frozen=frozen,
                                                             min_tets=plane_min_tets),
-        cut=lambda moves: _cut(*args, moves),
+        cut=lambda moves: _cut_parts(*args, moves),
         freeze=on_failed, near=None)
     # Then each stretch of a plane between one pair of pieces on its own (crack_offsets.CrackSegments).
     segments = crack_segments(per_crack, len(fragment_tets))
@@ -218,31 +224,38 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     kept, shifts, more = _fit_rounds(
         fit_rounds if segments.count else 0, kept, np.zeros(segments.count), targets,
         fragment_tets, fit_min_tets,
-        fit=lambda solids, sources, moves, frozen: segment_shifts(solids, piece_origins, sources, cracks, segments,
+        fit=lambda solids, sources, moves, frozen: segment_shifts(solids, origins, sources, cracks, segments,
                                                                   targets, fragment_tets, spacing, moves, frozen,
                                                                   fit_min_tets),
-        cut=lambda moves: _cut(*args, moved, segments, moves),
+        cut=lambda moves: _cut_parts(*args, moved, segments, moves),
         freeze=lambda newly: np.isin(segments.pieces, newly).any(axis=1),
         near=lambda before, after, jumped, newly: _stretches_near(
-            segments, np.concatenate([_changed_material(before, after, jumped, piece_origins, spacing),
+            segments, np.concatenate([_changed_material(before, after, jumped, origins, spacing),
                                       model.particle_position[np.isin(labels, newly)]]), spacing))
     reach = np.abs(moved[:, 0]) + np.linalg.norm(moved[:, 1:], axis=1)
-    stats = dict(kept.stats, moved_cracks=int(np.sum(reach > 0.0)),
-                 largest_offset=float(np.max(reach, initial=0.0)) / spacing, fit_cuts=cuts + more,
-                 moved_segments=int(np.sum(shifts != 0.0)),
-                 largest_segment_shift=float(np.max(np.abs(shifts), initial=0.0)) / spacing)
-    return _trimmed(kept.pieces, stats, model, labels, piece_origins)
+    return finished(kept.parts, moved_cracks=int(np.sum(reach > 0.0)),
+                    largest_offset=float(np.max(reach, initial=0.0)) / spacing, fit_cuts=cuts + more,
+                    moved_segments=int(np.sum(shifts != 0.0)),
+                    largest_segment_shift=float(np.max(np.abs(shifts), initial=0.0)) / spacing)
 
 
 class _Kept(NamedTuple):
-    """A cut the fit keeps: its pieces (RenderSolid or None), their solids, ``_cut``'s stats
-    and sources, and its ``volume_misfit``."""
+    """A cut the fit keeps: its ``_Parts`` and their ``volume_misfit``."""
 
-    pieces: list
-    solids: list
-    stats: dict
-    sources: np.ndarray
+    parts: "_Parts"
     misfit: float
+
+    @property
+    def solids(self) -> list:
+        return self.parts.solids
+
+    @property
+    def sources(self) -> np.ndarray:
+        return self.parts.sources
+
+    @property
+    def stats(self) -> dict:
+        return self.parts.stats
 
 
 def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, min_tets: int, fit, cut, freeze,
@@ -271,13 +284,13 @@ def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, mi
             break
         for step in FIT_STEPS:
             tried = moves + step * change
-            pieces, stats, _, sources = cut(tried)
+            parts = cut(tried)
             cuts += 1
-            newly = np.setdiff1d(stats["fallback_ids"], kept.stats["fallback_ids"])
-            solids = [p.solid if p is not None else None for p in pieces]
+            newly = np.setdiff1d(parts.stats["fallback_ids"], kept.stats["fallback_ids"])
+            solids = parts.solids
             misfit = volume_misfit(solids, targets, fragment_tets, min_tets)
             if not len(newly) and misfit < kept.misfit:
-                kept, moves = _Kept(pieces, solids, stats, sources, misfit), tried
+                kept, moves = _Kept(parts, misfit), tried
                 break
             jumped = (jumped_pieces(kept.solids, solids, targets, fragment_tets, min_tets) if near
                       else np.zeros(0, dtype=np.int64))
@@ -354,6 +367,23 @@ def _trimmed(pieces, stats, model, labels, piece_origins):
     return pieces, stats
 
 
+class _Parts(NamedTuple):
+    """One cut's pieces before the bridges that join their stray shells (``_cut_parts``):
+    every cut the fit tries is measured, only the one it keeps needs them (``_pieces``).
+    ``plan`` where each piece's shells go (``shells.StrayPlan``, the body's frame [m]),
+    ``cracks`` the pieces' crack surfaces, ``solids`` per piece its shells as ``plan`` gives
+    them out, one manifold (the body's frame) or None: what the fit measures (a bridge adds
+    a gap's volume, CONTACT_GAP_FACTOR spacings deep); ``stats``, ``index_of``, ``sources``
+    as ``_cut``'s."""
+
+    plan: object
+    cracks: tuple
+    solids: list
+    stats: dict
+    index_of: np.ndarray
+    sources: np.ndarray
+
+
 def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, frames, piece_origins, roughness,
          roughness_scale, seed, volume_scale, offsets, segments=None, shifts=None):
     """One cut of ``cut_render_solid`` with crack i moved by ``offsets[i]`` (MOVES,) [m] (see
@@ -363,7 +393,15 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
     (S,) [m]. Returns (pieces, stats, index_of, sources): index_of (len(cracks),) each crack's
     (first) index in the pieces' ``cracks`` (-1: it made no slab), sources the crack behind
     each index of the pieces' ``cracks`` (-1: one the body had)."""
+    parts = _cut_parts(render, model, fragment_tets, labels, cracks, per_crack, frames, roughness, roughness_scale,
+                       seed, offsets, segments, shifts)
+    pieces, stats = _pieces(render, parts, piece_origins, volume_scale)
+    return pieces, stats, parts.index_of, parts.sources
 
+
+def _cut_parts(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, frames, roughness,
+               roughness_scale, seed, offsets, segments=None, shifts=None) -> _Parts:
+    """``_cut`` up to the pieces' shells (see ``_Parts``)."""
     spacing = render.spacing
     new_cracks = list(render.cracks)
     slabs, planes, sources = [], [], []
@@ -420,32 +458,43 @@ def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, f
     failed |= overfull_pieces(parts, owner, model, labels, spacing, roughness) - received
     stats["fallback_pieces"] = len(failed)
     stats["fallback_ids"] = sorted(failed)
-    # Each piece's parts without its crumbs, once: the welds and the pieces below read them.
+    stats["unassigned_parts"] = int(sum(1 for o in owner if o == -1))
+    # Each piece's parts without its crumbs, once: the welds and the pieces read them.
     kept = {k: without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing) for k in set(owner) if k >= 0}
-    split_up = {k for k, mine in kept.items() if k not in failed and len(mine) > 1}
-    spheres = [surface for surface in new_cracks[len(render.cracks):] if surface.radius is not None]
-    welds = _weld_bits(render.solid, planes, spheres, split_up, spacing, roughness, roughness_scale, seed)
     shells = {}  # piece -> its shells, the body's frame
-    origins = np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)
-    for k in range(len(origins)):
-        mine = kept.get(k, [])
+    for k in range(len(fragment_tets)):
         if k in failed:
             # Its share of the solid nearest its own tets (see failed_piece_shells).
             shells[k] = without_crumbs(failed_piece_shells(render.solid, model, labels, k, failed, parts, owner,
                                                            spacing), spacing)
             stats["cell_pieces"] += bool(shells[k])
-        elif not mine:
+        elif not kept.get(k):
             stats["empty_pieces"] += 1
-        elif k in welds:
-            shells[k] = without_dust(m3.Manifold.batch_boolean([*mine, *welds[k]], m3.OpType.Add), spacing)
-            stats["welded_pieces"] += 1
         else:
-            shells[k] = mine
-    solids, stats["shells_moved"] = join_stray_shells({k: mine for k, mine in shells.items() if mine}, spacing)
-    pieces = [RenderSolid(solids[k], tuple(new_cracks), spacing, volume_scale).moved(origin) if k in solids else None
+            shells[k] = kept[k]
+    # A piece whose own parts a crack's slab parted is welded into one shell again.
+    split_up = {k for k, mine in kept.items() if k not in failed and len(mine) > 1}
+    spheres = [surface for surface in new_cracks[len(render.cracks):] if surface.radius is not None]
+    for k, bits in _weld_bits(render.solid, planes, spheres, split_up, spacing, roughness, roughness_scale,
+                              seed).items():
+        shells[k] = without_dust(m3.Manifold.batch_boolean([*shells[k], *bits], m3.OpType.Add), spacing)
+        stats["welded_pieces"] += 1
+    plan = plan_stray_shells({k: mine for k, mine in shells.items() if mine}, spacing)
+    stats["shells_moved"] = plan.moved
+    planned = planned_solids(plan)
+    return _Parts(plan, tuple(new_cracks), [planned.get(k) for k in range(len(fragment_tets))], stats, index_of,
+                  sources)
+
+
+def _pieces(render: RenderSolid, parts: _Parts, piece_origins, volume_scale) -> tuple[list, dict]:
+    """The pieces of a cut's ``parts``, each stray shell joined where the plan sends it
+    (``join_stray_shells``), in its frame (origin ``piece_origins[k]`` (3,) [m] in the
+    body's). Returns (pieces (RenderSolid or None), the cut's stats)."""
+    solids = join_planned_shells(parts.plan, render.spacing)
+    origins = np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)
+    pieces = [RenderSolid(solids[k], parts.cracks, render.spacing, volume_scale).moved(origin) if k in solids else None
               for k, origin in enumerate(origins)]
-    stats["unassigned_parts"] = int(sum(1 for o in owner if o == -1))
-    return pieces, stats, index_of, sources
+    return pieces, dict(parts.stats)
 
 
 def _weld_bits(solid: m3.Manifold, planes, spheres, split_up: set, spacing: float, roughness: float,
@@ -479,75 +528,3 @@ def _weld_bits(solid: m3.Manifold, planes, spheres, split_up: set, spacing: floa
         if welds:
             bits[k] = [solid ^ (m3.Manifold.batch_boolean(welds, m3.OpType.Add) if len(welds) > 1 else welds[0])]
     return bits
-
-
-def _face_cracks(corner_crack: np.ndarray, triangles: np.ndarray, cracks, spacing: float) -> np.ndarray:
-    """(F,) each face's crack index from its corners' (F,3): the one they share, else (a face
-    the booleans gave corners of two origins) the crack whose surface all three corners lie on
-    (within SPHERE_SAGITTA_FACTOR spacings), else the artist's surface (-1), or a hull's."""
-    crack = corner_crack[:, 0].copy()
-    mixed = np.nonzero((corner_crack != corner_crack[:, :1]).any(axis=1))[0]
-    for f in mixed:
-        crack[f] = HULL_FACE if (corner_crack[f] == HULL_FACE).any() else -1
-        for index in np.unique(corner_crack[f][corner_crack[f] >= 0]):
-            if np.all(np.abs(cracks[index].distance(triangles[f])) <= SPHERE_SAGITTA_FACTOR * spacing):
-                crack[f] = index
-                break
-    return crack
-
-
-def _outer_uvs(uvs: np.ndarray, triangles: np.ndarray, outer: np.ndarray) -> np.ndarray:
-    """``uvs`` (F,3,2) with each NaN corner of an ``outer`` face given the UV of the nearest
-    outer corner that has one (``triangles`` (F,3,3) [m] the corners): the booleans
-    interpolate a sliver's properties over its zero area as NaN (slivers of 1e-15 m^2
-    where a slab grazes the surface)."""
-    uvs = uvs.copy()
-    lost = outer[:, None] & np.isnan(uvs).any(axis=2)
-    known = outer[:, None] & ~np.isnan(uvs).any(axis=2)
-    if lost.any() and known.any():
-        from scipy.spatial import cKDTree
-
-        nearest = cKDTree(triangles[known]).query(triangles[lost])[1]
-        uvs[lost] = uvs[known][nearest]
-    return uvs
-
-
-def piece_mesh(render: RenderSolid) -> PieceMesh:
-    """The render solid as a triangle mesh with per-corner shading (see PieceMesh)."""
-    mesh = render.solid.to_mesh64()
-    props = np.asarray(mesh.vert_properties, dtype=np.float64)
-    tri_verts = np.asarray(mesh.tri_verts, dtype=np.int64)
-    # One vertex per topological vertex: property vertices repeat one across UV and normal
-    # seams (the merge vectors say which), while two vertices the solid pinches together at
-    # one position stay two, so the mesh stays manifold.
-    topological = np.arange(len(props))
-    topological[np.asarray(mesh.merge_from_vert, dtype=np.int64)] = np.asarray(mesh.merge_to_vert, dtype=np.int64)
-    used, vertex_of = np.unique(topological, return_inverse=True)
-    positions = props[used, :3]
-    faces = vertex_of.reshape(-1)[tri_verts]
-    corner = props[tri_verts]  # (F,3,P)
-    tri = positions[faces]
-    corner_crack = np.rint(np.nan_to_num(corner[:, :, CRACK], nan=-1.0)).astype(np.int64)
-    crack = _face_cracks(corner_crack, tri, render.cracks, render.spacing)
-    inner = crack != -1
-    flat = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    flat /= np.maximum(np.linalg.norm(flat, axis=1, keepdims=True), 1e-300)
-    normals = corner[:, :, NORMAL].copy()
-    normals[inner] = flat[inner][:, None, :]
-    length = np.linalg.norm(normals, axis=2, keepdims=True)
-    normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300), flat[:, None, :])
-    uvs = _outer_uvs(corner[:, :, UV], tri, crack == -1)
-    uvs[crack == HULL_FACE] = np.nan  # (the cache writer projects them on a box)
-    for index in np.unique(crack[crack >= 0]):
-        rows = np.nonzero(crack == index)[0]
-        surface = render.cracks[index]
-        rel = tri[rows] - surface.point
-        if surface.radius is None:
-            e1, e2 = tangent_frame(surface.normal)
-            uvs[rows] = np.stack([rel @ e1, rel @ e2], axis=2)
-        else:  # a sphere: longitude and latitude scaled to metres on the sphere
-            r = np.linalg.norm(rel, axis=2)
-            uvs[rows] = np.stack([np.arctan2(rel[..., 1], rel[..., 0]) * surface.radius,
-                                  np.arcsin(np.clip(rel[..., 2] / np.maximum(r, 1e-300), -1, 1)) * surface.radius],
-                                 axis=2)
-    return PieceMesh(positions, faces, inner, normals, uvs, crack, render.cracks)

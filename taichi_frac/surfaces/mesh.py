@@ -1,11 +1,14 @@
 """The render surface of a fragment: its boundary triangles, split into the original surface
-(outer) and crack faces (inner)."""
+(outer) and crack faces (inner), from its tets (``fragment_surface``) or its render solid
+(``piece_mesh``)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..model import BodyModel
+from .layout import CRACK, HULL_FACE, NORMAL, UV
+from .solid import SPHERE_SAGITTA_FACTOR, PieceMesh, RenderSolid, tangent_frame
 
 
 def fragment_surface(model: BodyModel, root: BodyModel, root_faces=None):
@@ -90,11 +93,81 @@ def render_surface(render, model: BodyModel, tet_peak_stress=None):
     """
     from scipy.spatial import cKDTree
 
-    from .cut import piece_mesh
-
     mesh = piece_mesh(render)
     face_peak = None
     if tet_peak_stress is not None:
         _, nearest = cKDTree(model.particle_position).query(mesh.vertices[mesh.faces].mean(axis=1))
         face_peak = np.asarray(tet_peak_stress, dtype=np.float64)[nearest]
     return mesh.vertices, mesh.faces, mesh.face_is_inner, mesh.normals, mesh.uvs, face_peak
+
+
+def _face_cracks(corner_crack: np.ndarray, triangles: np.ndarray, cracks, spacing: float) -> np.ndarray:
+    """(F,) each face's crack index from its corners' (F,3): the one they share, else (a face
+    the booleans gave corners of two origins) the crack whose surface all three corners lie on
+    (within SPHERE_SAGITTA_FACTOR spacings), else the artist's surface (-1), or a hull's."""
+    crack = corner_crack[:, 0].copy()
+    mixed = np.nonzero((corner_crack != corner_crack[:, :1]).any(axis=1))[0]
+    for f in mixed:
+        crack[f] = HULL_FACE if (corner_crack[f] == HULL_FACE).any() else -1
+        for index in np.unique(corner_crack[f][corner_crack[f] >= 0]):
+            if np.all(np.abs(cracks[index].distance(triangles[f])) <= SPHERE_SAGITTA_FACTOR * spacing):
+                crack[f] = index
+                break
+    return crack
+
+
+def _outer_uvs(uvs: np.ndarray, triangles: np.ndarray, outer: np.ndarray) -> np.ndarray:
+    """``uvs`` (F,3,2) with each NaN corner of an ``outer`` face given the UV of the nearest
+    outer corner that has one (``triangles`` (F,3,3) [m] the corners): the booleans
+    interpolate a sliver's properties over its zero area as NaN (slivers of 1e-15 m^2
+    where a slab grazes the surface)."""
+    uvs = uvs.copy()
+    lost = outer[:, None] & np.isnan(uvs).any(axis=2)
+    known = outer[:, None] & ~np.isnan(uvs).any(axis=2)
+    if lost.any() and known.any():
+        from scipy.spatial import cKDTree
+
+        nearest = cKDTree(triangles[known]).query(triangles[lost])[1]
+        uvs[lost] = uvs[known][nearest]
+    return uvs
+
+
+def piece_mesh(render: RenderSolid) -> PieceMesh:
+    """The render solid as a triangle mesh with per-corner shading (see PieceMesh)."""
+    mesh = render.solid.to_mesh64()
+    props = np.asarray(mesh.vert_properties, dtype=np.float64)
+    tri_verts = np.asarray(mesh.tri_verts, dtype=np.int64)
+    # One vertex per topological vertex: property vertices repeat one across UV and normal
+    # seams (the merge vectors say which), while two vertices the solid pinches together at
+    # one position stay two, so the mesh stays manifold.
+    topological = np.arange(len(props))
+    topological[np.asarray(mesh.merge_from_vert, dtype=np.int64)] = np.asarray(mesh.merge_to_vert, dtype=np.int64)
+    used, vertex_of = np.unique(topological, return_inverse=True)
+    positions = props[used, :3]
+    faces = vertex_of.reshape(-1)[tri_verts]
+    corner = props[tri_verts]  # (F,3,P)
+    tri = positions[faces]
+    corner_crack = np.rint(np.nan_to_num(corner[:, :, CRACK], nan=-1.0)).astype(np.int64)
+    crack = _face_cracks(corner_crack, tri, render.cracks, render.spacing)
+    inner = crack != -1
+    flat = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    flat /= np.maximum(np.linalg.norm(flat, axis=1, keepdims=True), 1e-300)
+    normals = corner[:, :, NORMAL].copy()
+    normals[inner] = flat[inner][:, None, :]
+    length = np.linalg.norm(normals, axis=2, keepdims=True)
+    normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300), flat[:, None, :])
+    uvs = _outer_uvs(corner[:, :, UV], tri, crack == -1)
+    uvs[crack == HULL_FACE] = np.nan  # (the cache writer projects them on a box)
+    for index in np.unique(crack[crack >= 0]):
+        rows = np.nonzero(crack == index)[0]
+        surface = render.cracks[index]
+        rel = tri[rows] - surface.point
+        if surface.radius is None:
+            e1, e2 = tangent_frame(surface.normal)
+            uvs[rows] = np.stack([rel @ e1, rel @ e2], axis=2)
+        else:  # a sphere: longitude and latitude scaled to metres on the sphere
+            r = np.linalg.norm(rel, axis=2)
+            uvs[rows] = np.stack([np.arctan2(rel[..., 1], rel[..., 0]) * surface.radius,
+                                  np.arcsin(np.clip(rel[..., 2] / np.maximum(r, 1e-300), -1, 1)) * surface.radius],
+                                 axis=2)
+    return PieceMesh(positions, faces, inner, normals, uvs, crack, render.cracks)

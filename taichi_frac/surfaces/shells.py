@@ -9,6 +9,8 @@ Plain numpy for the contacts; ``manifold3d`` for the bridges.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import manifold3d as m3
 import numpy as np
 
@@ -32,23 +34,32 @@ CONTACT_AREA_FACTOR = 0.1
 MOVED_VOLUME_SHARE = 0.1
 
 
-def join_stray_shells(shells: dict, spacing: float) -> tuple[dict, int]:
-    """Each piece's solid from its ``shells`` (piece -> closed Manifolds of one shell each,
-    none empty, the body's frame [m]): those other than the largest joined to the largest
-    shell they touch over CONTACT_AREA_FACTOR, their own piece's where they touch it so, else
-    the other piece's they touch most (MOVED_VOLUME_SHARE). The bridge: prisms over the bit's faces that touch
-    that shell (CONTACT_GAP_FACTOR), reaching through the gap into both. Bits that touch no
-    main shell stay. Returns (solids, how many bits moved to another piece)."""
-    from .solid import without_dust
+class StrayPlan(NamedTuple):
+    """Where each piece's stray shells go (``plan_stray_shells``): ``mains`` piece -> its main
+    shell, ``apart`` piece -> its bits that touch no main shell (they stay its own, apart),
+    ``joined`` piece -> (bit, its trimesh, the indices of its faces touching the main shell)
+    of each bit joined to that piece's main shell, ``moved`` how many of those came from
+    another piece."""
 
+    mains: dict
+    apart: dict
+    joined: dict
+    moved: int
+
+
+def plan_stray_shells(shells: dict, spacing: float) -> StrayPlan:
+    """Where the shells other than each piece's largest go (``shells``: piece -> closed
+    Manifolds of one shell each, none empty, the body's frame [m]): to the largest shell they
+    touch over CONTACT_AREA_FACTOR, their own piece's where they touch it so, else the other
+    piece's they touch most (MOVED_VOLUME_SHARE); bits that touch no main shell stay apart."""
     volume = {id(shell): shell.volume() for mine in shells.values() for shell in mine}  # [m^3]
     shells = {k: sorted(mine, key=lambda shell: -volume[id(shell)]) for k, mine in shells.items()}
     strays = [(k, bit) for k, mine in shells.items() for bit in mine[1:]]
     mains = {k: mine[0] for k, mine in shells.items()}
     main_triangles = {}  # piece -> its main shell's triangles (F,3,3) [m], once asked for
     gap, least = CONTACT_GAP_FACTOR * spacing, CONTACT_AREA_FACTOR * spacing**2
-    joining = {k: [] for k in shells}  # piece -> the bits and bridges its main shell is joined to
-    kept = {k: [] for k in shells}
+    joined = {k: [] for k in shells}
+    apart = {k: [] for k in shells}
     moved = 0
 
     def contact(mesh, j):
@@ -70,17 +81,48 @@ def join_stray_shells(shells: dict, spacing: float) -> tuple[dict, int]:
                       if j != k and volume[id(bit)] <= MOVED_VOLUME_SHARE * volume[id(mains[j])]]
             target, faces, area = max(others, key=lambda item: item[2], default=(k, faces, area))
         if area < least:
-            kept[k].append(bit)
+            apart[k].append(bit)
             continue
-        joining[target] += [bit, _bridge(mesh, faces, gap)]
+        joined[target].append((bit, mesh, faces))
         moved += target != k
+    return StrayPlan(mains, apart, joined, moved)
+
+
+def planned_solids(plan: StrayPlan) -> dict:
+    """Piece -> its shells as ``plan`` gives them out (main, joined bits, bits apart), as one
+    Manifold without the bridges: each piece's volume but for theirs (prisms CONTACT_GAP_FACTOR
+    spacings deep)."""
     result = {}
-    for k in shells:
-        parts = [mains[k], *kept[k]]
-        if joining[k]:
-            parts[:1] = without_dust(m3.Manifold.batch_boolean([mains[k], *joining[k]], m3.OpType.Add), spacing)
+    for k, main in plan.mains.items():
+        shells = [main, *(bit for bit, _, _ in plan.joined[k]), *plan.apart[k]]
+        result[k] = shells[0] if len(shells) == 1 else m3.Manifold.compose(shells)
+    return result
+
+
+def join_stray_shells(shells: dict, spacing: float) -> tuple[dict, int]:
+    """Each piece's solid from its ``shells`` (piece -> closed Manifolds of one shell each,
+    none empty, the body's frame [m]), its stray shells joined where ``plan_stray_shells``
+    sends them. The bridge: prisms over the bit's faces that touch the main shell
+    (CONTACT_GAP_FACTOR), reaching through the gap into both. Returns (solids, how many bits
+    moved to another piece)."""
+    plan = plan_stray_shells(shells, spacing)
+    return join_planned_shells(plan, spacing), plan.moved
+
+
+def join_planned_shells(plan: StrayPlan, spacing: float) -> dict:
+    """Piece -> its solid: ``plan``'s joined bits bridged to its main shell (see
+    ``join_stray_shells``), its bits apart beside it."""
+    from .solid import without_dust
+
+    gap = CONTACT_GAP_FACTOR * spacing
+    result = {}
+    for k, main in plan.mains.items():
+        parts = [main, *plan.apart[k]]
+        if plan.joined[k]:
+            joining = [solid for bit, mesh, faces in plan.joined[k] for solid in (bit, _bridge(mesh, faces, gap))]
+            parts[:1] = without_dust(m3.Manifold.batch_boolean([main, *joining], m3.OpType.Add), spacing)
         result[k] = parts[0] if len(parts) == 1 else m3.Manifold.compose(parts)
-    return result, moved
+    return result
 
 
 def without_crumbs(mine, spacing: float) -> list:
