@@ -12,7 +12,14 @@ import os
 import sys
 import traceback
 
-from . import __version__, interrupts
+# Before numpy loads OpenBLAS, which reads it then: its idle threads sleep at once instead
+# of spinning on sched_yield for about 2^28 cycles after each call. A run makes many tiny
+# calls (a new piece's 3x3 inertia inverse), and on 2 cores the spinning took CPU from the
+# frames and the surface workers (the 13 rings: system time 2.0 -> 1.1 s). The results are
+# the same: only how long a thread waits for work changes.
+os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "4")
+
+from . import __version__, interrupts  # noqa: E402
 
 # Order is the order shown in --help.
 COMMANDS = ("run", "info", "bench", "render", "sweep")

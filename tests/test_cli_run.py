@@ -140,3 +140,22 @@ def test_a_ctrl_c_while_the_lock_is_taken_gives_it_back(tmp_path, monkeypatch):
     finally:
         interrupts.restore()
     assert not (tmp_path / ".ring.usdc.lock").exists()
+
+
+@pytest.mark.parametrize("given, expected", [(None, "4"), ("20", "20")])
+def test_the_command_has_openblas_threads_sleep_at_once_unless_told_otherwise(given, expected):
+    """The command sets OPENBLAS_THREAD_TIMEOUT before numpy loads OpenBLAS (its idle threads
+    then sleep instead of spinning beside the frames), and keeps a value the user set: in a
+    new interpreter, the variable as OpenBLAS reads it when numpy is first imported."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_THREAD_TIMEOUT"}
+    if given is not None:
+        env["OPENBLAS_THREAD_TIMEOUT"] = given
+    # (the package itself loads no numpy: the command's module sets the variable first)
+    code = ("import sys, taichi_frac; early = 'numpy' in sys.modules; import os, taichi_frac.cli; "
+            "print(early, os.environ['OPENBLAS_THREAD_TIMEOUT'])")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.split()[-2:] == ["False", expected]
