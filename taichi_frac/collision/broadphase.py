@@ -18,8 +18,8 @@ dominates with a thousand bodies. Each list is then sorted, so it is the same li
 order, as testing every pair gives (tested), and the run is the same.
 """
 
-import taichi as ti
 
+from ..runtime import ti
 from .. import runtime
 from ..kinematics import linalg3 as la
 from ..kinematics.bounds import is_idle, motion_speed, near_static, pair_motion

@@ -5,8 +5,8 @@ rings touch where their tubes meet, whatever the sphere radius; ``surface.pair``
 patch with a normal against one without, and ``surface.against`` the static colliders.
 """
 
-import taichi as ti
 
+from ..runtime import ti
 from ..kinematics import linalg3 as la
 from .surface import _facet_rows, contact_spot, has_facets, lowest3
 

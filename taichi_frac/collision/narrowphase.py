@@ -16,8 +16,7 @@ never carry an impulse.
 """
 
 
-import taichi as ti
-
+from ..runtime import ti
 from ..kinematics import linalg3 as la
 from ..kinematics.bounds import fastest_point_speed, is_idle, pair_motion
 from . import hulls, surface

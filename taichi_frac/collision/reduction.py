@@ -31,8 +31,8 @@ narrowphase makes a pair's contacts from one side only.
 
 import math
 
-import taichi as ti
 
+from ..runtime import ti
 from ..kinematics import linalg3 as la
 from ..kinematics.frames import tangent_basis
 

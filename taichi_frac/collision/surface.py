@@ -27,8 +27,8 @@ A sphere without a patch (``point_count`` 0) is its own surface: its support alo
 its centre's less its radius, so a sphere body meets a patch body consistently.
 """
 
-import taichi as ti
 
+from ..runtime import ti
 from ..kinematics import linalg3 as la
 
 vec3 = ti.math.vec3

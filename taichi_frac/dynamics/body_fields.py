@@ -1,8 +1,8 @@
 """The kernels that write bodies into the World's fields and read them back, each over
 K bodies (or impact rows) in one launch, in the row layouts of ``layouts.py``."""
 
-import taichi as ti
 
+from ..runtime import ti
 from .. import runtime
 from ..collision.grid import CELLS_PER_SPHERE
 from ..kinematics import linalg3 as la

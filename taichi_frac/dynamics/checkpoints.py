@@ -4,8 +4,8 @@ and of the contact cache's parity and epoch, for a substep run again after a fra
 from dataclasses import dataclass
 
 import numpy as np
-import taichi as ti
 
+from ..runtime import ti
 from .. import runtime
 from .state import BodyMotion
 

@@ -3,8 +3,8 @@ collision spheres (``Bodies.cluster``), computed when the body is added. The
 narrowphase's pre-test reads a body's sphere grid only where a sphere of the other body
 comes near one of them (``narrowphase._pair_contacts``)."""
 
-import taichi as ti
 
+from ..runtime import ti
 from ..kinematics import linalg3 as la
 from .state import MAX_CLUSTERS
 

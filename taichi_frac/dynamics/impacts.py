@@ -23,8 +23,7 @@ count, not the table size.
 """
 
 
-import taichi as ti
-
+from ..runtime import ti
 from ..kinematics import linalg3 as la
 
 vec3 = ti.math.vec3

@@ -11,8 +11,7 @@ of the start and predicted end angular velocity, which keeps the energy error at
 """
 
 
-import taichi as ti
-
+from ..runtime import ti
 from .. import runtime
 from ..collision import surface
 from ..kinematics import linalg3 as la

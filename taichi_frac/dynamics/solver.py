@@ -18,8 +18,7 @@ these sweeps include every other contact with its non-penetration target.
 """
 
 
-import taichi as ti
-
+from ..runtime import ti
 from ..collision.narrowphase import GROUND
 from ..kinematics import linalg3 as la
 from ..kinematics.frames import tangent_basis

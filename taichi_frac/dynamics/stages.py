@@ -11,8 +11,8 @@ live in fields (a vector argument costs ~50 us per launch); each data-oriented c
 argument costs ~8 us of Python per launch, so the kernels take ``WorldFields``.
 """
 
-import taichi as ti
 
+from ..runtime import ti
 from ..collision import broadphase, narrowphase, reduction
 from . import impacts, integrate, solver
 

@@ -7,8 +7,7 @@ that writes each array.
 """
 
 
-import taichi as ti
-
+from ..runtime import ti
 from ..collision.grid import CELLS_PER_SPHERE
 from ..geometry.contact_patches import MAX_FACETS
 

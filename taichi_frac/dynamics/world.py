@@ -14,8 +14,8 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import taichi as ti
 
+from ..runtime import ti
 from .. import runtime
 from ..collision import broadphase, narrowphase
 from ..collision.grid import body_grid

@@ -35,8 +35,8 @@ and continuous). For a convex body near the contact this never happens.
 import math
 
 import numpy as np
-import taichi as ti
 
+from ..runtime import ti
 from .. import runtime
 from ..kinematics import linalg3 as la
 

@@ -6,8 +6,8 @@ differently in another kernel). A local analysis evaluates a few hundred particl
 three launches' Python argument handling would be most of its cost."""
 
 import numpy as np
-import taichi as ti
 
+from ..runtime import ti
 from .. import runtime
 from .field import displacement_at
 from .sph import CORRECTION_MIN_EIGEN_RATIO, gradient_at

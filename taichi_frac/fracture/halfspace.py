@@ -22,8 +22,8 @@ exact gradient of the field that ``field.py`` evaluates everywhere.
 import math
 
 import numpy as np
-import taichi as ti
 
+from ..runtime import ti
 from .. import runtime
 from ..kinematics import linalg3 as la
 from .field import _check_material, _as_points, load_rows

@@ -19,8 +19,8 @@ per process whatever the array sizes.
 import math
 
 import numpy as np
-import taichi as ti
 
+from ..runtime import ti
 from .. import runtime
 from ..kinematics import linalg3 as la
 from .stress import sym_eig3_extremes_f64

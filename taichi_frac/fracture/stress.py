@@ -23,8 +23,8 @@ Units: stresses in Pa, gradients and strains dimensionless. Arrays float64.
 import math
 
 import numpy as np
-import taichi as ti
 
+from ..runtime import ti
 from .. import runtime
 from ..kinematics import linalg3 as la
 

@@ -12,8 +12,8 @@ ring twice: ~6 times the faces).
 """
 
 import numpy as np
-import taichi as ti
 
+from ..runtime import ti
 from .. import runtime
 from . import rows
 from .rays import ray_triangle

@@ -3,8 +3,8 @@ by union-find in one serial Taichi kernel: scipy's connected_components spends m
 its time on matrix conversions at this size (a ring's 5,450 tets)."""
 
 import numpy as np
-import taichi as ti
 
+from ..runtime import ti
 from .. import runtime
 
 
@@ -43,7 +43,6 @@ def _union_find(bonds: ti.types.ndarray(dtype=ti.i32, ndim=2), cut: ti.types.nda
             else:
                 label[t] = label[r]
     return count
-
 
 
 def connected_tets(t_count: int, bonds: np.ndarray, cut: np.ndarray):

@@ -19,7 +19,7 @@ import contextlib
 import sys
 
 import numpy as np
-import taichi as ti
+from ..runtime import ti
 
 #: Levels of the grid; boxes grow 2x a level, so 16 levels span sizes 32,768 : 1 (larger
 #: faces all go in the top level, whose cell grows to fit them).

@@ -12,8 +12,8 @@ be hit within the reach), and runs the Moller-Trumbore test on the rest.
 
 
 import numpy as np
-import taichi as ti
 
+from ..runtime import ti
 from .. import runtime
 from . import rows
 

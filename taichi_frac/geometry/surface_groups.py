@@ -8,8 +8,8 @@ for a ring). The adjacency it walks is built in numpy beforehand.
 
 
 import numpy as np
-import taichi as ti
 
+from ..runtime import ti
 from .. import runtime
 
 

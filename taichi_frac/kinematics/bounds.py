@@ -2,8 +2,8 @@
 frame): whether a body is idle, how fast any of its points can move, and whether a sphere
 around it reaches a static collider."""
 
-import taichi as ti
 
+from ..runtime import ti
 from . import linalg3 as la
 from .quaternion import quat_mul
 

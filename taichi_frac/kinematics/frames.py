@@ -1,7 +1,7 @@
 """Orthonormal frames in Taichi."""
 
-import taichi as ti
 
+from ..runtime import ti
 from . import linalg3 as la
 
 vec3 = ti.math.vec3

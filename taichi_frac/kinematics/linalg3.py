@@ -12,7 +12,7 @@ kernel, LLVM's fast-math contraction may still round a few sums differently afte
 as it may after any edit of that kernel.
 """
 
-import taichi as ti
+from ..runtime import ti
 
 
 @ti.func

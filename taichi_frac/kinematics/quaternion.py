@@ -4,8 +4,8 @@ bodies, fragments and static colliders, reading poses). Each formula in one plac
 language: a Taichi function cannot be called from numpy code, nor numpy from a kernel."""
 
 import numpy as np
-import taichi as ti
 
+from ..runtime import ti
 from . import linalg3 as la
 
 
