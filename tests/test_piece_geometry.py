@@ -42,6 +42,15 @@ def test_edge_counts_and_inside_catch_broken_meshes():
     cube = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
     points = np.array([[0.0, 0.0, 0.0], [0.49, -0.49, 0.3], [0.51, 0.0, 0.0], [0.0, 0.0, -0.6]])
     np.testing.assert_array_equal(inside(points, cube.triangles), [True, True, False, False])
+    # A sphere of 5,120 triangles against its radius, away from the facets' band (their
+    # chords lie within 0.2 % of the radius), and no points or no triangles.
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=1.0)
+    probes = np.random.default_rng(3).uniform(-1.5, 1.5, size=(2000, 3))
+    radius = np.linalg.norm(probes, axis=1)
+    clear = np.abs(radius - 1.0) > 0.01
+    np.testing.assert_array_equal(inside(probes[clear], sphere.triangles), radius[clear] < 1.0)
+    assert inside(np.zeros((0, 3)), sphere.triangles).shape == (0,)
+    assert not inside(points, np.zeros((0, 3, 3))).any()
 
 
 def test_voronoi_cells_union_is_the_region_nearest_those_points():

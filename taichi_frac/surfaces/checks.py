@@ -50,21 +50,18 @@ def crack_deviation(vertices, faces, face_is_inner, face_crack, cracks) -> float
     return float(np.sqrt(np.sum(area * squares) / max(np.sum(area), 1e-300)))
 
 
-def inside(points: np.ndarray, triangles: np.ndarray, chunk: int = 256) -> np.ndarray:
+def inside(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """(N,) bool: ``points`` (N,3) inside the closed surface ``triangles`` (F,3,3): the
-    generalized winding number above 1/2 (Jacobson et al. 2013), each triangle's solid
-    angle by Van Oosterom and Strackee (1983)."""
-    points = np.asarray(points, dtype=np.float64)
-    result = np.zeros(len(points), dtype=bool)
-    for start in range(0, len(points), chunk):
-        p = points[start:start + chunk]
-        a, b, c = (triangles[None, :, k] - p[:, None] for k in range(3))
-        la, lb, lc = (np.linalg.norm(v, axis=2) for v in (a, b, c))
-        numerator = np.einsum("ptk,ptk->pt", a, np.cross(b, c))
-        denominator = (la * lb * lc + np.einsum("ptk,ptk->pt", a, b) * lc + np.einsum("ptk,ptk->pt", b, c) * la
-                       + np.einsum("ptk,ptk->pt", c, a) * lb)
-        result[start:start + chunk] = np.sum(np.arctan2(numerator, denominator), axis=1) / (2.0 * np.pi) > 0.5
-    return result
+    generalized winding number above 1/2 (Jacobson et al. 2013), the exact sum of the
+    triangles' solid angles (libigl's ``winding_number``, some fifty times numpy's speed)."""
+    import igl
+
+    points = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+    corners = np.ascontiguousarray(np.asarray(triangles, dtype=np.float64).reshape(-1, 3))
+    if not len(points) or not len(corners):
+        return np.zeros(len(points), dtype=bool)
+    faces = np.arange(len(corners), dtype=np.int64).reshape(-1, 3)
+    return np.asarray(igl.winding_number(corners, faces, points)) > 0.5
 
 
 def outside_distance(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
