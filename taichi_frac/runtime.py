@@ -101,6 +101,14 @@ def _plain_source_positions() -> None:
         found = getattr(kernel_impl, name, None)
         if found is not None and not hasattr(found, "cache_info"):
             setattr(kernel_impl, name, functools.lru_cache(maxsize=None)(found))
+    # ... and re-wraps every source line and dedents the whole (textwrap) before parsing it:
+    # the same lines give the same text, kept.
+    import textwrap
+    import types
+
+    if getattr(kernel_impl, "textwrap", None) is textwrap:
+        kernel_impl.textwrap = types.SimpleNamespace(fill=functools.lru_cache(maxsize=None)(textwrap.fill),
+                                                     dedent=functools.lru_cache(maxsize=None)(textwrap.dedent))
 
 
 def _arches_of(name: str) -> set:

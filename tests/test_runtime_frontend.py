@@ -70,3 +70,18 @@ def test_the_cheaper_class_check_answers_as_taichis_own(tmp_path, monkeypatch):
     assert len(ANSWERS) == 9
     assert all(ours == reference for _, ours, reference in ANSWERS), ANSWERS
     assert any(ours for _, ours, _ in ANSWERS)  # (the class statements were found)
+
+
+def test_the_kept_source_wrapping_gives_textwraps_text():
+    """Taichi re-wraps each source line and dedents the function before parsing it at every
+    call site; ``runtime`` keeps what the same text gave (after ``runtime.init``)."""
+    import textwrap
+
+    runtime.init()
+    lines = ["\tif x > 0:\t# a tab inside", "        y = [i for i in range(3)]", "", "    return y  " * 3]
+    for line in lines:
+        assert kernel_impl.textwrap.fill(line, tabsize=4, width=9999) == textwrap.fill(line, tabsize=4, width=9999)
+    text = "\n".join(lines[1:])
+    assert kernel_impl.textwrap.dedent(text) == textwrap.dedent(text)
+    assert kernel_impl.textwrap.fill(lines[0], tabsize=4, width=9999) is kernel_impl.textwrap.fill(
+        lines[0], tabsize=4, width=9999)  # (kept, not made again)
