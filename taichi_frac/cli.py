@@ -88,10 +88,8 @@ def leave(code: int) -> None:
     import atexit
 
     try:
-        if "taichi_frac.runtime" in sys.modules and sys.modules["taichi_frac.runtime"].is_initialised():
-            import taichi as ti
-
-            ti.reset()
+        if "taichi_frac.runtime" in sys.modules:  # (a command that never loaded Taichi skips it)
+            sys.modules["taichi_frac.runtime"].finish()
         atexit._run_exitfuncs()
     except Exception:  # noqa: BLE001 (said, and the exit goes on)
         traceback.print_exc()

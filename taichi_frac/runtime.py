@@ -1,7 +1,8 @@
-"""One place that initialises Taichi.
+"""One place that initialises Taichi, and ends it.
 
 Every module that launches kernels calls :func:`init` first; it is a no-op after the first
-call. Nothing else in the package (or in the tests) may call ``ti.init`` or ``ti.reset``:
+call. :func:`finish` ends the runtime at a process's last use (it writes the offline kernel
+cache). Nothing else in the package (or in the tests) may call ``ti.init`` or ``ti.reset``:
 a second ``ti.init`` throws away every field and compiled kernel.
 """
 
@@ -189,3 +190,16 @@ SERIAL_SMALL_LOOPS = True
 
 def is_initialised() -> bool:
     return _initialised_arch is not None
+
+
+def finish() -> bool:
+    """End Taichi's runtime: Taichi writes its offline cache of compiled kernels only then
+    (or at a normal interpreter exit, which a process leaving by ``os._exit`` or stopped by
+    a nanny never reaches). Every field and kernel goes with it: a process's last use of
+    Taichi. Returns whether a runtime was running."""
+    global _initialised_arch
+    if _initialised_arch is None:
+        return False
+    ti.reset()
+    _initialised_arch = None
+    return True

@@ -212,7 +212,7 @@ def test_shifted_segments_cut_closed_pieces_with_the_step_walled(box):
     wide); each piece is closed and one shell (the wall keeps the upper left piece apart from
     the lower right), its crack faces on its own segment's plane."""
     from taichi_frac.surfaces.crack_fit import MOVES, moved_crack
-    from taichi_frac.surfaces.cut import _cut
+    from taichi_frac.surfaces.cut import _cut_parts, _pieces
 
     model, render, cracks, tets, labels, per_crack, segments, centre, shifts = _quartered_box(box)
     spacing = model.spacing
@@ -223,8 +223,10 @@ def test_shifted_segments_cut_closed_pieces_with_the_step_walled(box):
     assert np.count_nonzero(shifts) == 2
     zeros = np.zeros((len(cracks), MOVES))
     origins = np.zeros((len(tets), 3))
-    pieces, stats, _, sources = _cut(render, model, tets, labels, cracks, per_crack, [None, None], origins, 0.0,
-                                     4 * spacing, 0, 1.0, zeros, segments, shifts)
+    parts = _cut_parts(render, model, tets, labels, cracks, per_crack, [None, None], 0.0, 4 * spacing, 0, zeros,
+                       segments, shifts)
+    pieces, stats = _pieces(render, parts, origins, 1.0)
+    sources = parts.sources
     assert stats["fallback_pieces"] == 0 and all(p is not None for p in pieces)
     half = SIZE / 2 - model.com_in_source  # the box's upper corner in the body frame
     low = -SIZE / 2 - model.com_in_source
@@ -344,7 +346,7 @@ def test_rough_stretches_share_one_surface_and_move_their_pieces_volume(box):
     loses h times its width times the box's depth), to within the blend across the step
     (a strip of about two spacings by the box's depth, at the 0.5-spacing step)."""
     from taichi_frac.surfaces.crack_fit import MOVES
-    from taichi_frac.surfaces.cut import _cut
+    from taichi_frac.surfaces.cut import _cut_parts, _pieces
 
     model, render, cracks, tets, labels, per_crack, segments, centre, shifts = _quartered_box(box)
     spacing = model.spacing
@@ -353,8 +355,9 @@ def test_rough_stretches_share_one_surface_and_move_their_pieces_volume(box):
     amplitude = 0.3 * spacing
 
     def cut(moves):
-        pieces, stats, _, _ = _cut(render, model, tets, labels, cracks, per_crack, [None, None], origins, amplitude,
-                                   4 * spacing, 3, 1.0, zeros, segments, moves)
+        parts = _cut_parts(render, model, tets, labels, cracks, per_crack, [None, None], amplitude, 4 * spacing, 3,
+                           zeros, segments, moves)
+        pieces, stats = _pieces(render, parts, origins, 1.0)
         assert stats["fallback_pieces"] == 0 and all(p is not None for p in pieces)
         return pieces
 

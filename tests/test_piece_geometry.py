@@ -394,7 +394,7 @@ def test_stray_shells_join_the_main_shell_they_touch():
     (joined to it), a bit against piece 1's main box only (it goes to piece 1) and a bit
     touching nothing (it stays apart). Closed form: the bridge over the 1 x 1 contact fills
     the gap and no more (it lies inside the boxes elsewhere), so each joined solid is 4^3 + 1."""
-    from taichi_frac.surfaces.shells import join_stray_shells
+    from taichi_frac.surfaces.shells import join_planned_shells, plan_stray_shells
     from taichi_frac.surfaces.solid import with_crack_index
 
     def cube(low, high):
@@ -405,9 +405,10 @@ def test_stray_shells_join_the_main_shell_they_touch():
     own_bit = cube([4 + gap, 0, 0], [5, 1, 1])
     neighbour_bit = cube([9, 0, 0], [10 - gap, 1, 1])
     lone_bit = cube([20, 20, 20], [21, 21, 21])
-    joined, moved = join_stray_shells({0: [cube([0, 0, 0], [4, 4, 4]), own_bit, neighbour_bit, lone_bit],
-                                       1: [cube([10, 0, 0], [14, 4, 4])]}, 1.0)
-    assert moved == 1
+    plan = plan_stray_shells({0: [cube([0, 0, 0], [4, 4, 4]), own_bit, neighbour_bit, lone_bit],
+                              1: [cube([10, 0, 0], [14, 4, 4])]}, 1.0)
+    joined = join_planned_shells(plan, 1.0)
+    assert plan.moved == 1
     shells = sorted(joined[0].decompose(), key=lambda shell: -shell.volume())
     assert len(shells) == 2 and shells[1].volume() == pytest.approx(1.0, rel=1e-9)
     assert shells[0].volume() == pytest.approx(65.0, abs=1e-9)

@@ -19,6 +19,7 @@ import contextlib
 import sys
 
 import numpy as np
+
 from ..runtime import ti
 
 #: Levels of the grid; boxes grow 2x a level, so 16 levels span sizes 32,768 : 1 (larger

@@ -45,7 +45,7 @@ it (``surfaces/parts.py``) get the solid nearer their tet centroids than those o
 other pieces so failed, less what the other pieces hold: the artist's surface outside, the
 other pieces' crack faces against them, faces between nearest-centroid cells between them.
 A piece's crumbs are dropped and its other stray shells bridged to the main shell they lie
-against, its own or a neighbour's (``piece_shells.join_stray_shells``).
+against, its own or a neighbour's (``shells.plan_stray_shells``).
 
 ``crack_roughness`` (FractureOptions) displaces the slabs' faces along the crack normal
 by smooth value noise, the same on both faces, so the two sides of a crack still fit; a
@@ -67,7 +67,7 @@ from .layout import HULL_FACE
 from .parts import (assign_parts, carve_lost_pieces, divide_joined_parts, failed_piece_shells, failed_pieces,
                     overfull_pieces, overreaching_pieces)
 from .reach import KEPT_SHARE, trim_overreach
-from .shells import join_planned_shells, plan_stray_shells, planned_solids, without_crumbs
+from .shells import StrayPlan, join_planned_shells, plan_stray_shells, planned_solids, without_crumbs
 from .slabs import SLAB_PAST_FACTOR, plane_slab, segment_slabs, sphere_shell
 from .solid import (DUST_VOLUME_FACTOR, WELD_REACH_FACTOR, WELD_THICKNESS_FACTOR, RenderSolid, with_crack_index,
                     without_dust)
@@ -170,7 +170,7 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
     unassigned parts, pieces without a part, ``fallback_pieces``: pieces the cut failed, see
     ``failed_pieces``, of which ``cell_pieces`` got the solid nearest their tets instead
     (``piece_parts.failed_piece_shells``) and the rest None; ``shells_moved``: stray shells
-    joined to another piece, see ``piece_shells.join_stray_shells``; ``moved_cracks``: cracks
+    joined to another piece, see ``shells.plan_stray_shells``; ``moved_cracks``: cracks
     the kept cut moved, ``largest_offset`` [particle spacings]: the largest shift of a moved
     crack (a plane's at its pivot plus its tilt's at its reach), ``moved_segments`` and
     ``largest_segment_shift`` [particle spacings]: the stretches shifted on their own and the
@@ -200,7 +200,7 @@ def cut_render_solid(render: RenderSolid, model, fragment_tets, cracks, piece_or
                         largest_segment_shift=0.0)
     targets = piece_target_volumes(scale, model, fragment_tets)
     plane_min_tets = max(int(fit_min_tets), FITTED_PIECE_TETS)
-    # (the fit reads the cuts' parts in the body's frame, before the welds: see _Parts)
+    # (the fit reads the cuts' parts in the body's frame, before the bridges: see _Parts)
     kept = _Kept(first, volume_misfit(first.solids, targets, fragment_tets, plane_min_tets))
     origins = np.zeros((len(fragment_tets), 3))
     # The whole cracks first: a crack is frozen when a piece on it fails.
@@ -261,8 +261,8 @@ class _Kept(NamedTuple):
 def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, min_tets: int, fit, cut, freeze,
                 near):
     """Up to ``rounds`` times, the moves ``fit(solids, sources, moves, frozen)`` proposes
-    (further moves, the misfit its linear model predicts), cut (``cut(moves)``: ``_cut``'s
-    result) with all of them or else half (FIT_STEPS), kept when the pieces' volumes come
+    (further moves, the misfit its linear model predicts), cut (``cut(moves)``: ``_cut_parts``'
+    ``_Parts``) with all of them or else half (FIT_STEPS), kept when the pieces' volumes come
     nearer (``volume_misfit`` over the pieces of ``min_tets`` tets or more). A move that
     fails a piece the kept cut did not (one crack passing the end of another's slab joins
     two pieces there) is not kept: ``freeze(newly)`` (bool, per move row) says which moves
@@ -370,13 +370,13 @@ def _trimmed(pieces, stats, model, labels, piece_origins):
 class _Parts(NamedTuple):
     """One cut's pieces before the bridges that join their stray shells (``_cut_parts``):
     every cut the fit tries is measured, only the one it keeps needs them (``_pieces``).
-    ``plan`` where each piece's shells go (``shells.StrayPlan``, the body's frame [m]),
-    ``cracks`` the pieces' crack surfaces, ``solids`` per piece its shells as ``plan`` gives
-    them out, one manifold (the body's frame) or None: what the fit measures (a bridge adds
-    a gap's volume, CONTACT_GAP_FACTOR spacings deep); ``stats``, ``index_of``, ``sources``
-    as ``_cut``'s."""
+    ``plan`` where each piece's shells go (the body's frame [m]), ``cracks`` the pieces'
+    crack surfaces, ``solids`` per piece its shells as ``plan`` gives them out, one manifold
+    (the body's frame) or None: what the fit measures (a bridge adds a gap's volume,
+    CONTACT_GAP_FACTOR spacings deep); ``stats`` the cut's counts (``cut_render_solid``'s),
+    ``index_of`` and ``sources`` as ``_cut_parts`` says."""
 
-    plan: object
+    plan: StrayPlan
     cracks: tuple
     solids: list
     stats: dict
@@ -384,24 +384,15 @@ class _Parts(NamedTuple):
     sources: np.ndarray
 
 
-def _cut(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, frames, piece_origins, roughness,
-         roughness_scale, seed, volume_scale, offsets, segments=None, shifts=None):
-    """One cut of ``cut_render_solid`` with crack i moved by ``offsets[i]`` (MOVES,) [m] (see
-    ``crack_offsets.moved_crack``; ``frames`` each crack's TiltFrame or None; the pieces'
-    ``RenderSolid.volume_scale`` is ``volume_scale``) and each of the ``segments``
-    (``crack_offsets.CrackSegments``) shifted further along its plane's normal by ``shifts``
-    (S,) [m]. Returns (pieces, stats, index_of, sources): index_of (len(cracks),) each crack's
-    (first) index in the pieces' ``cracks`` (-1: it made no slab), sources the crack behind
-    each index of the pieces' ``cracks`` (-1: one the body had)."""
-    parts = _cut_parts(render, model, fragment_tets, labels, cracks, per_crack, frames, roughness, roughness_scale,
-                       seed, offsets, segments, shifts)
-    pieces, stats = _pieces(render, parts, piece_origins, volume_scale)
-    return pieces, stats, parts.index_of, parts.sources
-
-
 def _cut_parts(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, frames, roughness,
                roughness_scale, seed, offsets, segments=None, shifts=None) -> _Parts:
-    """``_cut`` up to the pieces' shells (see ``_Parts``)."""
+    """One cut of ``cut_render_solid`` up to the pieces' shells (``_Parts``; ``_pieces``
+    finishes it), with crack i moved by ``offsets[i]`` (MOVES,) [m] (see
+    ``crack_offsets.moved_crack``; ``frames`` each crack's TiltFrame or None) and each of the
+    ``segments`` (``crack_offsets.CrackSegments``) shifted further along its plane's normal by
+    ``shifts`` (S,) [m]. Its ``index_of`` (len(cracks),) holds each crack's (first) index in
+    the pieces' ``cracks`` (-1: it made no slab), its ``sources`` the crack behind each index
+    of the pieces' ``cracks`` (-1: one the body had)."""
     spacing = render.spacing
     new_cracks = list(render.cracks)
     slabs, planes, sources = [], [], []
@@ -488,7 +479,7 @@ def _cut_parts(render: RenderSolid, model, fragment_tets, labels, cracks, per_cr
 
 def _pieces(render: RenderSolid, parts: _Parts, piece_origins, volume_scale) -> tuple[list, dict]:
     """The pieces of a cut's ``parts``, each stray shell joined where the plan sends it
-    (``join_stray_shells``), in its frame (origin ``piece_origins[k]`` (3,) [m] in the
+    (``shells.join_planned_shells``), in its frame (origin ``piece_origins[k]`` (3,) [m] in the
     body's). Returns (pieces (RenderSolid or None), the cut's stats)."""
     solids = join_planned_shells(parts.plan, render.spacing)
     origins = np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)

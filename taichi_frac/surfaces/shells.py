@@ -99,19 +99,10 @@ def planned_solids(plan: StrayPlan) -> dict:
     return result
 
 
-def join_stray_shells(shells: dict, spacing: float) -> tuple[dict, int]:
-    """Each piece's solid from its ``shells`` (piece -> closed Manifolds of one shell each,
-    none empty, the body's frame [m]), its stray shells joined where ``plan_stray_shells``
-    sends them. The bridge: prisms over the bit's faces that touch the main shell
-    (CONTACT_GAP_FACTOR), reaching through the gap into both. Returns (solids, how many bits
-    moved to another piece)."""
-    plan = plan_stray_shells(shells, spacing)
-    return join_planned_shells(plan, spacing), plan.moved
-
-
 def join_planned_shells(plan: StrayPlan, spacing: float) -> dict:
-    """Piece -> its solid: ``plan``'s joined bits bridged to its main shell (see
-    ``join_stray_shells``), its bits apart beside it."""
+    """Piece -> its solid: ``plan``'s joined bits bridged to its main shell, its bits apart
+    beside it. The bridge: prisms over the bit's faces that touch the main shell
+    (CONTACT_GAP_FACTOR), reaching through the gap into both."""
     from .solid import without_dust
 
     gap = CONTACT_GAP_FACTOR * spacing

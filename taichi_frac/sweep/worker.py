@@ -144,19 +144,16 @@ def run_variant(task: VariantTask) -> dict:
 def flush_kernel_cache() -> bool:
     """Write the worker's compiled kernels to Taichi's offline cache, so the next sweep's
     workers load them instead of compiling (minutes on a loaded machine). Taichi writes
-    the cache only when its runtime is finalised (``ti.reset`` or a normal interpreter
-    exit), which a worker process stopped by its nanny may never reach. This ends the
-    worker's Taichi runtime: the client calls it just before it closes its LocalCluster."""
+    the cache only when its runtime is finalised (``runtime.finish``), which a worker process
+    stopped by its nanny may never reach. This ends the worker's Taichi runtime: the client
+    calls it just before it closes its LocalCluster."""
     from .. import runtime
 
     if not runtime.is_initialised() or _STATE.closed:
         return False
-    import taichi as ti
-
     _STATE.world = None
     _STATE.closed = True
-    ti.reset()
-    return True
+    return runtime.finish()
 
 
 def _simulation(Simulation, scene, cache, task, progress):
