@@ -81,6 +81,29 @@ def test_voronoi_cells_union_is_the_region_nearest_those_points():
     np.testing.assert_array_equal(_inside_solid(probe, union ^ box, 1e-4), inside(probe, triangles))
 
 
+def test_inside_solid_answers_as_its_probes_do_near_and_far_from_the_surface():
+    """The inside test of the cells' divide reads the winding number away from the surface and
+    cuts its probe tetrahedra only near it: against the probes everywhere, on points at a
+    tenth to three times the probe's size inside and outside a box's large faces (the
+    nearest vertex far away), where a probe partly outside still meets the solid."""
+    import manifold3d as m3
+
+    from taichi_frac.surfaces.parts import _inside_solid, _probed_inside
+
+    size = 0.05
+    box = m3.Manifold.cube((1.0, 1.0, 1.0), center=True)
+    rng = np.random.default_rng(11)
+    offsets = np.array([-3.0, -1.2, -0.8, -0.4, -0.1, 0.1, 0.4, 0.8, 1.2, 3.0]) * size
+    face = rng.uniform(-0.3, 0.3, size=(len(offsets), 2))
+    points = np.column_stack([face, 0.5 + offsets])  # (by the top face: +z outside)
+    probed = _probed_inside(points, box, size)
+    np.testing.assert_array_equal(_inside_solid(points, box, size), probed)
+    # (a probe's corners reach half its size along each axis: those within it outside still
+    # meet the box)
+    np.testing.assert_array_equal(probed, offsets < 0.5 * size)
+    assert _inside_solid(np.zeros((0, 3)), box, size).shape == (0,)
+
+
 def test_face_with_corners_of_two_origins_gets_the_crack_it_lies_on():
     """Hand-made faces whose corners carry different crack indices (as exact booleans leave
     them where a cut meets a face): a face on crack 0's plane gets 0, one on crack 1's plane
