@@ -57,6 +57,26 @@ def test_bad_override_exits_2_and_names_the_key(capsys):
     assert "crack_count" in capsys.readouterr().err
 
 
+def test_draft_cuts_every_object_without_the_volume_fit(monkeypatch, capsys):
+    """--draft is crack_fit_rounds = 0 on every object; a --set of one object still wins."""
+    import taichi_frac.scenes as scenes
+    from taichi_frac.options import OptionError
+
+    loaded = []
+
+    def load_and_stop(path, overrides=()):
+        loaded.append(load_scene(path, overrides))
+        raise OptionError("stopped after loading")
+
+    monkeypatch.setattr(scenes, "load_scene", load_and_stop)
+    assert main(["run", "thirteen_rings", "--draft", "--set", "ring03.fracture.crack_fit_rounds=1", "-q"]) == 2
+    assert main(["run", "thirteen_rings", "-q"]) == 2
+    draft, full = loaded
+    assert [o.fracture.crack_fit_rounds for o in draft.objects] == [0, 0, 0, 1] + [0] * 9
+    assert {o.fracture.crack_fit_rounds for o in full.objects} == {3}
+    assert "stopped after loading" in capsys.readouterr().err
+
+
 def test_ctrl_c_keeps_a_valid_cache_of_the_frames_done(tmp_path, scene_world):
     """Ctrl-C raises KeyboardInterrupt wherever the main thread is; here it comes from the
     progress callback, right after frame 5 was written."""

@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from taichi_frac.options import FractureOptions, MATERIAL_PRESETS, OptionError, ParticleOptions, SimulationOptions
-from taichi_frac.scenes import Collider, Scene, SceneObject, euler_deg_to_quaternion, load_scene
+from taichi_frac.scenes import Collider, Scene, SceneObject, apply_overrides, euler_deg_to_quaternion, load_scene
 from taichi_frac.scenes import BUILTIN_SCENE_DIR as SCENES
 from taichi_frac.scenes import builtin_scenes, find_scene
 
@@ -89,6 +89,22 @@ def test_overrides_set_values_and_none_restores_the_default():
     assert scene.objects[3] == base.objects[3]
     with pytest.raises(OptionError, match="no entry named 'ring99'"):
         load_scene(SCENES / "thirteen_rings.toml", ["objects.ring99.fracture.crack_count=2"])
+
+
+def test_a_star_in_an_override_sets_every_object_or_collider():
+    """``objects.*.KEY`` (or ``*.KEY``) sets KEY in every object, ``colliders.*.KEY`` in every
+    collider; a later override of one object wins; a star over no entries is refused."""
+    base = load_scene(SCENES / "thirteen_rings.toml")
+    scene = load_scene(SCENES / "thirteen_rings.toml", ["objects.*.fracture.crack_fit_rounds=0",
+                                                        "ring05.fracture.crack_fit_rounds=2",
+                                                        "*.friction=0.25", "colliders.*.friction=0.4"])
+    assert [o.fracture.crack_fit_rounds for o in scene.objects] == [0] * 5 + [2] + [0] * 7
+    assert {o.friction for o in scene.objects} == {0.25} and [c.friction for c in scene.colliders] == [0.4]
+    assert [o.fracture.crack_count for o in scene.objects] == [o.fracture.crack_count for o in base.objects]
+    with pytest.raises(OptionError, match="colliders has no entries for"):
+        apply_overrides({"objects": [{"name": "ring"}], "colliders": []}, ["colliders.*.friction=1"])
+    with pytest.raises(OptionError, match="names a list"):
+        load_scene(SCENES / "thirteen_rings.toml", ["objects.*=1"])
 
 
 def test_toml_and_python_api_give_the_same_scene(tmp_path):

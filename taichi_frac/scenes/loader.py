@@ -223,11 +223,12 @@ def load_scene(path: str | os.PathLike, overrides=()) -> Scene:
 def apply_overrides(data: dict, overrides, *, where: str = "scene") -> dict:
     """Apply ``KEY=VALUE`` overrides to a parsed scene (returns a new dict).
 
-    KEY is a dotted path; an object or collider is named by its ``name`` or its index, e.g.
-    ``ring.fracture.crack_count=3``, ``objects.ring.material.tensile_strength=2e6``,
-    ``simulation.duration=1.5``, ``colliders.0.friction=0.3``. A bare object name stands for
-    ``objects.NAME``. A material given as a preset name becomes ``{preset = NAME}`` when one
-    of its fields is overridden. VALUE is parsed as TOML (``3``, ``2e6``, ``true``,
+    KEY is a dotted path; an object or collider is named by its ``name`` or its index, or
+    ``*`` for every one, e.g. ``ring.fracture.crack_count=3``,
+    ``objects.ring.material.tensile_strength=2e6``, ``objects.*.fracture.crack_fit_rounds=0``,
+    ``simulation.duration=1.5``, ``colliders.0.friction=0.3``. A bare object name (or ``*``)
+    stands for ``objects.NAME``. A material given as a preset name becomes ``{preset = NAME}``
+    when one of its fields is overridden. VALUE is parsed as TOML (``3``, ``2e6``, ``true``,
     ``[0, 0, 1]``, ``"porcelain"``); text that is not valid TOML is taken as a string.
     VALUE ``none`` removes the key, so the option takes its default (TOML has no null:
     ``ring.fracture.crack_length=none`` lets the crack run as far as the stress says).
@@ -247,39 +248,53 @@ def apply_overrides(data: dict, overrides, *, where: str = "scene") -> dict:
         except tomllib.TOMLDecodeError:
             value = raw
         parts = key.split(".")
-        if parts[0] in object_names and parts[0] not in ("objects", "colliders", "simulation", "output", "name"):
+        if (parts[0] in object_names or parts[0] == "*") and parts[0] not in ("objects", "colliders", "simulation",
+                                                                            "output", "name"):
             parts = ["objects"] + parts
-        node = data
-        for depth, part in enumerate(parts[:-1]):
-            here = ".".join(parts[:depth]) or "scene"
-            if isinstance(node, list):
-                match = [t for t in node if isinstance(t, dict) and t.get("name") == part]
-                if match:
-                    node = match[0]
-                elif part.isascii() and part.isdigit() and int(part) < len(node):
-                    node = node[int(part)]
-                else:
-                    raise OptionError(f"{where}: override {key!r}: no entry named {part!r} in {here}")
-                continue
-            child = node.get(part)
-            if child is None:
-                # A table the scene leaves out takes its defaults; set one of its keys.
-                child = node[part] = {} if depth > 0 or part in ("simulation", "output") else None
-                if child is None and part in ("objects", "colliders"):
-                    raise OptionError(f"{where}: override {key!r}: the scene has no {part}")
-                if child is None:
-                    names = ", ".join(sorted(str(n) for n in object_names)) or "none"
-                    raise OptionError(f"{where}: override {key!r}: unknown key {part!r}; a key starts with "
-                                      f"simulation, output, objects, colliders or an object's name ({names})")
-            elif isinstance(child, str) and part == "material":
-                child = node[part] = {"preset": child}
-            elif not isinstance(child, (dict, list)):
-                raise OptionError(f"{where}: override {key!r}: {here}.{part} is a value, not a table")
-            node = child
-        if isinstance(node, list):
-            raise OptionError(f"{where}: override {key!r} names a list; add the entry's name or index")
-        if raw.lower() == "none":
-            node.pop(parts[-1], None)
-        else:
-            node[parts[-1]] = value
+        _apply_override(data, parts, 0, None if raw.lower() == "none" else value, key, where, object_names)
     return data
+
+
+def _apply_override(node, parts: list, depth: int, value, key: str, where: str, object_names) -> None:
+    """Set ``parts[depth:]`` under ``node`` (the scene's table at ``parts[:depth]``) to
+    ``value`` (None: remove the key); ``*`` in a list sets it in every entry."""
+    for depth in range(depth, len(parts) - 1):
+        part = parts[depth]
+        here = ".".join(parts[:depth]) or "scene"
+        if isinstance(node, list):
+            if part == "*":
+                entries = [t for t in node if isinstance(t, dict)]
+                if not entries:
+                    raise OptionError(f"{where}: override {key!r}: {here} has no entries for '*' to set")
+                for entry in entries:
+                    _apply_override(entry, parts, depth + 1, value, key, where, object_names)
+                return
+            match = [t for t in node if isinstance(t, dict) and t.get("name") == part]
+            if match:
+                node = match[0]
+            elif part.isascii() and part.isdigit() and int(part) < len(node):
+                node = node[int(part)]
+            else:
+                raise OptionError(f"{where}: override {key!r}: no entry named {part!r} in {here}")
+            continue
+        child = node.get(part)
+        if child is None:
+            # A table the scene leaves out takes its defaults; set one of its keys.
+            child = node[part] = {} if depth > 0 or part in ("simulation", "output") else None
+            if child is None and part in ("objects", "colliders"):
+                raise OptionError(f"{where}: override {key!r}: the scene has no {part}")
+            if child is None:
+                names = ", ".join(sorted(str(n) for n in object_names)) or "none"
+                raise OptionError(f"{where}: override {key!r}: unknown key {part!r}; a key starts with "
+                                  f"simulation, output, objects, colliders or an object's name ({names})")
+        elif isinstance(child, str) and part == "material":
+            child = node[part] = {"preset": child}
+        elif not isinstance(child, (dict, list)):
+            raise OptionError(f"{where}: override {key!r}: {here}.{part} is a value, not a table")
+        node = child
+    if isinstance(node, list):
+        raise OptionError(f"{where}: override {key!r} names a list; add the entry's name or index, or '*'")
+    if value is None:
+        node.pop(parts[-1], None)
+    else:
+        node[parts[-1]] = value

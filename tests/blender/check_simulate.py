@@ -314,6 +314,12 @@ def check_export(workdir: Path, scene, cube):
                                 "tensile_strength": 3.0e6, "fracture_toughness": 1.0e6, "look": "porcelain"},
           f"custom material {entry['material']}")
     check("crack_count" not in entry["fracture"], "auto crack count wrote a count")
+    check("crack_fit_rounds" not in entry["fracture"], "a full run's scene sets crack_fit_rounds")
+    scene.taichi_frac_sim.draft = True
+    addon().export.export_scene(bpy.context)
+    entry = next(o for o in exported_scene(scene)["objects"] if o["name"] == "Cube")
+    check(entry["fracture"].get("crack_fit_rounds") == 0, f"a draft's fracture table {entry['fracture']}")
+    scene.taichi_frac_sim.draft = False
     check(np.allclose(entry["position"], [0.0, 0.0, 0.003], atol=1e-9), f"centimetre position {entry['position']}")
     check(np.allclose(entry["linear_velocity"], [0.0, 0.0, -0.12], atol=1e-9), f"velocity {entry['linear_velocity']}")
     vertices = np.array([[float(v) for v in line.split()[1:]] for line in

@@ -334,6 +334,8 @@ def _write(context, scene, objects, bodies, names, cache, mesh_dir, scale, fps) 
         }
         if props.role == "BREAKABLE":
             entry["fracture"] = _fracture(props, scale)
+            if settings.draft:
+                entry["fracture"]["crack_fit_rounds"] = 0
         entries.append(entry)
     document = {
         "name": safe_name(scene.name),

@@ -124,6 +124,11 @@ class TaichiFracSimScene(bpy.types.PropertyGroup):
                            description="Physics particles (tets) each breakable body is discretised into: more "
                                        "gives finer cracks and costs more")
     substeps: IntProperty(name="Substeps", min=1, max=1000, default=10, description="Solver substeps per frame")
+    draft: BoolProperty(
+        name="Draft", default=False,
+        description="A quick look: the pieces are cut on the cracks as the analysis placed them, without the "
+                    "cuts that fit each piece's volume to its tets' (the same physics; pieces a few per cent "
+                    "off their volume)")
     cache_path: StringProperty(
         name="Cache", subtype="FILE_PATH", default="",
         description="The cache file (.usdc); the scene file and meshes go beside it. Empty: a folder "

@@ -107,6 +107,7 @@ class VIEW3D_PT_taichi_frac_simulation(bpy.types.Panel):
         sub.prop(settings, "ground_height")
         box.prop(settings, "particles")
         box.prop(settings, "substeps")
+        box.prop(settings, "draft")
         box.prop(settings, "cache_path")
         scene = context.scene
         try:
