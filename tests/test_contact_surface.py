@@ -553,17 +553,18 @@ def test_patches_of_several_bodies_at_once_are_each_bodys_own():
 
 @pytest.mark.slow
 def test_pieces_wedged_between_pieces_come_to_rest(scene_world):
-    """The 13 rings breaking on their surfaces (crack seeds shifted by 91, whose pile wedges
+    """The 13 rings breaking on their surfaces (crack seeds shifted by 93, whose pile wedges
     chips between larger pieces): within the scene's 3 s every piece comes to rest and
-    sleeps, as on its spheres; at most 5 % may still be settling. A chip held by the plane
-    of a face reaching past its patch (not bounded by ``surface.PLANE_REACH``) was jolted
-    from substep to substep, and 51 of 128 pieces were still awake at the end. Every body
+    sleeps, as on its spheres; at most 5 % may still be settling (none was, of 154). A chip
+    held by the plane of a face reaching past its patch (not bounded by
+    ``surface.PLANE_REACH``) was jolted from substep to substep, and 25 of 118 pieces were
+    still awake at the end (seed shifts 91 and 92: 6 of 146 and 22 of 135). Every body
     is grouped by n = 4 (``surface_group_size`` 0), with 24 contact sweeps and rings of
     6 MPa, with which this pile wedges its chips (the scene's own settings make another
     pile)."""
     path = BUILTIN_SCENE_DIR / "thirteen_rings.toml"
     base = load_scene(path)
-    scene = load_scene(path, other_seeds(base, 91)
+    scene = load_scene(path, other_seeds(base, 93)
                        + ["simulation.surface_contact=true", "simulation.solver_iterations=24"]
                        + [f"{o.name}.particles.surface_group_size=0" for o in base.objects]
                        + [f"{o.name}.material.tensile_strength=6e6" for o in base.objects])

@@ -282,3 +282,25 @@ def test_group_sizes_coarsen_only_bodies_with_enough_surface():
     np.testing.assert_array_equal(group_sizes([0, 383, 384, 5000], 4, 12), [4, 4, 12, 12])
     np.testing.assert_array_equal(group_sizes([383, 384], 4, 0), [4, 4])
     np.testing.assert_array_equal(group_sizes([5000], 1, 12), [1])
+
+
+def test_mass_properties_are_the_same_bits_with_one_or_two_blas_threads():
+    """A body's centre of mass and inertia start every pile's chaos: they must not depend on
+    how many threads OpenBLAS splits a long product among (a threaded dot product sums in
+    another order). The same tets in two processes, one and two BLAS threads, bit for bit."""
+    import os
+    import subprocess
+    import sys
+
+    script = (
+        "import numpy as np\n"
+        "from taichi_frac.geometry.mass import tet_mass_properties\n"
+        "rng = np.random.default_rng(5)\n"
+        "vertices = rng.normal(size=(40000, 3)) + [3.0, -1.0, 0.5]\n"
+        "tets = rng.integers(0, len(vertices), size=(60000, 4))\n"
+        "props = tet_mass_properties(vertices, tets, 2400.0, np.abs(rng.normal(size=len(tets))) + 0.1)\n"
+        "print(props.center_of_mass.tobytes().hex(), props.inertia.tobytes().hex())\n")
+    answers = {subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True,
+                              env=dict(os.environ, OPENBLAS_NUM_THREADS=str(threads))).stdout
+               for threads in (1, 2)}
+    assert len(answers) == 1

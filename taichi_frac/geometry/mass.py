@@ -36,13 +36,30 @@ def tet_mass_properties(vertices: np.ndarray, tets: np.ndarray, density, volumes
     rho = np.broadcast_to(np.asarray(density, dtype=np.float64), vol.shape)
     m = rho * vol
     mass = float(m.sum())
-    com = (m @ corner_sum(p)) / (4.0 * mass)
+    com = _weighted_sums(m, corner_sum(p)) / (4.0 * mass)
     q = p - com  # about the centre of mass: no large parallel-axis cancellation
     s = corner_sum(q)
     w = m / 20.0
-    # sum_t w_t (sum_i q_ti q_ti^T + s_t s_t^T) as two (3,N) @ (N,3) products: BLAS, far
-    # cheaper than a per-tet einsum in a fragment's model build.
-    flat = q.reshape(-1, 3)
-    c = (flat * np.repeat(w, 4)[:, None]).T @ flat + (s * w[:, None]).T @ s
+    # sum_t w_t (sum_i q_ti q_ti^T + s_t s_t^T), entry by entry (_weighted_second_moments)
+    c = _weighted_second_moments(np.repeat(w, 4), q.reshape(-1, 3)) + _weighted_second_moments(w, s)
     inertia = np.trace(c) * np.eye(3) - c
     return MassProperties(mass=mass, center_of_mass=com, inertia=0.5 * (inertia + inertia.T), volume=float(vol.sum()))
+
+
+# These sums are numpy's own pairwise sums, not BLAS products: a threaded BLAS splits a long
+# dot product among its threads, so the last bits of a body's centre of mass and inertia, and
+# with them every chaotic pile, would depend on the machine's core count.
+def _weighted_sums(weights: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """(3,) sum_n weights[n] rows[n] over (N,) weights and (N,3) rows."""
+    return np.array([np.sum(weights * rows[:, i]) for i in range(3)])
+
+
+def _weighted_second_moments(weights: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """(3,3) sum_n weights[n] rows[n] rows[n]^T over (N,) weights and (N,3) rows."""
+    columns = [np.ascontiguousarray(rows[:, i]) for i in range(3)]
+    weighted = [weights * column for column in columns]
+    c = np.empty((3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            c[i, j] = c[j, i] = np.sum(weighted[i] * columns[j])
+    return c
