@@ -399,3 +399,27 @@ def test_a_whole_plane_fit_that_fails_a_piece_no_move_can_free_stops_cleanly():
         2, kept, np.zeros((1, 3)), np.ones(1), [np.arange(200)], 100,
         fit=lambda solids, sources, moves, frozen: (np.ones((1, 3)), 0.0), cut=cut, freeze=freeze, near=None)
     assert result is kept and np.all(moves == 0.0) and cuts == len(tried) >= 1
+
+
+def test_moves_already_cut_are_not_cut_again():
+    """A fit that froze nothing new proposes the same moves again; their cut is the one made
+    before (the cut is deterministic), not made again: three rounds proposing one set of
+    moves cut once, three proposing different ones cut three times."""
+    from taichi_frac.surfaces.cut import _fit_rounds, _Kept, _Parts
+
+    def parts(failed):
+        return _Parts(None, (), [None], {"fallback_ids": failed}, np.zeros(0), np.zeros(0))
+
+    for proposals, expected in (([1.0, 1.0, 1.0], 1), ([1.0, 2.0, 3.0], 3)):
+        kept = _Kept(parts(np.zeros(0, dtype=np.int64)), 1.0)
+        tried, asked = [], iter(proposals)
+
+        def cut(moves):
+            tried.append(moves.copy())
+            return parts(np.array([0]))  # (it fails the piece: never kept)
+
+        result, moves, cuts = _fit_rounds(
+            3, kept, np.zeros((1, 3)), np.ones(1), [np.arange(200)], 100,
+            fit=lambda solids, sources, moves, frozen: (np.full((1, 3), next(asked)), 0.0), cut=cut,
+            freeze=lambda pieces: np.zeros(1, dtype=bool), near=None)
+        assert result is kept and cuts == len(tried) == expected

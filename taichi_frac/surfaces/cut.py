@@ -278,14 +278,17 @@ def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, mi
     Returns (kept, moves, cuts made)."""
     frozen = np.zeros(len(moves), dtype=bool)
     cuts = 0
+    made = {}  # the moves' bytes -> their cut: a fit that froze nothing new proposes the same moves again
     for _ in range(rounds):
         change, predicted = fit(kept.solids, kept.sources, moves, frozen)
         if not np.any(change != 0.0) or predicted > (1.0 - FIT_GAIN) * kept.misfit:
             break
         for step in FIT_STEPS:
             tried = moves + step * change
-            parts = cut(tried)
-            cuts += 1
+            parts = made.get(tried.tobytes())
+            if parts is None:
+                parts = made[tried.tobytes()] = cut(tried)
+                cuts += 1
             newly = np.setdiff1d(parts.stats["fallback_ids"], kept.stats["fallback_ids"])
             solids = parts.solids
             misfit = volume_misfit(solids, targets, fragment_tets, min_tets)
