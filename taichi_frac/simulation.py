@@ -100,6 +100,10 @@ class Simulation:
         arch: Taichi backend overriding ``scene.simulation.arch``.
         progress: callable(frame, frame_count, simulated_time, fragments, frames_per_second)
             called after every frame, or None.
+        surfaces_progress: callable(left, splits) called while the run, its frames done,
+            waits for the pieces' surfaces still being cut: ``left`` of the ``splits`` it
+            found unfinished, once at the start of the wait and again each time one is
+            written; or None.
         single_scale: override the scene's single_scale setting (benchmarks).
         fracture: False disables the fracture stage (every body unbreakable).
         frames: simulate this many frames instead of duration x fps.
@@ -133,7 +137,8 @@ class Simulation:
 
     def __init__(self, scene, *, output=None, arch: str | None = None, progress=None,
                  single_scale: bool | None = None, fracture: bool = True, frames: int | None = None,
-                 world=None, overwrite: bool = False, prepare=None, surface_workers: int | None = None):
+                 world=None, overwrite: bool = False, prepare=None, surface_workers: int | None = None,
+                 surfaces_progress=None):
         self.scene = scene
         sim = scene.simulation
         if frames is not None and (not isinstance(frames, numbers.Integral) or frames < 1):
@@ -141,6 +146,7 @@ class Simulation:
         self.frame_count = int(frames if frames is not None else sim.frame_count)
         self.frame_dt = sim.frame_dt
         self.progress = progress
+        self.surfaces_progress = surfaces_progress
         self.fracture_enabled = bool(fracture)
         self.times = StageTimes()
         self.records: dict[int, BodyRecord] = {}
@@ -391,7 +397,8 @@ class Simulation:
                 if self.recorder is not None:
                     t = time.perf_counter()
                     # complete only when every requested frame was written
-                    self.recorder.close(complete=not failed and not interrupted and done == self.frame_count)
+                    self.recorder.close(complete=not failed and not interrupted and done == self.frame_count,
+                                        on_wait=self.surfaces_progress)
                     self.times.surfaces_wait += self.recorder.wait_seconds
                     self.times.output += time.perf_counter() - t - self.recorder.wait_seconds
             finally:

@@ -58,6 +58,9 @@ def test_progress_lines():
     assert p.fraction == 0.25
     assert runner.parse_progress("[Taichi] Starting on arch=x64") is None
     assert runner.parse_progress('{"frame": "x"}') is None
+    assert runner.parse_surfaces_wait('{"stage": "surfaces", "left": 2, "splits": 5}\n') == (2, 5)
+    assert runner.parse_surfaces_wait('{"stage": "prepare", "objects": 3}') is None
+    assert runner.parse_progress('{"stage": "surfaces", "left": 2, "splits": 5}') is None
 
 
 def _command(folder: Path, name: str = "taichi-frac") -> Path:
@@ -95,3 +98,21 @@ def test_failed_run_gives_the_commands_one_line_error(tmp_path):
     line = run.error_line()
     assert line.startswith("bad.toml:") and "friction" in line and "\n" not in line, line
     assert not (tmp_path / "stats.json").exists()
+
+
+def test_the_run_reads_the_wait_for_the_last_surfaces(tmp_path):
+    """A command that reports frames, then the wait for the last surfaces: the run's progress
+    holds the splits left, and those lines are not taken for the command's messages."""
+    command = tmp_path / "fake-taichi-frac"
+    command.write_text("#!/bin/sh\n"
+                       "echo '{\"stage\": \"prepare\", \"objects\": 1}' >&2\n"
+                       "echo '{\"frame\": 4, \"frames\": 4, \"time\": 0.08, \"fragments\": 3, \"fps\": 9.0}' >&2\n"
+                       "echo '{\"stage\": \"surfaces\", \"left\": 2, \"splits\": 2}' >&2\n"
+                       "echo '{\"stage\": \"surfaces\", \"left\": 0, \"splits\": 2}' >&2\n")
+    command.chmod(0o755)
+    run = runner.SimulationRun(str(command), str(tmp_path / "scene.toml"))
+    run.start()
+    assert run.wait(timeout=60) == 0
+    p = run.progress
+    assert (p.frame, p.frames, p.fragments, p.surfaces_left, p.surfaces_splits) == (4, 4, 3, 0, 2)
+    assert not any("surfaces" in line for line in run.stderr_lines)

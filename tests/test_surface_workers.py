@@ -76,6 +76,39 @@ def test_the_recorder_writes_in_order_once_a_surface_is_done():
     assert writer.calls[-1] == ("close", True)
 
 
+def test_the_wait_at_the_end_tells_how_many_splits_are_left():
+    """close() waiting for surfaces still being cut tells on_wait how many of those it found
+    unfinished are left, from all of them down to none, as they finish (out of order here),
+    and still writes in order."""
+    import threading
+
+    from taichi_frac.io.recorder import CacheRecorder
+    from taichi_frac.surfaces import BodySurface
+
+    surface = BodySurface(np.zeros((3, 3)), np.array([[0, 1, 2]]), np.zeros(1, bool))
+    recorder = CacheRecorder("unused.usdc", fps=50, checkpoint_every=0, checkpoint_seconds=0)
+    recorder.writer = writer = _Writer()
+    futures = [Future() for _ in range(3)]
+    for k, future in enumerate(futures):
+        recorder._log.append((future, recorder._add, (k, f"piece{k}", 0, None, None, None, 0.0)))
+    told = []
+
+    def finish():
+        for k in (2, 0, 1):
+            time.sleep(0.05)
+            futures[k].set_result(surface)
+
+    threading.Thread(target=finish).start()
+    recorder.close(complete=True, on_wait=lambda left, splits: told.append((left, splits)))
+    assert told[0] == (3, 3) and told[-1] == (0, 3)
+    assert all(splits == 3 for _, splits in told) and [left for left, _ in told] == sorted(
+        {left for left, _ in told}, reverse=True)
+    assert writer.calls == [("add", "piece0"), ("add", "piece1"), ("add", "piece2"), ("close", True)]
+    told.clear()
+    recorder.close(complete=True, on_wait=lambda left, splits: told.append((left, splits)))
+    assert told == []  # (nothing to wait for: nothing told)
+
+
 def test_a_worker_error_reaches_the_caller_with_its_traceback():
     from taichi_frac.surfaces.pool import SurfaceWorkerError, SurfaceWorkers
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 from pathlib import Path
 
 HELP = "simulate a scene (TOML) with fracture and write a USD cache"
@@ -43,7 +44,10 @@ def register(subparsers) -> None:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.add_argument("--progress-json", action="store_true",
                    help="report progress as one JSON object a frame on stderr, for programs that run this "
-                        "command (the Blender add-on): {\"frame\", \"frames\", \"time\", \"fragments\", \"fps\"}")
+                        "command (the Blender add-on): {\"frame\", \"frames\", \"time\", \"fragments\", \"fps\"}; "
+                        "stages besides the frames as {\"stage\": ...}: {\"stage\": \"prepare\", \"objects\"} "
+                        "first, {\"stage\": \"surfaces\", \"left\", \"splits\"} while the last pieces' "
+                        "surfaces are cut")
     p.set_defaults(func=main)
 
 
@@ -89,9 +93,25 @@ def _progress_printer(quiet: bool, as_json: bool = False):
     return cb, None
 
 
+def _surfaces_printer(args):
+    """The run's ``surfaces_progress``: while the frames are done and the cache waits for
+    the pieces' surfaces still being cut, how many splits are left (a stage line)."""
+    last = [-1.0]
+
+    def cb(left, splits):
+        # (a line a second at most on a terminal, and the last; a program reading JSON gets each)
+        now = time.monotonic()
+        if args.progress_json or left == 0 or now - last[0] >= 1.0:
+            last[0] = now
+            _stage_line(args, "surfaces", f"frames done; cutting the pieces' surfaces: {left} of {splits} "
+                                          "splits left", left=left, splits=splits)
+
+    return cb
+
+
 def _stage_line(args, stage: str, text: str, **fields) -> None:
-    """A progress line before the frames start, so a long set-up shows at once that the run
-    has started: ``text`` on stderr, or a JSON object ``{"stage": stage, ...}`` with
+    """A progress line outside the frames (a long set-up shows at once that the run has
+    started; the wait for the last surfaces shows what is left): ``text`` on stderr, or a JSON object ``{"stage": stage, ...}`` with
     ``--progress-json`` (programs that read the frames' lines skip it); none with -q."""
     if args.progress_json:
         print(json.dumps({"stage": stage} | fields), file=sys.stderr, flush=True)
@@ -198,7 +218,8 @@ def main(args) -> int:
     try:
         sim = Simulation(scene, output=output, arch=args.arch, progress=cb, frames=args.frames,
                          single_scale=True if args.single_scale else None, fracture=not args.no_fracture,
-                         overwrite=args.overwrite, surface_workers=args.surface_workers)
+                         overwrite=args.overwrite, surface_workers=args.surface_workers,
+                         surfaces_progress=_surfaces_printer(args))
         summary = sim.run()
     finally:
         if bar is not None:

@@ -77,15 +77,16 @@ class CacheRecorder:
         gave up on, at a second Ctrl-C)."""
         return bool(self._log)
 
-    def close(self, complete: bool) -> None:
+    def close(self, complete: bool, on_wait=None) -> None:
         """Write the file, once every surface asked for is done; ``complete``: every requested
         frame was written. A Ctrl-C while it waits writes what is done so far, marked
-        incomplete."""
+        incomplete. ``on_wait``: callable(left, splits) told how many of the splits' surfaces
+        it found unfinished are left, when it starts waiting and as each is written."""
         if self.writer is None:
             return
         t = time.perf_counter()
         try:
-            self._flush(wait=True)
+            self._flush(wait=True, on_wait=on_wait)
         except KeyboardInterrupt:
             complete = False
             self._flush()
@@ -93,17 +94,27 @@ class CacheRecorder:
             self.wait_seconds += time.perf_counter() - t
             self.writer.close(complete=complete and not self._log)
 
-    def _flush(self, wait: bool = False) -> None:
+    def _flush(self, wait: bool = False, on_wait=None) -> None:
         """Write the log's entries in order up to the first whose surface is not done
-        (``wait``: all of them, waiting for each)."""
+        (``wait``: all of them, waiting for each, telling ``on_wait`` as ``close`` says)."""
+        waiting, told = None, None  # (the futures unfinished when the wait began; the count last told)
         while self._log:
             future, write, args = self._log[0]
             if future is not None and not future.done():
                 if not wait:
                     return
+                if on_wait is not None and waiting is None:
+                    waiting = [f for f, _, _ in self._log if f is not None and not f.done()]
+                    told = len(waiting)
+                    on_wait(told, len(waiting))
                 concurrent.futures.wait([future])
             write(args, None if future is None else future.result())
             self._log.popleft()
+            if waiting:
+                left = sum(1 for f in waiting if not f.done())
+                if left < told:
+                    told = left
+                    on_wait(left, len(waiting))
 
     def _add(self, args, surface) -> None:
         body, name, birth_frame, look, parent, impact, peak = args

@@ -10,6 +10,7 @@ the frames done) and ``error_line`` (the command's one-line error, or a short re
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -54,17 +55,32 @@ def find_executable(preference: str = "", environ=None) -> tuple[str, str]:
 @dataclass
 class Progress:
     """The latest frame the run reported: frame done, frame count, simulated time [s], live
-    fragments, frames per second of wall time."""
+    fragments, frames per second of wall time; once the frames are done and the run waits for
+    the last pieces' surfaces, how many of the splits it waits for are left (-1: not waiting)."""
 
     frame: int = 0
     frames: int = 0
     time: float = 0.0
     fragments: int = 0
     fps: float = 0.0
+    surfaces_left: int = -1
+    surfaces_splits: int = 0
 
     @property
     def fraction(self) -> float:
         return self.frame / self.frames if self.frames else 0.0
+
+
+def parse_surfaces_wait(line: str) -> tuple[int, int] | None:
+    """A ``{"stage": "surfaces", "left", "splits"}`` line as (left, splits), else None."""
+    line = line.strip()
+    if not line.startswith('{"stage": "surfaces"'):
+        return None
+    try:
+        data = json.loads(line)
+        return int(data["left"]), int(data["splits"])
+    except (ValueError, KeyError, TypeError):
+        return None
 
 
 def parse_progress(line: str) -> Progress | None:
@@ -125,9 +141,13 @@ class SimulationRun:
     def _read(self, stream, sink: list[str]) -> None:
         for line in stream:
             progress = parse_progress(line)
+            waiting = None if progress is not None else parse_surfaces_wait(line)
             with self._lock:
                 if progress is not None:
                     self.progress = progress
+                elif waiting is not None:
+                    self.progress = dataclasses.replace(self.progress, surfaces_left=waiting[0],
+                                                        surfaces_splits=waiting[1])
                 else:
                     sink.append(line.rstrip("\n"))
 

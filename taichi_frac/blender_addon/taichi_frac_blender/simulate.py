@@ -87,6 +87,9 @@ class Job:
             return f"taichi-frac: stopping after frame {p.frame}, keeping the frames done ..."
         if not p.frames:
             return f"taichi-frac: preparing the bodies ({time.perf_counter() - self.started:.0f} s) - Esc to stop"
+        if p.surfaces_left >= 0:
+            return (f"taichi-frac: frames done, cutting the pieces' surfaces: {p.surfaces_left} of "
+                    f"{p.surfaces_splits} splits left - Esc to stop and keep what is done")
         return (f"taichi-frac: frame {p.frame}/{p.frames}, {p.fragments} pieces, {p.fps:.1f} frames/s"
                 " - Esc to stop and keep the frames done")
 
