@@ -211,9 +211,9 @@ def _client(workers: int | None, scheduler: str | None):
     # includes it, and with another size each worker would compile every kernel again
     # instead of loading what `taichi-frac run` and earlier sweeps compiled.
     # The workers' environment is this process's: Dask's nanny would otherwise pin the
-    # BLAS libraries to one thread (OMP/MKL/OPENBLAS_NUM_THREADS=1), and NumPy's products
-    # then round differently from `taichi-frac run`, so a variant's pieces would not be
-    # the ones the same settings give in a run.
+    # BLAS libraries to one thread (OMP/MKL/OPENBLAS_NUM_THREADS=1). The pieces do not
+    # depend on it (no BLAS product enters the physics: geometry/mass.py), but a variant
+    # then runs as `taichi-frac run` runs, timings included.
     with dask.config.set({"distributed.nanny.pre-spawn-environ": {"MALLOC_TRIM_THRESHOLD_": 65536}}):
         cluster = LocalCluster(n_workers=_local_workers(workers), threads_per_worker=1, processes=True,
                                dashboard_address=":0", memory_limit=0, silence_logs=logging.ERROR)
