@@ -12,11 +12,14 @@ import os
 import sys
 import traceback
 
-# Before numpy loads OpenBLAS, which reads it then: its idle threads sleep at once instead
-# of spinning on sched_yield for about 2^28 cycles after each call. A run makes many tiny
-# calls (a new piece's 3x3 inertia inverse), and on 2 cores the spinning took CPU from the
-# frames and the surface workers (the 13 rings: system time 2.0 -> 1.1 s). The results are
-# the same: only how long a thread waits for work changes.
+# Before numpy loads OpenBLAS, which reads them then. One BLAS thread: a run's BLAS calls
+# are small (a ring's FEM factorisation, a piece's 3x3 inverse) and the cores are the
+# frames' and the surface workers'; a second BLAS thread waiting for a busy core stalls the
+# call (the glass walls' fracture analysis beside three workers: 6.9 s, against 0.9 s on one
+# thread; whole runs 0.96-0.97x). The pieces do not depend on it: no BLAS product enters
+# the physics (geometry/mass.py). Where a user asks for more threads, their idle threads
+# sleep at once instead of spinning on sched_yield for about 2^28 cycles after each call.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "4")
 
 from . import __version__, interrupts  # noqa: E402

@@ -162,20 +162,22 @@ def test_a_ctrl_c_while_the_lock_is_taken_gives_it_back(tmp_path, monkeypatch):
     assert not (tmp_path / ".ring.usdc.lock").exists()
 
 
-@pytest.mark.parametrize("given, expected", [(None, "4"), ("20", "20")])
-def test_the_command_has_openblas_threads_sleep_at_once_unless_told_otherwise(given, expected):
-    """The command sets OPENBLAS_THREAD_TIMEOUT before numpy loads OpenBLAS (its idle threads
-    then sleep instead of spinning beside the frames), and keeps a value the user set: in a
-    new interpreter, the variable as OpenBLAS reads it when numpy is first imported."""
+@pytest.mark.parametrize("given, expected", [(None, ("1", "4")), (("3", "20"), ("3", "20"))])
+def test_the_command_runs_one_openblas_thread_unless_told_otherwise(given, expected):
+    """The command sets OPENBLAS_NUM_THREADS (one thread: the cores are the frames' and the
+    surface workers') and OPENBLAS_THREAD_TIMEOUT (idle threads sleep instead of spinning)
+    before numpy loads OpenBLAS, and keeps values the user set: in a new interpreter, the
+    variables as OpenBLAS reads them when numpy is first imported."""
     import os
     import subprocess
     import sys
 
-    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_THREAD_TIMEOUT"}
+    names = ("OPENBLAS_NUM_THREADS", "OPENBLAS_THREAD_TIMEOUT")
+    env = {k: v for k, v in os.environ.items() if k not in names}
     if given is not None:
-        env["OPENBLAS_THREAD_TIMEOUT"] = given
-    # (the package itself loads no numpy: the command's module sets the variable first)
+        env.update(zip(names, given))
+    # (the package itself loads no numpy: the command's module sets the variables first)
     code = ("import sys, taichi_frac; early = 'numpy' in sys.modules; import os, taichi_frac.cli; "
-            "print(early, os.environ['OPENBLAS_THREAD_TIMEOUT'])")
+            "print(early, os.environ['OPENBLAS_NUM_THREADS'], os.environ['OPENBLAS_THREAD_TIMEOUT'])")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
-    assert out.split()[-2:] == ["False", expected]
+    assert out.split()[-3:] == ["False", *expected]
