@@ -423,3 +423,31 @@ def test_moves_already_cut_are_not_cut_again():
             fit=lambda solids, sources, moves, frozen: (np.full((1, 3), next(asked)), 0.0), cut=cut,
             freeze=lambda pieces: np.zeros(1, dtype=bool), near=None)
         assert result is kept and cuts == len(tried) == expected
+
+
+def test_the_fit_solves_with_one_blas_thread_whatever_the_process_runs():
+    """The fit's least squares, in two processes with one and two BLAS threads, give the
+    same bits (without ``one_blas_thread`` a threaded BLAS sums a long product in another
+    order and they differ), and inside it every BLAS library loaded runs one thread."""
+    import os
+    import subprocess
+    import sys
+
+    from threadpoolctl import threadpool_info
+
+    from taichi_frac.surfaces.crack_fit import one_blas_thread
+
+    with one_blas_thread():
+        assert {info["num_threads"] for info in threadpool_info() if info["user_api"] == "blas"} == {1}
+    script = ("import hashlib, numpy as np\n"
+              "from scipy.optimize import lsq_linear\n"
+              "from taichi_frac.surfaces.crack_fit import one_blas_thread\n"
+              "rng = np.random.default_rng(3)\n"
+              "a, b = rng.normal(size=(3000, 400)), rng.normal(size=3000)\n"
+              "with one_blas_thread():\n"
+              "    x = lsq_linear(a, b, bounds=(-0.5, 0.5)).x\n"
+              "print(hashlib.sha1(x.tobytes()).hexdigest())\n")
+    answers = {subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True,
+                              env=dict(os.environ, OPENBLAS_NUM_THREADS=str(threads))).stdout.split()[-1]
+               for threads in (1, 2)}
+    assert len(answers) == 1

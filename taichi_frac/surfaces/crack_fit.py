@@ -22,6 +22,7 @@ stay as the physics made them.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,6 +57,24 @@ VOLUME_TOLERANCE = 0.01
 #: Weight of the offsets themselves [per particle spacing, squared] against the pieces'
 #: relative volume errors: keeps a plane no piece measures where the analysis put it.
 OFFSET_WEIGHT = 1e-4
+
+
+def one_blas_thread():
+    """A context in which the BLAS libraries loaded (numpy's, scipy's) run one thread: a
+    threaded BLAS splits a long product among its threads and sums the parts in another
+    order, so a fit of many moves would otherwise come out differently, in its last bits and
+    then in which cut it keeps, with the machine's core count."""
+    return _blas_libraries().limit(limits=1, user_api="blas")
+
+
+@functools.lru_cache(maxsize=1)
+def _blas_libraries():
+    # (made once, after the solvers' modules are imported: it lists the libraries loaded;
+    # limiting through it then costs about 10 us)
+    import scipy.optimize  # noqa: F401
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
 
 
 def piece_target_volumes(scale: float, model, fragment_tets) -> np.ndarray:
@@ -254,7 +273,8 @@ def _fit(free: np.ndarray, pieces, already: np.ndarray, now: float, spacing: flo
     # (the weight is on the total moves)
     a = np.vstack([rows, np.sqrt(OFFSET_WEIGHT) * np.eye(len(already))])
     b = np.concatenate([-misfits, -np.sqrt(OFFSET_WEIGHT) * already])
-    fit = lsq_linear(a, b, bounds=(lo, hi))
+    with one_blas_thread():
+        fit = lsq_linear(a, b, bounds=(lo, hi))
     change[free] = fit.x * spacing
     # (the pieces without faces on a free crack keep their errors)
     return change, now - float(np.sum(misfits**2)) + float(np.sum((rows @ fit.x + misfits) ** 2))
@@ -389,7 +409,8 @@ def _sparse_fit(free: np.ndarray, pieces, already: np.ndarray, now: float, spaci
     cost = np.concatenate([np.ones(2 * n), ERROR_PRICE * np.ones(2 * p)])
     equality = np.hstack([a, -a, -np.eye(p), np.eye(p)])
     bounds = ([(0.0, max(h, 0.0)) for h in hi] + [(0.0, max(-l, 0.0)) for l in lo] + [(0.0, None)] * (2 * p))
-    result = linprog(cost, A_eq=equality, b_eq=-errors, bounds=bounds, method="highs")
+    with one_blas_thread():
+        result = linprog(cost, A_eq=equality, b_eq=-errors, bounds=bounds, method="highs")
     if result.status != 0:
         return None
     x = result.x[:n] - result.x[n:2 * n]
