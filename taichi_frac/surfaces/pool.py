@@ -41,12 +41,12 @@ def default_worker_count(breakable_bodies: int) -> int:
     """Workers for a run with ``breakable_bodies`` scene bodies that may break: one per core
     and at least four where workers are forked, no more than there are such bodies (none
     when nothing breaks). A run cutting its pieces in this process leaves the second core
-    idle (the cut is single-threaded and every piece's cut waits for its parent's); a body
-    and its pieces stay in one worker, and the splits' costs differ by tenfold, so more
-    workers than cores even out the load: on 2 cores the 13 rings took 11.3 s inline, 9.6 s
-    with two workers, 8.1 s with four and 8.8 s with eight; the glass walls' three 15.8 s
-    with three workers against 16.9 s with two; the single ring as fast with its one. Where
-    a worker is a new interpreter (no fork), one for every two cores past the first two: its
+    idle (every piece's cut waits for its parent's); a body and its pieces stay in one
+    worker, and the splits' costs differ by tenfold, so more workers than cores even out
+    the load. On 2 cores the 13 rings run within 5 % of each other with two, four or six
+    workers (paired runs: 2 against 4 0.98x, 6 against 4 0.95x) and take 10.0 s inline
+    against 8.0 s with four, the frames waiting for every cut. Where a worker is a new
+    interpreter (no fork), one for every two cores past the first two: its
     imports cost the frame loop more on fewer cores than the cuts it takes off it."""
     cores = os.cpu_count() or 1
     wanted = max(4, cores) if FORK else max(0, cores - 2) // 2
