@@ -111,8 +111,9 @@ def _surfaces_printer(args):
 
 def _stage_line(args, stage: str, text: str, **fields) -> None:
     """A progress line outside the frames (a long set-up shows at once that the run has
-    started; the wait for the last surfaces shows what is left): ``text`` on stderr, or a JSON object ``{"stage": stage, ...}`` with
-    ``--progress-json`` (programs that read the frames' lines skip it); none with -q."""
+    started; the wait for the last surfaces shows what is left): ``text`` on stderr, or a
+    JSON object ``{"stage": stage, ...}`` with ``--progress-json`` (programs that read the
+    frames' lines skip it); none with -q."""
     if args.progress_json:
         print(json.dumps({"stage": stage} | fields), file=sys.stderr, flush=True)
     elif not args.quiet:
