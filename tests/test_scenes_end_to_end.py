@@ -182,7 +182,7 @@ def test_the_whole_stress_field_is_computed_only_for_the_cache(world, tmp_path, 
         summary = sim.run()
         ids = sim.world.body_ids
         runs[label] = (summary.fragments, sim.world.body_state(ids)["position"], calls.count(True))
-        assert (summary.stage_seconds["render_surfaces"] > 0.0) == (label == "cache")
+        assert bool(sim.render_cuts) == (label == "cache")  # (a repeated split's cut may be a memo's: 0 s)
     assert runs["cache"][0] == runs["none"][0] >= 3
     np.testing.assert_array_equal(runs["cache"][1], runs["none"][1])
     assert runs["cache"][2] >= 1 and runs["none"][2] == 0

@@ -245,3 +245,75 @@ def test_a_second_run_takes_the_idle_workers_and_writes_the_same_cache(tmp_path)
     assert pids[0] == pids[1] == pids[2]  # (the same processes, idle between the runs)
     pool.close_idle_workers()
     assert not pool._IDLE
+
+
+def test_splits_cut_in_other_workers_than_the_ones_holding_their_solids_give_the_same_cache(tmp_path, monkeypatch):
+    """Splits go to a worker that does not hold their parent's render solid while there is
+    one: the ring's first split to the one that did not build the ring's solid (sent the
+    arrays it is built from), a piece's split to the one that did not cut the piece (which
+    cuts again the split that made it first, and so holds its siblings too). The ring thrown
+    down, cracked twice, its pieces breaking again (five splits), writes the cache the
+    process writes alone, sample for sample."""
+    from taichi_frac.surfaces import pool, stage
+
+    ran = []
+    real_extra, real_start = pool.SurfaceWorkers._extra, pool.SurfaceWorkers._start
+
+    def elsewhere(self, job, worker):
+        key = job.needs if job.needs is not None else job.payload.parent_key if job.kind == "cut" else None
+        if key is not None and key in worker.held and any(key not in w.held for w in self._workers):
+            return None  # (not where the solid is, while a worker does not hold it)
+        return real_extra(self, job, worker)
+
+    def start(self, job, worker):
+        replayed = job.kind == "cut" and job.needs is not None and job.needs not in worker.held
+        ran.append((job.kind, job.needs is not None, replayed))
+        return real_start(self, job, worker)
+
+    scene = load_scene(SCENES / "single_ring.toml", [
+        "ring.fracture.crack_count=2", "ring.fracture.refracture=true", "ring.material.tensile_strength=4.5e6",
+        "ring.fracture.seed=5", "ring.linear_velocity=[0,0,-4]"])
+    alone = tmp_path / "alone.usdc"
+    Simulation(scene, output=alone, frames=40, surface_workers=0).run()
+    monkeypatch.setattr(stage, "_CUTS", {})  # (cut again, not taken from the run above)
+    monkeypatch.setattr(stage, "_ROOT_SURFACES", {})
+    monkeypatch.setattr(pool, "_MADE_BY", {})
+    monkeypatch.setattr(pool.SurfaceWorkers, "_extra", elsewhere)
+    monkeypatch.setattr(pool.SurfaceWorkers, "_start", start)
+    spread = tmp_path / "spread.usdc"
+    sim = Simulation(scene, output=spread, frames=40, surface_workers=2)
+    sim.run()
+    cuts = [(piece, replayed) for kind, piece, replayed in ran if kind == "cut"]
+    assert sim.fracture_events >= 3 and cuts[0] == (False, False) and len(cuts) == sim.fracture_events
+    assert sum(replayed for _, replayed in cuts) >= 2  # (pieces' splits where the pieces were not)
+    assert cache_digest(alone) == cache_digest(spread)
+
+
+def test_a_scene_objects_render_solid_built_again_from_its_arrays_cuts_the_same():
+    """``portable``: two solids built from one scene object's arrays, other solids made in
+    between (the boolean library numbers every solid it makes), cut by the same slab into
+    the same bytes; the digest names the content."""
+    import manifold3d as m3
+    import trimesh
+
+    from taichi_frac.surfaces.portable import PortableSolid
+    from taichi_frac.surfaces.solid import render_solid_from_surface
+
+    ring = trimesh.creation.torus(0.1, 0.025, major_sections=48, minor_sections=16)
+    first = render_solid_from_surface(ring, np.zeros(3), 0.01)
+    made = []
+    for others in (0, 17):
+        made += [m3.Manifold.sphere(0.2, 12) for _ in range(others)]
+        solid = first.solid if others == 0 else first.portable.rebuilt().solid
+        slab = m3.Manifold.cube((0.5, 0.5, 1e-4), center=True).rotate((20.0, 30.0, 0.0))
+        pieces = (solid - slab).decompose()
+        assert len(pieces) == 2
+        made.append(b"".join(np.asarray(p.to_mesh64().vert_properties).tobytes()
+                             + np.asarray(p.to_mesh64().tri_verts).tobytes() for p in pieces))
+    assert made[0] == made[-1]
+    assert abs(first.solid.volume() - ring.volume) <= 1e-9 * ring.volume
+    shifted = render_solid_from_surface(ring, np.array([0.0, 0.0, 1e-9]), 0.01).portable
+    assert shifted.digest != first.portable.digest
+    again = first.portable
+    assert PortableSolid.of_arrays(again.vert_properties, again.tri_verts, again.merge_from, again.merge_to,
+                                   again.spacing).digest == again.digest

@@ -1,18 +1,23 @@
 """The piece-surface stage where the simulation does not wait for it.
 
 :class:`SurfaceWorkers` runs :class:`~taichi_frac.surfaces.stage.SurfaceStage` in worker
-processes (``worker.py``): a body and every piece of it go to one worker, which keeps their
-render solids; requests return futures at once, so the frame loop goes on while a split's
-pieces are cut, and the recorder writes them when they are done. Workers are forked from
-this process (no imports to wait for) and, after a run, stay idle for the next run in this
-process, which takes their memos of root surfaces and cuts with them; they end with it.
-:class:`InProcessSurfaces` is the same interface in this process (futures already done).
-Both give the same surfaces: the same code runs on the same arrays.
+processes (``worker.py``): requests return futures at once, so the frame loop goes on while
+a split's pieces are cut, and the recorder writes them when they are done. Each worker takes
+one job at a time, the largest waiting first. A scene object's first split goes to any idle
+worker (sent the arrays its render solid is built from, ``portable.py``); a piece's split to
+the worker that cut the piece, which holds its solid, or, when that one stays busy, to
+another that cuts the piece again first (a cut gives the same bytes in any process); a split
+a worker's memo holds (a repeated run's) to that worker. Workers are forked from this
+process (no imports to wait for) and, after a run, stay idle for the next run in this
+process, which takes their memos; they end with it. :class:`InProcessSurfaces` is the same
+interface in this process (futures already done). Both give the same surfaces: the same code
+runs on the same arrays.
 """
 
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import itertools
 import multiprocessing
 import os
@@ -24,7 +29,8 @@ import threading
 import time
 from concurrent.futures import Future
 
-from .stage import CutRequest, SurfaceStage
+from .front import Job, SurfaceFront, _sent
+from .stage import SurfaceStage
 from .worker import read_frame, write_frame
 
 
@@ -39,46 +45,40 @@ class SurfaceWorkerError(RuntimeError):
 
 def default_worker_count(breakable_bodies: int) -> int:
     """Workers for a run with ``breakable_bodies`` scene bodies that may break: one per core
-    and at least four where workers are forked, no more than there are such bodies (none
-    when nothing breaks). A run cutting its pieces in this process leaves the second core
-    idle (every piece's cut waits for its parent's); a body and its pieces stay in one
-    worker, and the splits' costs differ by tenfold, so more workers than cores even out
-    the load. On 2 cores the 13 rings run within 5 % of each other with two, four or six
-    workers (paired runs: 2 against 4 0.98x, 6 against 4 0.95x) and take 10.0 s inline
-    against 8.0 s with four, the frames waiting for every cut. Where a worker is a new
-    interpreter (no fork), one for every two cores past the first two: its
+    where workers are forked, no more than there are such bodies (none when nothing breaks).
+    A scene object's first split goes to any idle worker, so more workers than cores only
+    share the cores. Where a
+    worker is a new interpreter (no fork), one for every two cores past the first two: its
     imports cost the frame loop more on fewer cores than the cuts it takes off it."""
     cores = os.cpu_count() or 1
-    wanted = max(4, cores) if FORK else max(0, cores - 2) // 2
+    wanted = cores if FORK else max(0, cores - 2) // 2
     return min(wanted, max(0, breakable_bodies))
 
 
-def _done(value) -> Future:
-    future = Future()
-    future.set_result(value)
-    return future
-
-
-class InProcessSurfaces:
+class InProcessSurfaces(SurfaceFront):
     """The surface stage in this process, behind :class:`SurfaceWorkers`' interface."""
 
     count = 0  # (worker processes)
 
     def __init__(self):
+        super().__init__()
         self.stage = SurfaceStage()
 
-    def add_body(self, body: int, model, surface) -> Future:
-        return _done(self.stage.add_body(body, model, surface))
-
-    def cut(self, fracture) -> Future:
-        return _done(self.stage.cut(fracture))
+    def _run(self, job: Job) -> None:
+        payload = job.sent(self.stage.holds)
+        try:
+            result = self.stage.add_body(*payload) if job.kind == "add_body" else self.stage.cut(payload)
+        except Exception as error:  # noqa: BLE001 (the future carries it to whoever waits)
+            job.failed(error)
+        else:
+            job.done(result)
 
     def render_of(self, body: int):
-        return self.stage.render_of(body)
-
-    @property
-    def cuts(self) -> list:
-        return self.stage.cuts
+        """The render solid of a live body (``solid.RenderSolid``), or None (it shows its
+        tets' boundary)."""
+        future = self._render.get(body)
+        solid = None if future is None else future.result()
+        return None if solid is None else self.stage.render_of(solid.key)
 
     def close(self, cancel: bool = False) -> None:
         pass
@@ -170,7 +170,7 @@ class _Worker:
         self.pending: dict[int, Future] = {}
         self.lock = threading.Lock()
         self.outbox: queue.SimpleQueue = queue.SimpleQueue()
-        self.load = 0  # tets of the bodies it holds, for choosing a worker
+        self.held: set[str] = set()  # keys of the render solids and shading its stage holds
         threading.Thread(target=self._write, daemon=True).start()
         threading.Thread(target=self._read, daemon=True).start()
 
@@ -228,15 +228,15 @@ class _Worker:
                                   + (f" ({reason})" if reason else "") + " before it answered")
 
 
-#: Worker processes idle between runs of this process, for the next run to take: their
-#: memos (``stage._ROOT_SURFACES``, ``stage._CUTS``) serve a repeated run's bodies and splits
-#: as this process' own serve a run without workers. They end with this process.
+#: Worker processes idle between runs of this process, for the next run to take (no new
+#: process to start; a repeated run's splits come from this process' memos, ``front.py``).
+#: They end with this process.
 _IDLE: list = []
 
 
 def _take_workers(count: int) -> list:
-    """``count`` workers: idle ones first (in the order they were first started, so that a
-    repeated run routes its bodies as before), then new ones."""
+    """``count`` workers: idle ones first (in the order they were first started), then new
+    ones."""
     alive = [w for w in _IDLE if w.process.poll() is None]
     _IDLE.clear()
     taken, spare = alive[:count], alive[count:]
@@ -244,55 +244,170 @@ def _take_workers(count: int) -> list:
         worker.close()
     taken += [_Worker() for _ in range(count - len(taken))]
     for worker in taken:
-        worker.load = 0
-        worker.tell("reset", None)  # (a new run's body ids: nothing of the last run's bodies)
+        worker.held = set()
+        worker.tell("reset", None)  # (nothing of the last run's solids)
     return taken
 
 
-class SurfaceWorkers:
-    """The surface stage in ``count`` worker processes (each body and its pieces in one).
+#: A job waits for the worker holding its piece's solid (or its memo) up to this many times
+#: what another worker would take to make the solid again first (``SurfaceFront.replay``),
+#: then goes to an idle one: the cores are busy anyway while new splits come in, and a
+#: worker that makes a solid again spends time a split could have used.
+STEAL_WAIT_FACTOR = 2.0
 
-    ``cuts``: (seconds, counts) of each finished cut that cut a render solid, in the order
-    the splits were asked for.
+#: Which worker's memo holds each split cut (and each scene object started) in this process,
+#: and how long that job took [s]: a repeated run's jobs go to it (key -> (worker, seconds)).
+#: The oldest go first past this many (more than the workers' memos keep: ``stage.CUTS_KEPT``
+#: each).
+MADE_BY_KEPT = 4096
+_MADE_BY: dict = {}
+
+
+class SurfaceWorkers(SurfaceFront):
+    """The surface stage in ``count`` worker processes, one job at a time each.
+
+    A job goes to the idle worker where it costs least: one holding the piece's solid it
+    cuts (or whose memo holds its result), else, once it has waited STEAL_WAIT_FACTOR times
+    what another worker would have to cut again first (the cuts that made the piece,
+    ``replay``), to that one: so no core idles long while one worker has a queue.
     """
 
     def __init__(self, count: int):
         if count < 1:
             raise ValueError(f"count = {count}: at least one worker")
+        super().__init__()
         self.count = count
         self._workers = _take_workers(count)
-        self._route: dict[int, _Worker] = {}
+        self._idle = list(self._workers)
+        self._queue: list[tuple] = []  # (order, job): the largest first, then the first asked
         self._tasks = itertools.count()
-        self._cut_futures: list[Future] = []
+        self._lock = threading.RLock()  # (a settled job's callbacks may queue jobs: same thread)
+        self._timer = None  # (wakes the queue when a waiting job may go to another worker)
+        self._closed = False
 
-    def add_body(self, body: int, model, surface) -> Future:
-        worker = min(self._workers, key=lambda w: w.load)
-        worker.load += model.tet_count
-        self._route[body] = worker
-        # Without trimesh's cache: a spatial index built here does not survive pickling.
-        surface = None if surface is None else surface.copy(include_cache=False)
-        return worker.submit(next(self._tasks), "add_body", (body, model, surface))
+    def _run(self, job: Job) -> None:
+        with self._lock:
+            job.queued = time.monotonic()
+            self._queue.append(((job.kind != "add_body", -job.size, next(self._tasks)), job))
+            self._queue.sort(key=lambda entry: entry[0])
+            self._pump()
 
-    def cut(self, fracture) -> Future:
-        worker = self._route.pop(fracture.parent)
-        for child in fracture.children:
-            self._route[child] = worker
-        future = worker.submit(next(self._tasks), "cut", CutRequest.of(fracture))
-        self._cut_futures.append(future)
-        return future
+    def _extra(self, job: Job, worker: "_Worker") -> float | None:
+        """[s] what ``job`` costs more on ``worker`` than where it costs least: the time it
+        took where another worker's memo holds its result, and the cuts it replays where
+        ``worker`` does not hold the piece's solid; None where it cannot go."""
+        extra = 0.0
+        made = _MADE_BY.get(job.key)
+        if made is not None and made[0] is not worker and made[0] in self._workers:
+            extra += made[1]
+        if job.needs is not None and job.needs not in worker.held:
+            replay = self.replay(job.needs, worker.held.__contains__)
+            if replay is None:
+                return None
+            extra += replay[1]
+        return extra
+
+    def _pump(self) -> None:
+        """Start queued jobs on idle workers, the largest first, each where it costs least;
+        one that costs more on every idle worker waits for its own as long as that (called
+        with the lock held)."""
+        if self._closed:
+            return
+        now, wake = time.monotonic(), None
+        for entry in list(self._queue):
+            if not self._idle:
+                break
+            job = entry[1]
+            needed = [sum(e[1].needs in w.held for e in self._queue) for w in self._idle]
+            costs = [(extra, needed[i], i) for i, w in enumerate(self._idle)
+                     if (extra := self._extra(job, w)) is not None]
+            if not costs:
+                if all(self._extra(job, w) is None for w in self._workers):
+                    self._queue.remove(entry)  # (no worker holds the solid, or can make it again)
+                    job.failed(SurfaceWorkerError(f"no piece-surface worker can cut the split {job.key}"))
+                continue
+            extra, _, i = min(costs)
+            extra *= STEAL_WAIT_FACTOR
+            if now - job.queued < extra:
+                wake = min(wake if wake is not None else extra, job.queued + extra - now)
+                continue
+            self._queue.remove(entry)
+            self._start(job, self._idle[i])
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        if wake is not None and self._idle:
+            self._timer = threading.Timer(wake + 1e-3, self._wake)
+            self._timer.daemon = True
+            self._timer.start()
+
+    def _wake(self) -> None:
+        with self._lock:
+            self._pump()
+
+    def _start(self, job: Job, worker: "_Worker") -> None:
+        self._idle.remove(worker)
+        holds = worker.held.__contains__
+        payload = job.sent(holds)
+        if job.kind == "add_body" and payload[1] is not None:
+            # Without trimesh's cache: a spatial index built here does not survive pickling.
+            payload = (payload[0], payload[1].copy(include_cache=False), payload[2])
+        if job.kind == "cut":
+            if job.needs is not None and job.needs not in worker.held:
+                chain, _ = self.replay(job.needs, holds)
+                sent = []
+                for request in chain:  # (its pieces' solids stay there too)
+                    sent.append(_sent(request, holds))
+                    worker.held.add(request.shading_key)
+                    worker.held |= {k for k in request.piece_keys if k in self._origin}
+                    if request.render is None:
+                        worker.held.discard(request.parent_key)
+                payload = dataclasses.replace(payload, replay=tuple(sent))
+            worker.held.add(job.payload.shading_key)
+            worker.held.discard(job.needs)  # (the stage lets go of a piece's solid it cuts)
+        job.started = time.monotonic()
+        future = worker.submit(next(self._tasks), job.kind, payload)
+        future.add_done_callback(lambda f: self._settle(worker, job, f))
+
+    def _settle(self, worker: "_Worker", job: Job, future: Future) -> None:
+        error = future.exception()
+        with self._lock:
+            if error is None:
+                result = future.result()
+                if job.kind == "add_body":
+                    worker.held.add(job.key)
+                else:
+                    worker.held |= {k for k, has in zip(job.payload.piece_keys, result.renders) if has}
+                while len(_MADE_BY) >= MADE_BY_KEPT:
+                    del _MADE_BY[next(iter(_MADE_BY))]
+                took = time.monotonic() - job.started
+                made = _MADE_BY.pop(job.key, None)
+                if made is not None and made[0] is worker:  # (a memo's answer: what the job took first)
+                    took = max(took, made[1])
+                _MADE_BY[job.key] = (worker, took)
+            if not self._closed:
+                self._idle.append(worker)
+                self._idle.sort(key=self._workers.index)
+        if error is None:
+            job.done(result)
+        else:
+            job.failed(error)
+        with self._lock:
+            self._pump()
 
     def render_of(self, body: int):
         raise RuntimeError("the render solids live in the worker processes: run with surface_workers = 0 "
                            "(Simulation(..., surface_workers=0)) to read them")
 
-    @property
-    def cuts(self) -> list:
-        done = [f.result() for f in self._cut_futures if f.done() and f.exception() is None]
-        return [(r.seconds, r.counts) for r in done if r.counts]
-
     def close(self, cancel: bool = False) -> None:
-        """Leave the workers idle for the next run in this process once their queued work is
-        done, or end them at once (``cancel``: their results are no longer wanted)."""
+        """Leave the workers idle for the next run in this process once their work is done,
+        or end them at once (``cancel``: their results are no longer wanted). Jobs not
+        started are dropped."""
+        with self._lock:
+            self._closed = True
+            self._queue.clear()
+            if self._timer is not None:
+                self._timer.cancel()
         for worker in self._workers:
             if cancel:
                 worker.kill()
@@ -306,6 +421,7 @@ def close_idle_workers(timeout: float = 5.0) -> None:
     to exit (at this process' exit: none outlives it, not even by the moment the kernel's
     parent-death signal takes)."""
     idle, _IDLE[:] = list(_IDLE), []
+    _MADE_BY.clear()
     for worker in idle:
         worker.close()
     deadline = time.monotonic() + timeout

@@ -8,7 +8,7 @@ and what is dropped, and the vertex property columns say what each corner carrie
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import manifold3d as m3
 import numpy as np
@@ -74,12 +74,14 @@ class RenderSolid:
     their crack in ``cracks``; ``spacing`` [m] the body's particle spacing. ``volume_scale``
     (a broken piece's): the unbroken body's render volume over its tets' volume, what a
     piece's render solid should hold per volume of its tets; None for an unbroken body's
-    (its own volume over its tets')."""
+    (its own volume over its tets'). ``portable``: the arrays a scene object's solid was built
+    from (``portable.PortableSolid``), None for a cut piece's."""
 
     solid: m3.Manifold
     cracks: tuple
     spacing: float
     volume_scale: float | None = None
+    portable: object = field(default=None, repr=False)
 
     def moved(self, offset) -> "RenderSolid":
         """The same solid in a frame whose origin is at ``offset`` (3,) [m] of this one."""
@@ -105,9 +107,12 @@ class PieceMesh:
     cracks: tuple
 
 
-def _to_manifold(vertices: np.ndarray, faces: np.ndarray, properties: np.ndarray) -> m3.Manifold:
-    """Manifold of a triangle mesh whose corners carry ``properties`` (F,3,P): one property
-    vertex per distinct (position, properties) row, shared positions merged."""
+def _built(vertices: np.ndarray, faces: np.ndarray, properties: np.ndarray, spacing: float) -> RenderSolid:
+    """The render solid of a triangle mesh whose corners carry ``properties`` (F,3,P): one
+    property vertex per distinct (position, properties) row, shared positions merged; built
+    from arrays any process can be sent (``portable.PortableSolid``)."""
+    from .portable import PortableSolid
+
     rows = np.concatenate([vertices[faces].reshape(-1, 3), properties.reshape(-1, properties.shape[2])], axis=1)
     unique, corner = np.unique(rows, axis=0, return_inverse=True)
     position_of = np.unique(unique[:, :3], axis=0, return_inverse=True)[1].reshape(-1)
@@ -115,15 +120,7 @@ def _to_manifold(vertices: np.ndarray, faces: np.ndarray, properties: np.ndarray
     first[position_of[::-1]] = np.arange(len(unique))[::-1]  # each position's first property vertex
     target = first[position_of]
     distinct = np.nonzero(target != np.arange(len(unique)))[0]
-    pairs = np.stack([distinct, target[distinct]], axis=1)
-    mesh = m3.Mesh64(vert_properties=np.ascontiguousarray(unique, dtype=np.float64),
-                     tri_verts=np.ascontiguousarray(corner.reshape(-1, 3), dtype=np.uint64),
-                     merge_from_vert=np.ascontiguousarray(pairs[:, 0], dtype=np.uint64),
-                     merge_to_vert=np.ascontiguousarray(pairs[:, 1], dtype=np.uint64))
-    solid = m3.Manifold(mesh)
-    if solid.status() != m3.Error.NoError:
-        raise ValueError(f"the render surface is not a closed manifold ({solid.status()})")
-    return solid
+    return PortableSolid.of_arrays(unique, corner.reshape(-1, 3), distinct, target[distinct], spacing).rebuilt()
 
 
 def render_solid_from_surface(surface: trimesh.Trimesh, origin, spacing: float) -> RenderSolid:
@@ -138,7 +135,7 @@ def render_solid_from_surface(surface: trimesh.Trimesh, origin, spacing: float) 
     if uv is not None and len(uv) == len(vertices):
         props[:, :, UV.start - 3:UV.stop - 3] = np.asarray(uv, dtype=np.float64)[faces]
     props[:, :, CRACK - 3] = -1.0
-    return RenderSolid(_to_manifold(vertices, faces, props), (), float(spacing))
+    return _built(vertices, faces, props, float(spacing))
 
 
 def render_solid_from_tets(model) -> RenderSolid:
@@ -151,7 +148,7 @@ def render_solid_from_tets(model) -> RenderSolid:
     props = np.zeros((len(faces), 3, PROPERTY_COUNT - 3))
     props[:, :, 0:3] = normal[:, None, :]
     props[:, :, CRACK - 3] = -1.0
-    return RenderSolid(_to_manifold(model.vertices, faces, props), (), float(model.spacing))
+    return _built(model.vertices, faces, props, float(model.spacing))
 
 
 def tangent_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -2,17 +2,16 @@
 
 A scene object's surface is the artist's own (its render solid, ``solid.py``) with the
 shading of its source surface; a split cuts the parent's render solid along the cracks
-(``cut.cut_render_solid``) into one closed surface per piece. The frame loop
-(``simulation.py``) calls :meth:`SurfaceStage.add_body` for each scene object and
-:meth:`SurfaceStage.cut` after each split; the recorder (``io/recorder.py``) writes the
-:class:`BodySurface` it is handed.
+(``cut.cut_render_solid``) into one closed surface per piece. :class:`SurfaceStage` does
+that work in one process and keeps no record of bodies: it holds the render solids it made
+by the keys the requests give them (``front.py`` names every body's solid), a scene
+object's solid rebuilt from the arrays a request brings where it has none
+(``portable.py``), and the memos a repeated run's splits are taken from.
 """
 
 from __future__ import annotations
 
 import atexit
-import dataclasses
-import hashlib
 import time
 from dataclasses import dataclass
 
@@ -21,24 +20,25 @@ import numpy as np
 from ..model import BodyModel
 from . import cut as _cut
 from .mesh import fragment_surface, render_surface, root_faces_of, surface_corner_attributes
+from .portable import PortableSolid
 from .solid import render_solid_from_surface, render_solid_from_tets
 
-#: Scene bodies' surfaces made in this process, by what they are made from (``_content_key``):
-#: (shading, render solid, BodySurface), all read-only. The copies of one object in a scene,
-#: and the next run of it in this process (a sweep's variants), take the surface made once:
-#: finding the corner shading (closest points on the source surface) and the render solid
-#: are most of a body's set-up. The oldest go first past this many.
+#: Scene objects' starts made in this process (``BodyStart``, the render solid), by what they
+#: are made from (the shading key, ``front._content_key``). The next run of an object in
+#: this process (a sweep's variants) takes the start made once: finding the corner shading
+#: (closest points on the source surface) and the render solid are most of a body's set-up.
+#: The oldest go first past this many.
 ROOT_SURFACES_KEPT = 64
 _ROOT_SURFACES: dict[str, tuple] = {}
-#: Splits cut in this process, by what they cut (``_cut_key``): (the cut render solid, the
-#: pieces' render solids, the cut's counts), all read-only. A run repeated in one process (a
-#: second ``Simulation(scene).run()``, a sweep's variant that changes what does not touch
-#: the splits) meets the same splits and takes their pieces made once: the cuts are most of
-#: what a run with a cache costs besides the physics. The oldest go first past this many
-#: (the 13 rings make about 30 splits a run; a sweep's worker, whose variants meet other
+#: Splits cut in this process, by what they cut (``CutRequest.cut_key``): (the pieces' render
+#: solids, the cut's counts, the pieces' surfaces), all read-only. A run repeated in one
+#: process (a second ``Simulation(scene).run()``, a sweep's variant that changes what does
+#: not touch the splits) meets the same splits and takes their pieces made once: the cuts are
+#: most of what a run with a cache costs besides the physics. The oldest go first past this
+#: many (the 13 rings make about 40 splits a run; a sweep's worker, whose variants meet other
 #: splits, keeps no more than this many pieces' solids alive).
 CUTS_KEPT = 128
-_CUTS: dict[tuple, tuple] = {}
+_CUTS: dict[str, tuple] = {}
 
 
 @atexit.register
@@ -47,6 +47,12 @@ def _forget_made() -> None:
     # those still alive then as leaked, and says so on stderr.
     _ROOT_SURFACES.clear()
     _CUTS.clear()
+
+
+def _remember(memo: dict, key: str, value, kept: int) -> None:
+    while len(memo) >= kept:
+        del memo[next(iter(memo))]
+    memo[key] = value
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,6 +80,23 @@ class BodySurface:
 
 
 @dataclass(frozen=True, eq=False)
+class BodyStart:
+    """A scene object's start in the surface stage.
+
+    Attributes:
+        surface: its BodySurface.
+        render: the arrays of its render solid (``portable.PortableSolid``).
+        shading: (normals (F,3,3), UVs (F,3,2) or None) of its tets' boundary faces, read off
+            its source surface, or (None, None) for an object given as tets: what a piece
+            the cut gives no part shows.
+    """
+
+    surface: BodySurface
+    render: PortableSolid
+    shading: tuple
+
+
+@dataclass(frozen=True, eq=False)
 class PieceSurfaces:
     """The surfaces of one split's pieces.
 
@@ -81,167 +104,165 @@ class PieceSurfaces:
         surfaces: one BodySurface per piece, in the order of ``Fracture.children``.
         seconds: [s] wall time of the render solid's cut (0 without one).
         counts: the cut's counts (``cut.cut_render_solid``), empty without one.
+        renders: per piece whether it has a render solid (False: it shows its tets'
+            boundary), held by the stage that cut it under the piece's key.
     """
 
     surfaces: list
     seconds: float = 0.0
     counts: dict | None = None
+    renders: list | None = None
 
 
 @dataclass(frozen=True, eq=False)
 class CutRequest:
-    """What a split's cut needs of a ``fracture.stage.Fracture``, and nothing the World
-    holds, so that it can travel to a worker process.
+    """What a split's cut needs, and nothing the World holds, so that it can travel to a
+    worker process.
 
     Attributes:
-        parent: the parent's body id; model: its BodyModel; options: its FractureOptions.
+        cut_key: names the cut (``front.py``: the parent's key and this request's content);
+            piece_keys: the keys the pieces' render solids are held under.
+        parent_key: the key of the parent's render solid, or None (it shows its tets'
+            boundary: nothing to cut); render: the arrays of a scene object's render solid
+            (``portable.PortableSolid``), which any stage rebuilds, or None for a piece's,
+            which the stage that cut it holds.
+        shading: the parent's scene object's shading (``BodyStart.shading``), or the key of
+            the shading the stage holds; shading_key: that key.
+        tet_peak: (T,) [Pa] the largest principal stress each of the parent's tets has seen
+            at a split, this one included.
+        model: the parent's BodyModel; options: its FractureOptions.
         fragment_tets: the split's pieces as parent tet indices (``FractureResult``).
         cracks: the analysis' CrackPlane / RingCrack list.
-        principal_stress: (T,) [Pa] the largest principal stress at the parent's tets.
-        children: the pieces' body ids; models: their BodyModels; roots: their root models;
-        parent_tets: each piece's tets in the parent.
+        models: the pieces' BodyModels; roots: their root models; parent_tets: each piece's
+            tets in the parent.
+        replay: the cuts (CutRequests) that made the parent's solid, from a scene object's
+            or a solid the stage holds down, for a stage that does not hold it: they are cut
+            again here first (each cut gives the same bytes in any process).
     """
 
-    parent: int
+    cut_key: str
+    piece_keys: list
+    parent_key: str | None
+    render: PortableSolid | None
+    shading: object
+    shading_key: str
+    tet_peak: np.ndarray
     model: BodyModel
     options: object
     fragment_tets: list
     cracks: list
-    principal_stress: np.ndarray
-    children: list
     models: list
     roots: list
     parent_tets: list
+    replay: tuple = ()
 
-    @classmethod
-    def of(cls, fracture) -> "CutRequest":
-        rec = fracture.parent_record
-        return cls(parent=fracture.parent, model=rec.model, options=rec.fracture,
-                   fragment_tets=list(fracture.split.fragment_tets), cracks=list(fracture.analysis.cracks),
-                   principal_stress=fracture.analysis.particle_principal_stress,
-                   children=list(fracture.children), models=[r.model for r in fracture.children_records],
-                   roots=[r.root for r in fracture.children_records],
-                   parent_tets=[p.parent_tets for p in fracture.pieces])
+    @staticmethod
+    def digest(hasher, model, tet_peak, fragment_tets, cracks, models, parent_tets, options, shading_key) -> None:
+        """Feed ``hasher`` (hashlib) what a cut's result depends on besides the parent's
+        render solid: the parent's particles, the pieces' tets and origins, the cracks, the
+        peak stresses and the options the cut reads."""
+        import dataclasses
 
-
-def _content_key(model: BodyModel, surface) -> str:
-    """A digest of what a scene body's surface is made from: its model's boundary and frame,
-    and its source surface (None: its tets)."""
-    digest = hashlib.sha256()
-    arrays = [model.vertices, model.surface_faces, model.com_in_source, np.array([model.spacing])]
-    if surface is not None:
-        arrays += [surface.vertices, surface.faces]
-        uv = getattr(getattr(surface, "visual", None), "uv", None)
-        if uv is not None:
-            arrays.append(np.asarray(uv))
-    for array in arrays:
-        array = np.ascontiguousarray(array)
-        digest.update(f"{array.dtype}{array.shape}".encode())
-        digest.update(array.tobytes())
-    digest.update(b"tets" if surface is None else b"surface")
-    return digest.hexdigest()
-
-
-def _cut_key(render, request: CutRequest) -> tuple:
-    """What a split's cut depends on: the render solid cut (by identity: the memo keeps it
-    alive, and a repeated run's parents are the same objects, from ``_ROOT_SURFACES`` and
-    earlier cuts), the parent's particles, the pieces' tets and origins, the cracks and the
-    options the cut reads."""
-    digest = hashlib.sha256()
-    arrays = [request.model.particle_position, *request.fragment_tets, *[m.com_in_source for m in request.models]]
-    for crack in request.cracks:
-        digest.update(type(crack).__name__.encode())
-        arrays.append(np.concatenate([np.ravel(np.asarray(getattr(crack, f.name), dtype=np.float64))
-                                      for f in dataclasses.fields(crack)]))
-    for array in arrays:
-        array = np.ascontiguousarray(array)
-        digest.update(f"{array.dtype}{array.shape}".encode())
-        digest.update(array.tobytes())
-    o = request.options
-    return (id(render), digest.hexdigest(), o.crack_roughness, o.crack_roughness_scale, o.seed, o.crack_fit_rounds,
-            o.crack_fit_min_tets)
+        arrays = [model.particle_position, tet_peak, *fragment_tets, *[m.com_in_source for m in models],
+                  *parent_tets]
+        for crack in cracks:
+            hasher.update(type(crack).__name__.encode())
+            arrays.append(np.concatenate([np.ravel(np.asarray(getattr(crack, f.name), dtype=np.float64))
+                                          for f in dataclasses.fields(crack)]))
+        for array in arrays:
+            array = np.ascontiguousarray(array)
+            hasher.update(f"{array.dtype}{array.shape}".encode())
+            hasher.update(array.tobytes())
+        o = options
+        hasher.update(repr((o.crack_roughness, o.crack_roughness_scale, o.seed, o.crack_fit_rounds,
+                            o.crack_fit_min_tets, shading_key)).encode())
 
 
 class SurfaceStage:
-    """Holds each live body's render solid and shading, and cuts them when a body breaks.
+    """Makes scene bodies' surfaces and cuts render solids, in one process.
 
-    Per body id: its render solid (``solid.RenderSolid``, None for a piece the cut gave no
-    part to: it shows its tets' boundary), its root's boundary shading and the peak stress
-    each of its tets has seen at a split. ``cuts``: per split that cut a render solid,
-    (seconds, the cut's counts).
+    It holds render solids by key until they are cut (a scene object's stays: its copies in a
+    scene share it), and each scene object's shading by key.
     """
 
     def __init__(self):
-        self._render: dict[int, object] = {}
-        self._shading: dict[int, tuple] = {}
-        self._tet_peak: dict[int, np.ndarray] = {}
-        self.cuts: list[tuple[float, dict]] = []
+        self._held: dict[str, object] = {}
 
-    def add_body(self, body: int, model: BodyModel, surface) -> BodySurface:
-        """A scene object's surface: ``surface`` is its source surface (a trimesh.Trimesh in
+    def holds(self, key: str) -> bool:
+        return key in self._held
+
+    def render_of(self, key: str):
+        """The render solid held under ``key`` (``solid.RenderSolid``), or None."""
+        return self._held.get(key)
+
+    def add_body(self, model: BodyModel, surface, key: str) -> BodyStart:
+        """A scene object's start: ``surface`` is its source surface (a trimesh.Trimesh in
         the model's source frame, ``PrepareReport.surface``), or None for an object given as
-        tets, which shows its tets' boundary."""
-        key = _content_key(model, surface)
+        tets, which shows its tets' boundary; its shading and render solid are held under
+        ``key`` (and ``key`` + "/render")."""
         if key not in _ROOT_SURFACES:
             if surface is None:
-                self._shading[body] = (None, None)
-                self._render[body] = render_solid_from_tets(model)
+                shading = (None, None)
+                render = render_solid_from_tets(model)
             else:
                 from ..geometry.surface_attributes import boundary_corner_attributes
 
                 corners = model.vertices[model.surface_faces] + model.com_in_source
-                self._shading[body] = boundary_corner_attributes(surface, corners)
-                self._render[body] = render_solid_from_surface(surface, model.com_in_source, model.spacing)
-            while len(_ROOT_SURFACES) >= ROOT_SURFACES_KEPT:
-                del _ROOT_SURFACES[next(iter(_ROOT_SURFACES))]
-            _ROOT_SURFACES[key] = (self._shading[body], self._render[body], self._surface(body, model, model))
-        self._shading[body], self._render[body], made = _ROOT_SURFACES[key]
-        return made
+                shading = boundary_corner_attributes(surface, corners)
+                render = render_solid_from_surface(surface, model.com_in_source, model.spacing)
+            start = BodyStart(self._surface(render, model, model, None, shading), render.portable, shading)
+            _remember(_ROOT_SURFACES, key, (start, render), ROOT_SURFACES_KEPT)
+        start, render = _ROOT_SURFACES[key]
+        self._held[key] = start.shading
+        self._held[key + "/render"] = render
+        return start
 
-    def render_of(self, body: int):
-        """The render solid of a live body (``solid.RenderSolid``) or None."""
-        return self._render.get(body)
-
-    def cut(self, fracture) -> PieceSurfaces:
-        """The pieces' surfaces of a split (a ``fracture.stage.Fracture`` or its
-        :class:`CutRequest`): the parent's render solid cut along its cracks, each piece
-        carrying the peak stress its tets have seen."""
-        request = fracture if isinstance(fracture, CutRequest) else CutRequest.of(fracture)
-        parent = request.parent
-        peak_parent = np.maximum(self._tet_peak.pop(parent, np.zeros(request.model.tet_count)),
-                                 request.principal_stress)
-        render = self._render.pop(parent, None)
-        shading = self._shading.pop(parent, (None, None))
-        renders, seconds, counts = [None] * len(request.children), 0.0, {}
-        if render is not None:
-            options = request.options
-            t = time.perf_counter()
-            key = _cut_key(render, request)
-            if key not in _CUTS:
+    def cut(self, request: CutRequest) -> PieceSurfaces:
+        """The pieces' surfaces of a split: the parent's render solid cut along its cracks,
+        each piece carrying the peak stress its tets have seen."""
+        for ancestor in request.replay:
+            self.cut(ancestor)
+        shading = request.shading
+        if isinstance(shading, str):
+            shading = self._held[shading]
+        else:
+            self._held[request.shading_key] = shading
+        render = None
+        if request.parent_key is not None:
+            render = self._held.get(request.parent_key)
+            if render is None and request.render is None:
+                raise RuntimeError(f"no render solid held under {request.parent_key}: a piece's split goes to the "
+                                   "stage that cut the piece")
+            if render is None:  # (a scene object's solid this stage has not built)
+                render = self._held[request.parent_key] = request.render.rebuilt()
+        seconds = 0.0
+        made = _CUTS.get(request.cut_key)
+        if made is None:
+            renders, counts = [None] * len(request.models), {}
+            if render is not None:
+                options = request.options
+                t = time.perf_counter()
                 renders, counts = _cut.cut_render_solid(
                     render, request.model, request.fragment_tets, request.cracks,
                     [m.com_in_source for m in request.models], roughness=options.crack_roughness,
                     roughness_scale=options.crack_roughness_scale, seed=options.seed,
                     fit_rounds=options.crack_fit_rounds, fit_min_tets=options.crack_fit_min_tets)
-                while len(_CUTS) >= CUTS_KEPT:
-                    del _CUTS[next(iter(_CUTS))]
-                _CUTS[key] = (render, renders, counts)
-            _render, renders, counts = _CUTS[key]
-            renders = list(renders)
-            seconds = time.perf_counter() - t
-            self.cuts.append((seconds, counts))
-        surfaces = []
-        for child, model, root, tets, piece_render in zip(request.children, request.models, request.roots,
-                                                          request.parent_tets, renders):
-            self._render[child] = piece_render
-            self._shading[child] = shading
-            self._tet_peak[child] = peak_parent[tets]
-            surfaces.append(self._surface(child, model, root))
-        return PieceSurfaces(surfaces, seconds, counts)
+                seconds = time.perf_counter() - t
+            surfaces = [self._surface(piece, model, root, request.tet_peak[tets], shading)
+                        for model, root, tets, piece in zip(request.models, request.roots, request.parent_tets, renders)]
+            made = (tuple(renders), counts, tuple(surfaces))
+            if render is not None:
+                _remember(_CUTS, request.cut_key, made, CUTS_KEPT)
+        renders, counts, surfaces = made
+        if request.render is None and request.parent_key is not None:
+            del self._held[request.parent_key]  # (a piece's solid: cut once)
+        for key, piece in zip(request.piece_keys, renders):
+            if piece is not None:
+                self._held[key] = piece
+        return PieceSurfaces(list(surfaces), seconds, counts, [piece is not None for piece in renders])
 
-    def _surface(self, body: int, model: BodyModel, root: BodyModel) -> BodySurface:
-        tet_peak = self._tet_peak.get(body)
-        render = self._render.get(body)
+    @staticmethod
+    def _surface(render, model: BodyModel, root: BodyModel, tet_peak, shading) -> BodySurface:
         if render is not None:
             vertices, faces, inner, normals, uvs, face_peak = render_surface(render, model, tet_peak)
             return BodySurface(vertices, faces, inner, normals, uvs, face_peak, shade_inner=True)
@@ -250,7 +271,7 @@ class SurfaceStage:
         root_faces = root_faces_of(model, root)  # (both calls below need it)
         vertices, faces, inner = fragment_surface(model, root, root_faces)
         normals = uvs = None
-        root_normals, root_uvs = self._shading.get(body, (None, None))
+        root_normals, root_uvs = shading
         if root_normals is not None:
             normals, uvs = surface_corner_attributes(model, root, root_normals, root_uvs, root_faces)
         return BodySurface(vertices, faces, inner, normals, uvs, face_peak)

@@ -2,12 +2,12 @@
 ``python -m taichi_frac.surfaces.worker PARENT_PID REQUESTS_FD ANSWERS_FD`` where there is
 no fork.
 
-It holds a :class:`~taichi_frac.surfaces.stage.SurfaceStage` for the bodies sent to it and
-answers the requests read from one pipe with results written to another, one pickled frame
-each way (an 8-byte length, then the pickle): ``(task id, "add_body", (body, model,
-surface))`` or ``(task id, "cut", CutRequest)`` in, ``(task id, True, result)`` or
-``(task id, False, the error's traceback)`` out; ``(task id, "reset", None)`` (no answer)
-starts a new run's stage, the memos of earlier runs kept. It ends at the end of its input,
+It holds a :class:`~taichi_frac.surfaces.stage.SurfaceStage` and answers the requests read
+from one pipe with results written to another, one pickled frame each way (an 8-byte
+length, then the pickle): ``(task id, "add_body", (model, surface, shading key))`` or
+``(task id, "cut", CutRequest)`` in, ``(task id, True, result)`` or ``(task id, False, the
+error's traceback)`` out; ``(task id, "reset", None)`` (no answer) starts a new run's
+stage. It ends at the end of its input,
 and with its parent however that ends (a parent-death signal); Ctrl-C in the terminal is
 the parent's to handle.
 """
