@@ -6,7 +6,7 @@ Entry points: ``pool.SurfaceWorkers(count)`` and ``pool.InProcessSurfaces()`` (b
 futures of a :class:`BodySurface` per body (the vertex layout the cache writer takes) and of
 the split's :class:`PieceSurfaces`; :class:`SurfaceStage` (``stage.py``) does the work in
 whichever process takes it, a scene object's render solid sent as the arrays it is built
-from (``portable.py``).
+from (``solid.PortableSolid``).
 Modules: ``solid.py`` (a render solid and its per-vertex property columns, ``layout``), ``cut.py``
 (the cut along the cracks), ``slabs.py`` (the solids a crack removes), ``crack_fit.py``
 (cracks moved so the pieces hold their volumes), ``parts.py``, ``shells.py``, ``reach.py``,

@@ -3,7 +3,7 @@ the record of every live body that a process needs to cut it.
 
 :class:`SurfaceFront` keeps, in the process that runs the frames, each live body's render
 solid as a key (and, for a scene object's, the arrays it is built from,
-``portable.PortableSolid``), a future until the job that makes it is done; the shading of
+``solid.PortableSolid``), a future until the job that makes it is done; the shading of
 its scene object and the peak stress its tets have seen. A split becomes a
 ``stage.CutRequest`` once its parent's render solid is made, and goes to whichever
 ``stage.SurfaceStage`` the subclass chooses (``pool.py``: this process', or a worker's).

@@ -4,7 +4,7 @@
 processes (``worker.py``): requests return futures at once, so the frame loop goes on while
 a split's pieces are cut, and the recorder writes them when they are done. Each worker takes
 one job at a time, the largest waiting first. A scene object's first split goes to any idle
-worker (sent the arrays its render solid is built from, ``portable.py``); a piece's split to
+worker (sent the arrays its render solid is built from, ``solid.PortableSolid``); a piece's split to
 the worker that cut the piece, which holds its solid, or, when that one stays busy, to
 another that cuts the piece again first (a cut gives the same bytes in any process); a split
 a worker's memo holds (a repeated run's) to that worker. Workers are forked from this

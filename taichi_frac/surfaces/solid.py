@@ -3,11 +3,19 @@ records a broken piece's surface carries (its crack surfaces, its mesh for the c
 
 ``cut.py`` cuts it along the cracks; the constants here say how thin the cuts are
 and what is dropped, and the vertex property columns say what each corner carries.
+
+A scene object's render solid is built from arrays (:class:`PortableSolid`) that travel
+between processes: the boolean library builds the same solid from the same arrays in every
+process, so its cut gives the same bytes wherever it is made. A cut piece's solid is not
+rebuilt from its own mesh: the library would tidy what a cut leaves (slivers a hairline
+slab wide), which moved tiny pieces' crack faces by up to a spacing; it stays in the
+process that cut it (``pool.py``).
 """
 
 from __future__ import annotations
 
 import functools
+import hashlib
 from dataclasses import dataclass, field
 
 import manifold3d as m3
@@ -75,7 +83,7 @@ class RenderSolid:
     (a broken piece's): the unbroken body's render volume over its tets' volume, what a
     piece's render solid should hold per volume of its tets; None for an unbroken body's
     (its own volume over its tets'). ``portable``: the arrays a scene object's solid was built
-    from (``portable.PortableSolid``), None for a cut piece's."""
+    from (:class:`PortableSolid`), None for a cut piece's."""
 
     solid: m3.Manifold
     cracks: tuple
@@ -107,12 +115,51 @@ class PieceMesh:
     cracks: tuple
 
 
+@dataclass(frozen=True, eq=False)
+class PortableSolid:
+    """The arrays a scene object's render solid (``solid.RenderSolid``) is built from.
+
+    Attributes:
+        vert_properties: (V,P) float64, the solid's vertices: x, y, z [m] then the property
+            columns (``layout.py``).
+        tri_verts: (F,3) uint64 vertex indices, outward.
+        merge_from, merge_to: (M,) uint64, the property vertices that share a position.
+        spacing: [m] the body's particle spacing.
+        digest: a hex digest of all of the above.
+    """
+
+    vert_properties: np.ndarray
+    tri_verts: np.ndarray
+    merge_from: np.ndarray
+    merge_to: np.ndarray
+    spacing: float
+    digest: str
+
+    @classmethod
+    def of_arrays(cls, vert_properties, tri_verts, merge_from, merge_to, spacing: float) -> "PortableSolid":
+        arrays = (np.ascontiguousarray(vert_properties, dtype=np.float64),
+                  np.ascontiguousarray(tri_verts, dtype=np.uint64).reshape(-1, 3),
+                  np.ascontiguousarray(merge_from, dtype=np.uint64), np.ascontiguousarray(merge_to, dtype=np.uint64))
+        digest = hashlib.sha256()
+        for array in arrays:
+            digest.update(f"{array.shape}".encode())
+            digest.update(array.tobytes())
+        digest.update(repr(float(spacing)).encode())
+        return cls(*arrays, float(spacing), digest.hexdigest())
+
+    def rebuilt(self) -> RenderSolid:
+        """The render solid these arrays are of, as every process builds it."""
+        solid = m3.Manifold(m3.Mesh64(vert_properties=self.vert_properties, tri_verts=self.tri_verts,
+                                      merge_from_vert=self.merge_from, merge_to_vert=self.merge_to))
+        if solid.status() != m3.Error.NoError:
+            raise ValueError(f"the render surface is not a closed manifold ({solid.status()})")
+        return RenderSolid(solid, (), self.spacing, portable=self)
+
+
 def _built(vertices: np.ndarray, faces: np.ndarray, properties: np.ndarray, spacing: float) -> RenderSolid:
     """The render solid of a triangle mesh whose corners carry ``properties`` (F,3,P): one
     property vertex per distinct (position, properties) row, shared positions merged; built
-    from arrays any process can be sent (``portable.PortableSolid``)."""
-    from .portable import PortableSolid
-
+    from arrays any process can be sent (:class:`PortableSolid`)."""
     rows = np.concatenate([vertices[faces].reshape(-1, 3), properties.reshape(-1, properties.shape[2])], axis=1)
     unique, corner = np.unique(rows, axis=0, return_inverse=True)
     position_of = np.unique(unique[:, :3], axis=0, return_inverse=True)[1].reshape(-1)

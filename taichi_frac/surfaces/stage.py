@@ -6,7 +6,7 @@ shading of its source surface; a split cuts the parent's render solid along the 
 that work in one process and keeps no record of bodies: it holds the render solids it made
 by the keys the requests give them (``front.py`` names every body's solid), a scene
 object's solid rebuilt from the arrays a request brings where it has none
-(``portable.py``), and the memos a repeated run's splits are taken from.
+(``solid.PortableSolid``), and the memos a repeated run's splits are taken from.
 """
 
 from __future__ import annotations
@@ -20,8 +20,7 @@ import numpy as np
 from ..model import BodyModel
 from . import cut as _cut
 from .mesh import fragment_surface, render_surface, root_faces_of, surface_corner_attributes
-from .portable import PortableSolid
-from .solid import render_solid_from_surface, render_solid_from_tets
+from .solid import PortableSolid, render_solid_from_surface, render_solid_from_tets
 
 #: Scene objects' starts made in this process (``BodyStart``, the render solid), by what they
 #: are made from (the shading key, ``front._content_key``). The next run of an object in
@@ -85,7 +84,7 @@ class BodyStart:
 
     Attributes:
         surface: its BodySurface.
-        render: the arrays of its render solid (``portable.PortableSolid``).
+        render: the arrays of its render solid (``solid.PortableSolid``).
         shading: (normals (F,3,3), UVs (F,3,2) or None) of its tets' boundary faces, read off
             its source surface, or (None, None) for an object given as tets: what a piece
             the cut gives no part shows.
@@ -124,7 +123,7 @@ class CutRequest:
             piece_keys: the keys the pieces' render solids are held under.
         parent_key: the key of the parent's render solid, or None (it shows its tets'
             boundary: nothing to cut); render: the arrays of a scene object's render solid
-            (``portable.PortableSolid``), which any stage rebuilds, or None for a piece's,
+            (``solid.PortableSolid``), which any stage rebuilds, or None for a piece's,
             which the stage that cut it holds.
         shading: the parent's scene object's shading (``BodyStart.shading``), or the key of
             the shading the stage holds; shading_key: that key.
