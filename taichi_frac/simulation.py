@@ -120,8 +120,8 @@ class Simulation:
             models, so runs that change no geometry reuse the model and its SPH neighbour
             lists). The model must not be changed by the caller between runs.
         surface_workers: worker processes that cut the pieces' render surfaces while the
-            frames go on (0: in this process, between frames); None: one per core, at most
-            one per breakable object (``surfaces.pool.default_worker_count``). Workers are
+            frames go on (0: in this process, between frames); None: four, or one per core on
+            more, at most one per breakable object (``surfaces.pool.default_worker_count``). Workers are
             forked from this process and stay idle after the run for the next run in it,
             whose repeated splits they answer from their memos. The cache is the same either
             way, whichever worker cuts a split.

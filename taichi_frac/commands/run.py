@@ -39,8 +39,8 @@ def register(subparsers) -> None:
                    help="write the cache even while another run holds its lock (that run then stops)")
     p.add_argument("--surface-workers", type=int, default=None, metavar="N",
                    help="processes that cut the broken pieces' render surfaces while the frames go on (0: in "
-                        "this process; default: one per core, at most one per breakable object); the cache "
-                        "is the same either way")
+                        "this process; default: four, or one per core on more, at most one per breakable "
+                        "object); the cache is the same either way")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.add_argument("--progress-json", action="store_true",
                    help="report progress as one JSON object a frame on stderr, for programs that run this "

@@ -45,13 +45,16 @@ class SurfaceWorkerError(RuntimeError):
 
 def default_worker_count(breakable_bodies: int) -> int:
     """Workers for a run with ``breakable_bodies`` scene bodies that may break: one per core
-    where workers are forked, no more than there are such bodies (none when nothing breaks).
-    A scene object's first split goes to any idle worker, so more workers than cores only
-    share the cores. Where a
-    worker is a new interpreter (no fork), one for every two cores past the first two: its
-    imports cost the frame loop more on fewer cores than the cuts it takes off it."""
+    and at least four where workers are forked, no more than there are such bodies (none
+    when nothing breaks). A split's cost is not known before it is cut and differs by a
+    hundredfold (the glass walls' three first cuts took 4, 15 and 17 s): with one worker per
+    core two long cuts can run one after the other while another core idles (the glass walls
+    took 1.055x as long with two workers on 2 cores as with four), and more workers share the
+    cores between them instead. Where a worker is a new interpreter (no fork), one for every
+    two cores past the first two: its imports cost the frame loop more on fewer cores than
+    the cuts it takes off it."""
     cores = os.cpu_count() or 1
-    wanted = cores if FORK else max(0, cores - 2) // 2
+    wanted = max(4, cores) if FORK else max(0, cores - 2) // 2
     return min(wanted, max(0, breakable_bodies))
 
 
@@ -267,9 +270,11 @@ class SurfaceWorkers(SurfaceFront):
     """The surface stage in ``count`` worker processes, one job at a time each.
 
     A job goes to the idle worker where it costs least: one holding the piece's solid it
-    cuts (or whose memo holds its result), else, once it has waited STEAL_WAIT_FACTOR times
-    what another worker would have to cut again first (the cuts that made the piece,
-    ``replay``), to that one: so no core idles long while one worker has a queue.
+    cuts (or whose memo holds its result), else, while fewer workers are busy than there are
+    cores and once it has waited STEAL_WAIT_FACTOR times what another worker would have to
+    cut again first (the cuts that made the piece, ``replay``), to that one: so no core
+    idles long while one worker has a queue, and no core makes a solid again while a split
+    could use it.
     """
 
     def __init__(self, count: int):
@@ -283,6 +288,7 @@ class SurfaceWorkers(SurfaceFront):
         self._tasks = itertools.count()
         self._lock = threading.RLock()  # (a settled job's callbacks may queue jobs: same thread)
         self._timer = None  # (wakes the queue when a waiting job may go to another worker)
+        self._cores = os.cpu_count() or 1
         self._closed = False
 
     def _run(self, job: Job) -> None:
@@ -327,6 +333,8 @@ class SurfaceWorkers(SurfaceFront):
                     job.failed(SurfaceWorkerError(f"no piece-surface worker can cut the split {job.key}"))
                 continue
             extra, _, i = min(costs)
+            if extra > 0.0 and len(self._workers) - len(self._idle) >= self._cores:
+                continue  # (no core is idle: what is made again would take one from a split)
             extra *= STEAL_WAIT_FACTOR
             if now - job.queued < extra:
                 wake = min(wake if wake is not None else extra, job.queued + extra - now)
