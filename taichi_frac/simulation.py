@@ -121,10 +121,10 @@ class Simulation:
             lists). The model must not be changed by the caller between runs.
         surface_workers: worker processes that cut the pieces' render surfaces while the
             frames go on (0: in this process, between frames); None: four, or one per core on
-            more, at most one per breakable object (``surfaces.pool.default_worker_count``). Workers are
-            forked from this process and stay idle after the run for the next run in it,
-            whose repeated splits they answer from their memos. The cache is the same either
-            way, whichever worker cuts a split.
+            more, at most one per breakable object (``surfaces.pool.default_worker_count``).
+            Workers are forked from this process and stay idle after the run for the next run
+            in it, whose repeated splits they answer from their memos. The cache is the same
+            either way, whichever worker cuts a split.
 
     Attributes (for benches and tests): ``world``; ``records`` (body id -> BodyRecord, every
     body that lived); ``fracture_stage`` (``fracture.stage.FractureStage``, None without

@@ -292,11 +292,11 @@ def test_splits_cut_in_other_workers_than_the_ones_holding_their_solids_give_the
 def test_a_scene_objects_render_solid_built_again_from_its_arrays_cuts_the_same():
     """``solid.PortableSolid``: two solids built from one scene object's arrays, other solids made in
     between (the boolean library numbers every solid it makes), cut by the same slab into
-    the same bytes; the digest names the content."""
+    the same bytes."""
     import manifold3d as m3
     import trimesh
 
-    from taichi_frac.surfaces.solid import PortableSolid, render_solid_from_surface
+    from taichi_frac.surfaces.solid import render_solid_from_surface
 
     ring = trimesh.creation.torus(0.1, 0.025, major_sections=48, minor_sections=16)
     first = render_solid_from_surface(ring, np.zeros(3), 0.01)
@@ -311,8 +311,3 @@ def test_a_scene_objects_render_solid_built_again_from_its_arrays_cuts_the_same(
                              + np.asarray(p.to_mesh64().tri_verts).tobytes() for p in pieces))
     assert made[0] == made[-1]
     assert abs(first.solid.volume() - ring.volume) <= 1e-9 * ring.volume
-    shifted = render_solid_from_surface(ring, np.array([0.0, 0.0, 1e-9]), 0.01).portable
-    assert shifted.digest != first.portable.digest
-    again = first.portable
-    assert PortableSolid.of_arrays(again.vert_properties, again.tri_verts, again.merge_from, again.merge_to,
-                                   again.spacing).digest == again.digest

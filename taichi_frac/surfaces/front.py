@@ -68,10 +68,12 @@ class Job:
     def sent(self, holds) -> object:
         """The payload as sent to a stage for which ``holds(key)`` says what it holds: the
         shading it holds goes by its key."""
-        return _sent(self.payload, holds) if self.kind == "cut" else self.payload
+        return shading_by_key(self.payload, holds) if self.kind == "cut" else self.payload
 
 
-def _sent(request: CutRequest, holds) -> CutRequest:
+def shading_by_key(request: CutRequest, holds) -> CutRequest:
+    """``request`` with its shading named by its key where ``holds(key)`` says the stage it
+    goes to holds it."""
     if holds(request.shading_key):
         return dataclasses.replace(request, shading=request.shading_key)
     return request
@@ -133,8 +135,7 @@ class SurfaceFront:
                       roots=[r.root for r in fracture.children_records],
                       parent_tets=[p.parent_tets for p in fracture.pieces])
         digest = hashlib.sha256(parent_key.encode())
-        CutRequest.digest(digest, fields["model"], peak, fields["fragment_tets"], fields["cracks"], fields["models"],
-                          fields["parent_tets"], fields["options"], shading_key)
+        CutRequest.digest(digest, shading_key, **fields)
         cut_key = digest.hexdigest()
         piece_keys = [hashlib.sha256(f"{cut_key}/{k}".encode()).hexdigest() for k in range(len(fracture.children))]
         renders = []

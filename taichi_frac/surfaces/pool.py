@@ -4,10 +4,10 @@
 processes (``worker.py``): requests return futures at once, so the frame loop goes on while
 a split's pieces are cut, and the recorder writes them when they are done. Each worker takes
 one job at a time, the largest waiting first. A scene object's first split goes to any idle
-worker (sent the arrays its render solid is built from, ``solid.PortableSolid``); a piece's split to
-the worker that cut the piece, which holds its solid, or, when that one stays busy, to
-another that cuts the piece again first (a cut gives the same bytes in any process); a split
-a worker's memo holds (a repeated run's) to that worker. Workers are forked from this
+worker (sent the arrays its render solid is built from, ``solid.PortableSolid``); a piece's
+split to the worker that cut the piece, which holds its solid, or, when that one stays busy
+and a core is idle, to another that cuts the piece again first (a cut gives the same bytes
+in any process); a split a worker's memo holds (a repeated run's) to that worker. Workers are forked from this
 process (no imports to wait for) and, after a run, stay idle for the next run in this
 process, which takes their memos; they end with it. :class:`InProcessSurfaces` is the same
 interface in this process (futures already done). Both give the same surfaces: the same code
@@ -29,8 +29,8 @@ import threading
 import time
 from concurrent.futures import Future
 
-from .front import Job, SurfaceFront, _sent
-from .stage import SurfaceStage
+from .front import Job, SurfaceFront, shading_by_key
+from .stage import SurfaceStage, remember
 from .worker import read_frame, write_frame
 
 
@@ -232,8 +232,8 @@ class _Worker:
 
 
 #: Worker processes idle between runs of this process, for the next run to take (no new
-#: process to start; a repeated run's splits come from this process' memos, ``front.py``).
-#: They end with this process.
+#: process to start; their memos, ``stage._CUTS``, answer a repeated run's splits). They end
+#: with this process.
 _IDLE: list = []
 
 
@@ -365,7 +365,7 @@ class SurfaceWorkers(SurfaceFront):
                 chain, _ = self.replay(job.needs, holds)
                 sent = []
                 for request in chain:  # (its pieces' solids stay there too)
-                    sent.append(_sent(request, holds))
+                    sent.append(shading_by_key(request, holds))
                     worker.held.add(request.shading_key)
                     worker.held |= {k for k in request.piece_keys if k in self._origin}
                     if request.render is None:
@@ -386,13 +386,11 @@ class SurfaceWorkers(SurfaceFront):
                     worker.held.add(job.key)
                 else:
                     worker.held |= {k for k, has in zip(job.payload.piece_keys, result.renders) if has}
-                while len(_MADE_BY) >= MADE_BY_KEPT:
-                    del _MADE_BY[next(iter(_MADE_BY))]
                 took = time.monotonic() - job.started
-                made = _MADE_BY.pop(job.key, None)
+                made = _MADE_BY.get(job.key)
                 if made is not None and made[0] is worker:  # (a memo's answer: what the job took first)
                     took = max(took, made[1])
-                _MADE_BY[job.key] = (worker, took)
+                remember(_MADE_BY, job.key, (worker, took), MADE_BY_KEPT)
             if not self._closed:
                 self._idle.append(worker)
                 self._idle.sort(key=self._workers.index)

@@ -15,7 +15,6 @@ process that cut it (``pool.py``).
 from __future__ import annotations
 
 import functools
-import hashlib
 from dataclasses import dataclass, field
 
 import manifold3d as m3
@@ -125,7 +124,6 @@ class PortableSolid:
         tri_verts: (F,3) uint64 vertex indices, outward.
         merge_from, merge_to: (M,) uint64, the property vertices that share a position.
         spacing: [m] the body's particle spacing.
-        digest: a hex digest of all of the above.
     """
 
     vert_properties: np.ndarray
@@ -133,19 +131,13 @@ class PortableSolid:
     merge_from: np.ndarray
     merge_to: np.ndarray
     spacing: float
-    digest: str
 
     @classmethod
     def of_arrays(cls, vert_properties, tri_verts, merge_from, merge_to, spacing: float) -> "PortableSolid":
         arrays = (np.ascontiguousarray(vert_properties, dtype=np.float64),
                   np.ascontiguousarray(tri_verts, dtype=np.uint64).reshape(-1, 3),
                   np.ascontiguousarray(merge_from, dtype=np.uint64), np.ascontiguousarray(merge_to, dtype=np.uint64))
-        digest = hashlib.sha256()
-        for array in arrays:
-            digest.update(f"{array.shape}".encode())
-            digest.update(array.tobytes())
-        digest.update(repr(float(spacing)).encode())
-        return cls(*arrays, float(spacing), digest.hexdigest())
+        return cls(*arrays, float(spacing))
 
     def rebuilt(self) -> RenderSolid:
         """The render solid these arrays are of, as every process builds it."""

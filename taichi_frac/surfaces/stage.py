@@ -48,7 +48,9 @@ def _forget_made() -> None:
     _CUTS.clear()
 
 
-def _remember(memo: dict, key: str, value, kept: int) -> None:
+def remember(memo: dict, key: str, value, kept: int) -> None:
+    """``memo[key] = value``, as its newest entry, the oldest dropped past ``kept`` entries."""
+    memo.pop(key, None)
     while len(memo) >= kept:
         del memo[next(iter(memo))]
     memo[key] = value
@@ -156,10 +158,12 @@ class CutRequest:
     replay: tuple = ()
 
     @staticmethod
-    def digest(hasher, model, tet_peak, fragment_tets, cracks, models, parent_tets, options, shading_key) -> None:
+    def digest(hasher, shading_key: str, *, model, tet_peak, fragment_tets, cracks, models, parent_tets, options,
+               roots=None) -> None:
         """Feed ``hasher`` (hashlib) what a cut's result depends on besides the parent's
-        render solid: the parent's particles, the pieces' tets and origins, the cracks, the
-        peak stresses and the options the cut reads."""
+        render solid (the request's fields by name; ``roots`` follow from the models): the
+        parent's particles, the pieces' tets and origins, the cracks, the peak stresses, the
+        options the cut reads and the shading key."""
         import dataclasses
 
         arrays = [model.particle_position, tet_peak, *fragment_tets, *[m.com_in_source for m in models],
@@ -210,7 +214,7 @@ class SurfaceStage:
                 shading = boundary_corner_attributes(surface, corners)
                 render = render_solid_from_surface(surface, model.com_in_source, model.spacing)
             start = BodyStart(self._surface(render, model, model, None, shading), render.portable, shading)
-            _remember(_ROOT_SURFACES, key, (start, render), ROOT_SURFACES_KEPT)
+            remember(_ROOT_SURFACES, key, (start, render), ROOT_SURFACES_KEPT)
         start, render = _ROOT_SURFACES[key]
         self._held[key] = start.shading
         self._held[key + "/render"] = render
@@ -247,11 +251,11 @@ class SurfaceStage:
                     roughness_scale=options.crack_roughness_scale, seed=options.seed,
                     fit_rounds=options.crack_fit_rounds, fit_min_tets=options.crack_fit_min_tets)
                 seconds = time.perf_counter() - t
-            surfaces = [self._surface(piece, model, root, request.tet_peak[tets], shading)
-                        for model, root, tets, piece in zip(request.models, request.roots, request.parent_tets, renders)]
+            surfaces = [self._surface(piece, model, root, request.tet_peak[tets], shading) for model, root, tets, piece
+                        in zip(request.models, request.roots, request.parent_tets, renders)]
             made = (tuple(renders), counts, tuple(surfaces))
             if render is not None:
-                _remember(_CUTS, request.cut_key, made, CUTS_KEPT)
+                remember(_CUTS, request.cut_key, made, CUTS_KEPT)
         renders, counts, surfaces = made
         if request.render is None and request.parent_key is not None:
             del self._held[request.parent_key]  # (a piece's solid: cut once)
