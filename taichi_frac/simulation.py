@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import interrupts, runtime
+from .blas import one_blas_thread
 from .fracture.stage import BodyRecord, FractureStage
 from .options import LOOKS, OptionError
 
@@ -362,7 +363,13 @@ class Simulation:
         The objects alive when the run starts (Taichi's, the models', the scene's: ~10^5)
         are frozen out of Python's cyclic garbage collector for the run (``gc.freeze``,
         undone at the end): otherwise each full collection walks them all, a pause of tens
-        of milliseconds inside a frame."""
+        of milliseconds inside a frame. BLAS runs one thread in this process for the run
+        (``blas.one_blas_thread``): beside the surface workers a threaded BLAS waits for its
+        helper thread to be scheduled at every small solve."""
+        with one_blas_thread():
+            return self._run()
+
+    def _run(self) -> RunSummary:
         start = time.perf_counter()
         interrupted = False
         failed = True  # until the loop ends: an exception leaves the cache incomplete

@@ -435,13 +435,13 @@ def test_the_fit_solves_with_one_blas_thread_whatever_the_process_runs():
 
     from threadpoolctl import threadpool_info
 
-    from taichi_frac.surfaces.crack_fit import one_blas_thread
+    from taichi_frac.blas import one_blas_thread
 
     with one_blas_thread():
         assert {info["num_threads"] for info in threadpool_info() if info["user_api"] == "blas"} == {1}
     script = ("import hashlib, numpy as np\n"
               "from scipy.optimize import lsq_linear\n"
-              "from taichi_frac.surfaces.crack_fit import one_blas_thread\n"
+              "from taichi_frac.blas import one_blas_thread\n"
               "rng = np.random.default_rng(3)\n"
               "a, b = rng.normal(size=(3000, 400)), rng.normal(size=3000)\n"
               "with one_blas_thread():\n"

@@ -311,3 +311,45 @@ def test_a_scene_objects_render_solid_built_again_from_its_arrays_cuts_the_same(
                              + np.asarray(p.to_mesh64().tri_verts).tobytes() for p in pieces))
     assert made[0] == made[-1]
     assert abs(first.solid.volume() - ring.volume) <= 1e-9 * ring.volume
+
+
+def test_a_split_that_holds_up_waiting_splits_goes_before_a_larger_one():
+    """The queue's order: scene objects' starts first, then each split by its own tets plus
+    those of the splits already asked for that wait for its pieces (through their pieces
+    too), here 3,000 + 2,500 + 1,000 against 5,000 (the sums counted by hand)."""
+    from taichi_frac.surfaces import pool
+    from taichi_frac.surfaces.front import Job
+
+    workers = pool.SurfaceWorkers(1)
+    try:
+        def job(kind, size, makes):
+            return Job(kind, None, size, f"{kind}{size}", None, None, makes=makes)
+
+        large, chain, start = job("cut", 5000, ["a1", "a2"]), job("cut", 3000, ["b1"]), job("add_body", 10, ["r"])
+        workers._waiting = {"b1": [(2500, ["c1", "c2"])], "c2": [(1000, ["d1"])], "zz": [(9999, [])]}
+        assert workers.waiting_work(chain.makes) == 3500 and workers.waiting_work(large.makes) == 0
+        order = sorted([(0, large), (1, chain), (2, start)], key=workers._order)
+        assert [entry[1] for entry in order] == [start, chain, large]
+        workers._waiting = {"b1": [(1500, [])]}  # (4,500 in all: the larger split first again)
+        assert [e[1] for e in sorted([(0, large), (1, chain)], key=workers._order)] == [large, chain]
+    finally:
+        workers.close(cancel=True)
+
+
+def test_a_run_keeps_blas_to_one_thread_and_gives_the_threads_back():
+    """During a run every BLAS library loaded runs one thread (see ``taichi_frac.blas``: a
+    threaded BLAS waits for its helper thread at each small solve while the surface workers
+    keep the cores busy); after it, what the process had before."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    def blas_threads():
+        return {lib["filepath"]: lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
+
+    scene = load_scene(SCENES / "single_ring.toml")
+    with threadpool_limits(limits=2, user_api="blas"):  # (two, whatever this machine's cores)
+        before, during = blas_threads(), []
+        Simulation(scene, output=False, frames=2, progress=lambda *_: during.append(blas_threads())).run()
+        after = blas_threads()
+    assert before and set(before.values()) == {2}
+    assert len(during) == 2 and all(set(seen) >= set(before) and set(seen.values()) == {1} for seen in during)
+    assert after == before

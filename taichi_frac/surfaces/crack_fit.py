@@ -22,11 +22,11 @@ stay as the physics made them.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..blas import one_blas_thread
 from ..fracture.crack_types import CrackPlane
 
 #: Largest shift [particle spacings] of a crack plane at its pivot, or of a ring crack's radius:
@@ -57,24 +57,6 @@ VOLUME_TOLERANCE = 0.01
 #: Weight of the offsets themselves [per particle spacing, squared] against the pieces'
 #: relative volume errors: keeps a plane no piece measures where the analysis put it.
 OFFSET_WEIGHT = 1e-4
-
-
-def one_blas_thread():
-    """A context in which the BLAS libraries loaded (numpy's, scipy's) run one thread: a
-    threaded BLAS splits a long product among its threads and sums the parts in another
-    order, so a fit of many moves would otherwise come out differently, in its last bits and
-    then in which cut it keeps, with the machine's core count."""
-    return _blas_libraries().limit(limits=1, user_api="blas")
-
-
-@functools.lru_cache(maxsize=1)
-def _blas_libraries():
-    # (made once, after the solvers' modules are imported: it lists the libraries loaded;
-    # limiting through it then costs about 10 us)
-    import scipy.optimize  # noqa: F401
-    from threadpoolctl import ThreadpoolController
-
-    return ThreadpoolController()
 
 
 def piece_target_volumes(scale: float, model, fragment_tets) -> np.ndarray:

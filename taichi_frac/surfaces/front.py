@@ -54,15 +54,16 @@ def _content_key(model: BodyModel, surface) -> str:
 class Job:
     """A piece of work for a ``stage.SurfaceStage``: a scene object's start (``kind``
     "add_body", ``payload`` (model, surface, shading key)) or a split's cut ("cut", a
-    CutRequest). ``size`` [tets] orders the queue (the largest first); ``needs``: the key of
+    CutRequest). ``size`` [tets] orders the queue (with ``SurfaceFront.waiting_work``); ``needs``: the key of
     the piece's solid it cuts (a stage that does not hold it cuts it again first, see
     ``SurfaceFront.replay``), else None; ``key``: what names its result in a stage's memos
-    (the shading key, the cut key). ``done(result)`` and ``failed(error)`` settle it;
+    (the shading key, the cut key); ``makes``: the keys of the solids it makes (a cut's
+    pieces'). ``done(result)`` and ``failed(error)`` settle it;
     ``queued`` and ``started`` [s, monotonic]: when it was queued and started."""
 
-    def __init__(self, kind: str, payload, size: int, key: str, done, failed, needs=None):
+    def __init__(self, kind: str, payload, size: int, key: str, done, failed, needs=None, makes=()):
         self.kind, self.payload, self.size, self.key = kind, payload, size, key
-        self.done, self.failed, self.needs = done, failed, needs
+        self.done, self.failed, self.needs, self.makes = done, failed, needs, tuple(makes)
         self.queued = self.started = 0.0
 
     def sent(self, holds) -> object:
@@ -90,6 +91,9 @@ class SurfaceFront:
         self._peak: dict[int, np.ndarray] = {}  # body -> (T,) [Pa] its tets' peak stress
         self._starting: dict[str, Future] = {}  # shading key -> future of its stage.BodyStart
         self._origin: dict[str, tuple] = {}  # a piece's key -> (the CutRequest that made it, its cut's seconds)
+        # A piece's key -> the splits of it asked for before its solid is made: (their size
+        # [tets], their pieces' keys) each; see ``waiting_work``.
+        self._waiting: dict[str, list] = {}
         self._cut_futures: list[Future] = []
 
     def _run(self, job: Job) -> None:
@@ -116,7 +120,7 @@ class SurfaceFront:
             # (the copies of one object in a scene take the first one's start)
             start = self._starting[key] = Future()
             self._run(Job("add_body", (model, surface, key), model.tet_count, key, start.set_result,
-                          start.set_exception))
+                          start.set_exception, makes=(key + "/render",)))
         start.add_done_callback(settle)
         return out
 
@@ -161,7 +165,17 @@ class SurfaceFront:
                 future.set_result(BodySolid(key, None) if has else None)
             out.set_result(result)
 
+        size = record.model.tet_count
+        waiting = None
+        if not parent_render.done():
+            waiting = (size, piece_keys)
+            self._waiting.setdefault(parent_key, []).append(waiting)
+
         def ready(parent_done: Future):
+            if waiting is not None:
+                self._waiting[parent_key].remove(waiting)
+                if not self._waiting[parent_key]:
+                    del self._waiting[parent_key]
             if parent_done.exception() is not None:
                 failed(parent_done.exception())
                 return
@@ -172,10 +186,22 @@ class SurfaceFront:
                                  shading=self._shading[shading_key], shading_key=shading_key, **fields)
             made.append(request)
             needs = solid.key if solid is not None and solid.render is None else None
-            self._run(Job("cut", request, record.model.tet_count, cut_key, done, failed, needs=needs))
+            self._run(Job("cut", request, size, cut_key, done, failed, needs=needs, makes=piece_keys))
 
         parent_render.add_done_callback(ready)
         return out
+
+    def waiting_work(self, keys) -> int:
+        """[tets] the splits already asked for that wait, directly or through their own
+        pieces, for the solids ``keys`` (a job's ``makes``): a job that holds up a chain of
+        splits goes before a larger one that holds up none, so the last split of a run is not
+        left to start late behind work any worker could have done."""
+        total, stack = 0, list(keys)
+        while stack:
+            for size, pieces in tuple(self._waiting.get(stack.pop(), ())):  # (a copy: splits come in meanwhile)
+                total += size
+                stack.extend(pieces)
+        return total
 
     def replay(self, key: str, holds) -> tuple[list, float] | None:
         """The cuts that made the piece's solid ``key``, from the nearest solid ``holds(key)``

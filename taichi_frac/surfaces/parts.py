@@ -216,10 +216,10 @@ def carve_lost_pieces(parts, owner, model, fragment_tets, labels, spacing, rough
         if best is None or owner[best] == k:
             continue
         taker = -(owner[best] + 2) if owner[best] < -1 else owner[best]
-        carved, hull = _carved(parts[best], model, labels, k, [taker, *lost], spacing)
+        carved, rest = _carved(parts[best], model, labels, k, [taker, *lost], spacing)
         if carved.is_empty():
             continue
-        rest = sorted(without_dust(parts[best] - hull, spacing), key=lambda part: -part.volume())
+        rest = sorted(without_dust(rest, spacing), key=lambda part: -part.volume())
         parts[best] = rest[0] if rest else m3.Manifold()  # (the bulk stays its owner's)
         parts += rest[1:]
         owner += assign_parts(rest[1:], model, labels, spacing)
@@ -231,8 +231,8 @@ def carve_lost_pieces(parts, owner, model, fragment_tets, labels, spacing, rough
 
 
 def _carved(part: m3.Manifold, model, labels, k: int, holders, spacing: float):
-    """(carved, cells): the share of ``part`` in piece ``k``'s tets' nearest-centroid cells,
-    and those cells. The cells are drawn against the tets of the pieces whose material the
+    """(carved, rest): the share of ``part`` in piece ``k``'s tets' nearest-centroid cells,
+    and the part less those cells (one boolean makes both: ``Manifold.split``). The cells are drawn against the tets of the pieces whose material the
     part may hold, ``holders`` (its owner and the lost pieces): another piece is parted from
     ``k`` by a slab already, and cells drawn against it would cut ``k`` again along the
     staircase, a layer short (a 170-tet piece 7 % short). Where the share so carved reaches
@@ -244,7 +244,7 @@ def _carved(part: m3.Manifold, model, labels, k: int, holders, spacing: float):
 
     mine = np.nonzero(labels == k)[0]
     own = float(model.tet_volume[mine].sum())
-    carved = cells = None
+    carved = rest = cells = None
     pools = [np.nonzero(np.isin(labels, [k, *holders]))[0]]
     if len(pools[0]) < len(labels):  # (when those are every tet, the first carve is the last)
         pools.append(np.arange(len(labels)))
@@ -252,16 +252,16 @@ def _carved(part: m3.Manifold, model, labels, k: int, holders, spacing: float):
         cells = own_cells(model, labels, k, spacing, pool)
         if cells is None:
             break
-        carved = part ^ cells
+        carved, rest = part.split(cells)
         vertices = np.asarray(carved.to_mesh64().vert_properties)[:, :3]
         foreign = np.any(_far_owners(vertices, model, labels, mine, spacing) != k)
         if not foreign and not _gained(carved.volume(), own, spacing):
-            return carved, cells
+            return carved, rest
     if cells is None:
         cells = with_crack_index(m3.Manifold.hull_points(
             np.ascontiguousarray(model.vertices[model.tets[mine]].reshape(-1, 3))), HULL_FACE)
-        carved = part ^ cells
-    return carved, cells
+        carved, rest = part.split(cells)
+    return carved, rest
 
 
 def assign_parts(parts, model, labels, spacing, corners=None) -> list[int]:

@@ -3,7 +3,8 @@
 :class:`SurfaceWorkers` runs :class:`~taichi_frac.surfaces.stage.SurfaceStage` in worker
 processes (``worker.py``): requests return futures at once, so the frame loop goes on while
 a split's pieces are cut, and the recorder writes them when they are done. Each worker takes
-one job at a time, the largest waiting first. A scene object's first split goes to any idle
+one job at a time, the one holding up the most work first (its tets and those of the splits
+waiting for its pieces). A scene object's first split goes to any idle
 worker (sent the arrays its render solid is built from, ``solid.PortableSolid``); a piece's
 split to the worker that cut the piece, which holds its solid, or, when that one stays busy
 and a core is idle, to another that cuts the piece again first (a cut gives the same bytes
@@ -284,7 +285,7 @@ class SurfaceWorkers(SurfaceFront):
         self.count = count
         self._workers = _take_workers(count)
         self._idle = list(self._workers)
-        self._queue: list[tuple] = []  # (order, job): the largest first, then the first asked
+        self._queue: list[tuple] = []  # (order, job): see _order
         self._tasks = itertools.count()
         self._lock = threading.RLock()  # (a settled job's callbacks may queue jobs: same thread)
         self._timer = None  # (wakes the queue when a waiting job may go to another worker)
@@ -294,9 +295,15 @@ class SurfaceWorkers(SurfaceFront):
     def _run(self, job: Job) -> None:
         with self._lock:
             job.queued = time.monotonic()
-            self._queue.append(((job.kind != "add_body", -job.size, next(self._tasks)), job))
-            self._queue.sort(key=lambda entry: entry[0])
+            self._queue.append((next(self._tasks), job))
             self._pump()
+
+    def _order(self, entry: tuple) -> tuple:
+        """A queued job's place: scene objects' starts first, then the most work it holds up
+        (its own tets and those of the splits waiting for its pieces, ``waiting_work``),
+        then the first asked."""
+        order, job = entry
+        return job.kind != "add_body", -(job.size + self.waiting_work(job.makes)), order
 
     def _extra(self, job: Job, worker: "_Worker") -> float | None:
         """[s] what ``job`` costs more on ``worker`` than where it costs least: the time it
@@ -314,12 +321,13 @@ class SurfaceWorkers(SurfaceFront):
         return extra
 
     def _pump(self) -> None:
-        """Start queued jobs on idle workers, the largest first, each where it costs least;
+        """Start queued jobs on idle workers in ``_order``, each where it costs least;
         one that costs more on every idle worker waits for its own as long as that (called
         with the lock held)."""
         if self._closed:
             return
         now, wake = time.monotonic(), None
+        self._queue.sort(key=self._order)  # (splits asked for since the last pump move their parents up)
         for entry in list(self._queue):
             if not self._idle:
                 break

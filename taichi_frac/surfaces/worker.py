@@ -52,13 +52,20 @@ def main(parent_pid: int, requests_fd: int, answers_fd: int) -> int:
 
 def serve(requests, answers) -> None:
     """Answer the requests read from ``requests`` on ``answers`` until the input ends."""
+    from ..blas import one_blas_thread
     from .stage import SurfaceStage
 
-    stage = SurfaceStage()
+    # (the workers share the cores with each other and the frames: see blas.py)
+    with one_blas_thread():
+        _answer(requests, answers, SurfaceStage)
+
+
+def _answer(requests, answers, new_stage) -> None:
+    stage = new_stage()
     while (request := read_frame(requests)) is not None:
         task, kind, payload = request
         if kind == "reset":  # (a new run: its body ids are not the last run's; no answer)
-            stage = SurfaceStage()
+            stage = new_stage()
             continue
         try:
             result = stage.add_body(*payload) if kind == "add_body" else stage.cut(payload)
