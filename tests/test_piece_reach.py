@@ -132,3 +132,30 @@ def test_a_piece_mostly_past_its_tets_is_left_to_the_cuts_checks():
     pieces, stats = _trimmed([wedged], {}, model, labels, np.zeros((1, 3)))
     assert stats["trimmed_pieces"] == 1 and np.isclose(pieces[0].solid.volume(),
                                                        wedged.solid.volume() - stats["trimmed_volume"])
+
+
+def test_centroid_trees_are_kept_per_set_and_answer_as_a_new_tree():
+    """``surfaces.trees.centroid_tree``: the tree of a body's centroids, a piece's, or the
+    rest's, each the same object when asked again with the same arrays, and answering as a
+    KD-tree built afresh on that set (scipy's own, the reference); another labels array (a
+    later split) gets trees of its own."""
+    from types import SimpleNamespace
+
+    from scipy.spatial import cKDTree
+
+    from taichi_frac.surfaces.trees import centroid_tree
+
+    rng = np.random.default_rng(3)
+    model = SimpleNamespace(particle_position=rng.random((300, 3)))
+    labels = rng.integers(0, 3, 300)
+    probes = rng.random((50, 3))
+    for args, kwargs, chosen in (((), {}, np.ones(300, bool)), ((labels, 1), {}, labels == 1),
+                                 ((labels, 1), {"others": True}, labels != 1)):
+        tree = centroid_tree(model, *args, **kwargs)
+        assert centroid_tree(model, *args, **kwargs) is tree
+        got, expected = tree.query(probes, k=3), cKDTree(model.particle_position[chosen]).query(probes, k=3)
+        assert np.array_equal(got[1], expected[1]) and np.array_equal(got[0], expected[0])
+    relabelled = (labels + 1) % 3
+    tree = centroid_tree(model, relabelled, 1)
+    assert tree is not centroid_tree(model, labels, 1)
+    assert np.array_equal(tree.data, model.particle_position[relabelled == 1])

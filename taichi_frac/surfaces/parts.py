@@ -12,6 +12,7 @@ import numpy as np
 
 from .solid import solid_arrays, with_crack_index
 from .tet_cells import LOCAL_DIAGRAM_FACTOR, own_cells, voronoi_cells
+from .trees import centroid_tree
 
 #: A part's vote reads at most about this many of its faces (evenly spread over its list).
 MAX_VOTING_FACES = 256
@@ -92,7 +93,7 @@ def overreaching_pieces(parts, owner, model, labels, spacing, corners) -> set[in
         if not len(mine):
             continue
         vertices = np.concatenate([_vertices(p, corners) for p, o in zip(parts, owner) if o == k])
-        nearest = _far_owners(vertices, model, labels, mine, spacing)
+        nearest = _far_owners(vertices, model, labels, k, spacing)
         if np.all(nearest == k):
             continue
         failed.add(k)
@@ -103,16 +104,13 @@ def overreaching_pieces(parts, owner, model, labels, spacing, corners) -> set[in
     return failed
 
 
-def _far_owners(vertices: np.ndarray, model, labels, mine: np.ndarray, spacing: float) -> np.ndarray:
+def _far_owners(vertices: np.ndarray, model, labels, k: int, spacing: float) -> np.ndarray:
     """The pieces (labels) of the tets nearest those of ``vertices`` (N,3) [m] that lie
-    farther than OVERREACH_FACTOR spacings from every centroid of the tets ``mine``: where a
-    piece whose tets are ``mine`` reaches (a vertex that far from every tet, where the
-    surface has detail the tets leave out, is its nearest piece's)."""
-    from scipy.spatial import cKDTree
-
-    centroids = model.particle_position
-    far = vertices[cKDTree(centroids[mine]).query(vertices)[0] > OVERREACH_FACTOR * spacing]
-    return labels[cKDTree(centroids).query(far)[1]] if len(far) else np.zeros(0, dtype=labels.dtype)
+    farther than OVERREACH_FACTOR spacings from every centroid of piece ``k``'s tets: where
+    the piece reaches (a vertex that far from every tet, where the surface has detail the
+    tets leave out, is its nearest piece's)."""
+    far = vertices[centroid_tree(model, labels, k).query(vertices)[0] > OVERREACH_FACTOR * spacing]
+    return labels[centroid_tree(model).query(far)[1]] if len(far) else np.zeros(0, dtype=labels.dtype)
 
 
 def overfull_pieces(parts, owner, model, labels, spacing, roughness: float = 0.0) -> set[int]:
@@ -254,7 +252,7 @@ def _carved(part: m3.Manifold, model, labels, k: int, holders, spacing: float):
             break
         carved, rest = part.split(cells)
         vertices = np.asarray(carved.to_mesh64().vert_properties)[:, :3]
-        foreign = np.any(_far_owners(vertices, model, labels, mine, spacing) != k)
+        foreign = np.any(_far_owners(vertices, model, labels, k, spacing) != k)
         if not foreign and not _gained(carved.volume(), own, spacing):
             return carved, rest
     if cells is None:
@@ -268,9 +266,7 @@ def assign_parts(parts, model, labels, spacing, corners=None) -> list[int]:
     """The piece (label) each connected part belongs to: an area-weighted vote of its faces,
     each probed a quarter spacing inside the part, for the piece of the nearest tet centroid
     (-1: dropped tets). Each part's vertices go into ``corners`` (by id) when given."""
-    from scipy.spatial import cKDTree
-
-    tree = cKDTree(model.particle_position)
+    tree = centroid_tree(model)
     owners = []
     for part in parts:
         mesh = part.to_mesh64()
@@ -332,11 +328,8 @@ def divide_joined_parts(parts, owner, model, labels, spacing, corners):
     times, every part this made checked again. The cut faces lie on no crack (HULL_FACE).
     Returns (parts, owner, the pieces given material cut off another's part); new parts'
     vertices go into ``corners``."""
-    from scipy.spatial import cKDTree
-
-    centroids = model.particle_position
     limit = OVERREACH_FACTOR * spacing
-    trees, everyone = {}, cKDTree(centroids)
+    trees, everyone = {}, centroid_tree(model)
     parts, owner = list(parts), list(owner)
     received = set()
 
@@ -366,7 +359,7 @@ def divide_joined_parts(parts, owner, model, labels, spacing, corners):
             if k < 0:
                 continue
             if k not in trees:
-                trees[k] = cKDTree(centroids[labels == k])
+                trees[k] = centroid_tree(model, labels, k)
             vertices = _vertices(parts[j], corners)
             reach = trees[k].query(vertices)[0]
             if reach.max() <= limit:
@@ -515,8 +508,6 @@ def failed_piece_shells(solid: m3.Manifold, model, labels, k: int, failed, parts
     its faces are their crack faces; shells under the dust volume, and those with no vertex
     within OVERREACH_FACTOR spacings of its tets (material no piece kept beyond its
     neighbours' parts), left out. Empty where the diagram is degenerate."""
-    from scipy.spatial import cKDTree
-
     from .solid import without_dust
 
     share = nearest_cells_share(solid, model, labels, k, failed, spacing)
@@ -526,7 +517,7 @@ def failed_piece_shells(solid: m3.Manifold, model, labels, k: int, failed, parts
     kept = [p for p, o in zip(parts, owner) if o >= 0 and o not in failed
             and np.all(np.asarray(p.bounding_box())[:3] <= box[3:]) and np.all(np.asarray(p.bounding_box())[3:] >= box[:3])]
     share = m3.Manifold.batch_boolean([share, *kept], m3.OpType.Subtract)
-    tree = cKDTree(model.particle_position[labels == k])
+    tree = centroid_tree(model, labels, k)
     return [shell for shell in without_dust(share, spacing)
             if tree.query(_vertices(shell, {}))[0].min() <= OVERREACH_FACTOR * spacing]
 

@@ -46,11 +46,12 @@ def _ball() -> np.ndarray:
     return BALL_BOUND * np.asarray(trimesh.creation.icosphere(subdivisions=0).vertices)
 
 
-def distance_to_tets(points: np.ndarray, corners: np.ndarray, centroids: np.ndarray) -> np.ndarray:
+def distance_to_tets(points: np.ndarray, corners: np.ndarray, centroids: np.ndarray, tree=None) -> np.ndarray:
     """(N,) [m] each of ``points`` (N,3) [m]'s distance to the union of the tets ``corners``
     (T,4,3) [m] (0 inside one), measured to the NEAREST_TETS tets whose ``centroids`` (T,3)
     are nearest it (a far tet with a nearer face would be nearer still: the distance is an
-    upper bound, exact wherever the tets are of like size)."""
+    upper bound, exact wherever the tets are of like size). ``tree``: a KD-tree of
+    ``centroids`` where one is at hand."""
     import trimesh
     from scipy.spatial import cKDTree
 
@@ -58,7 +59,8 @@ def distance_to_tets(points: np.ndarray, corners: np.ndarray, centroids: np.ndar
     if not len(points) or not len(corners):
         return np.full(len(points), np.inf)
     k = min(NEAREST_TETS, len(corners))
-    candidates = cKDTree(centroids).query(points, k=k)[1].reshape(len(points), k)  # (N,K)
+    tree = cKDTree(centroids) if tree is None else tree
+    candidates = tree.query(points, k=k)[1].reshape(len(points), k)  # (N,K)
     tet = corners[candidates]  # (N,K,4,3)
     p = np.broadcast_to(points[:, None, :], (len(points), k, 3))
     # Inside a tet: every barycentric coordinate of the point non-negative.
@@ -86,7 +88,7 @@ def trim_overreach(solid: m3.Manifold, model, labels: np.ndarray, k: int, spacin
     REACH_FACTOR spacings from its tets (``labels == k`` of ``model``'s) and within that of
     the other tets (another piece's, or dropped), near the vertices that far. Returns the
     solid (``solid`` itself where nothing is that far) and the volume cut away [m^3]."""
-    from scipy.spatial import cKDTree
+    from .trees import centroid_tree
 
     mine = np.nonzero(labels == k)[0]
     if solid.is_empty() or not len(mine):
@@ -97,15 +99,17 @@ def trim_overreach(solid: m3.Manifold, model, labels: np.ndarray, k: int, spacin
     # Vertices beyond reach of the piece's tets and within it of another's (a vertex within
     # reach of a tet centroid is within reach of its tet).
     centroids = model.particle_position
-    candidates = np.nonzero(cKDTree(centroids[mine]).query(vertices)[0] > reach)[0]
+    own_tree = centroid_tree(model, labels, k)
+    candidates = np.nonzero(own_tree.query(vertices)[0] > reach)[0]
     if not len(candidates):
         return solid, 0.0
     own_corners = model.vertices[model.tets[mine]]  # (T,4,3)
-    distance = distance_to_tets(vertices[candidates], own_corners, centroids[mine])
+    distance = distance_to_tets(vertices[candidates], own_corners, centroids[mine], own_tree)
     candidates, distance = candidates[distance > reach], distance[distance > reach]
     others = np.nonzero(labels != k)[0]
     if len(candidates) and len(others):
-        held = distance_to_tets(vertices[candidates], model.vertices[model.tets[others]], centroids[others]) <= reach
+        held = distance_to_tets(vertices[candidates], model.vertices[model.tets[others]], centroids[others],
+                                centroid_tree(model, labels, k, others=True)) <= reach
         candidates, distance = candidates[held], distance[held]
     if not len(candidates):
         return solid, 0.0
