@@ -13,7 +13,7 @@ One, wherever a result or a run's pace must not depend on them:
 
 from __future__ import annotations
 
-import functools
+import sys
 
 
 def one_blas_thread():
@@ -21,11 +21,17 @@ def one_blas_thread():
     return _blas_libraries().limit(limits=1, user_api="blas")
 
 
-@functools.lru_cache(maxsize=1)
-def _blas_libraries():
-    # (made once, after the solvers' modules are imported: it lists the libraries loaded;
-    # limiting through it then costs about 10 us)
-    import scipy.optimize  # noqa: F401
-    from threadpoolctl import ThreadpoolController
+_controller = None  # threadpoolctl's list of the libraries loaded, and how many modules were then
+_modules_then = -1
 
-    return ThreadpoolController()
+
+def _blas_libraries():
+    # (listed again once more modules are imported, which may have loaded another BLAS, a
+    # solver's; limiting through the list costs about 10 us, listing about 1.4 ms)
+    global _controller, _modules_then
+    if _controller is None or len(sys.modules) != _modules_then:
+        import scipy.optimize  # noqa: F401 (its BLAS loaded first: the solvers use it)
+        from threadpoolctl import ThreadpoolController
+
+        _controller, _modules_then = ThreadpoolController(), len(sys.modules)
+    return _controller

@@ -346,10 +346,10 @@ def test_a_run_keeps_blas_to_one_thread_and_gives_the_threads_back():
         return {lib["filepath"]: lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
 
     scene = load_scene(SCENES / "single_ring.toml")
-    with threadpool_limits(limits=2, user_api="blas"):  # (two, whatever this machine's cores)
+    with threadpool_limits(limits=2, user_api="blas"):  # (two where a library can, whatever the cores)
         before, during = blas_threads(), []
         Simulation(scene, output=False, frames=2, progress=lambda *_: during.append(blas_threads())).run()
         after = blas_threads()
-    assert before and set(before.values()) == {2}
+    assert 2 in before.values()  # (numpy's and scipy's OpenBLAS; a single-threaded build stays at 1)
     assert len(during) == 2 and all(set(seen) >= set(before) and set(seen.values()) == {1} for seen in during)
     assert after == before
