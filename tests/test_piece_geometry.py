@@ -81,6 +81,35 @@ def test_voronoi_cells_union_is_the_region_nearest_those_points():
     np.testing.assert_array_equal(_inside_solid(probe, union ^ box, 1e-4), inside(probe, triangles))
 
 
+def test_a_pieces_own_cells_asked_again_are_built_anew_from_the_kept_diagram():
+    """``own_cells`` keeps the diagram for the same centroids, labels and pool (each pass of a
+    split's crack fit asks again) and builds a new manifold from it each time (the boolean
+    library numbers each solid it builds, and a cut's bytes follow those numbers): the same
+    mesh, byte for byte, as asked with nothing kept, and a solid of its own each time."""
+    from types import SimpleNamespace
+
+    from taichi_frac.surfaces import tet_cells
+
+    rng = np.random.default_rng(5)
+    model = SimpleNamespace(particle_position=rng.uniform(-1.0, 1.0, size=(300, 3)))
+    labels = (model.particle_position[:, 0] > 0.2).astype(np.int64)
+    pool = np.arange(300)
+
+    def mesh_bytes(solid):
+        mesh = solid.to_mesh64()
+        return np.asarray(mesh.vert_properties).tobytes(), np.asarray(mesh.tri_verts).tobytes()
+
+    tet_cells._OWN_CELLS.clear()
+    first = tet_cells.own_cells(model, labels, 1, 0.1, pool)
+    again = tet_cells.own_cells(model, labels, 1, 0.1, pool)
+    tet_cells._OWN_CELLS.clear()
+    fresh = tet_cells.own_cells(model, labels, 1, 0.1, pool)
+    assert first is not None and again is not first
+    assert mesh_bytes(again) == mesh_bytes(first) == mesh_bytes(fresh)
+    other = tet_cells.own_cells(model, labels, 0, 0.1, pool)  # (another piece: its own cells)
+    assert other.volume() > 0.0 and mesh_bytes(other) != mesh_bytes(first)
+
+
 def test_inside_solid_answers_as_its_probes_do_near_and_far_from_the_surface():
     """The inside test of the cells' divide reads the winding number away from the surface and
     cuts its probe tetrahedra only near it: against the probes everywhere, on points at a

@@ -6,6 +6,8 @@ holding two pieces' material, a piece carved out of its neighbour, a piece the c
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import manifold3d as m3
 import numpy as np
 
@@ -56,6 +58,12 @@ def voronoi_cells(points: np.ndarray, spacing: float):
 
         @staticmethod
         def union(indices):
+            mesh = Cells.union_mesh(indices)
+            return None if mesh is None else solid_of(mesh)
+
+        @staticmethod
+        def union_mesh(indices):
+            """The arrays ``union`` builds its manifold from (``m3.Mesh64``), or None."""
             # The union's boundary is every ridge between a chosen point and one not chosen:
             # a convex polygon, its corners sorted by angle about its centre and fanned into
             # triangles facing away from the chosen point; neighbouring ridges share the
@@ -91,23 +99,49 @@ def voronoi_cells(points: np.ndarray, spacing: float):
             props = np.zeros((len(used), PROPERTY_COUNT))
             props[:, :3] = diagram.vertices[used]
             props[:, CRACK] = HULL_FACE
-            solid = m3.Manifold(m3.Mesh64(vert_properties=props,
-                                          tri_verts=np.ascontiguousarray(faces.reshape(-1, 3), dtype=np.uint64)))
-            return solid if solid.status() == m3.Error.NoError and not solid.is_empty() else None
+            return m3.Mesh64(vert_properties=props, tri_verts=np.ascontiguousarray(faces.reshape(-1, 3),
+                                                                                   dtype=np.uint64))
 
     return Cells()
+
+
+def solid_of(mesh: m3.Mesh64):
+    """The closed manifold of a cells' union's arrays (``union_mesh``), or None where qhull's
+    diagram was degenerate."""
+    solid = m3.Manifold(mesh)
+    return solid if solid.status() == m3.Error.NoError and not solid.is_empty() else None
+
+
+#: The last few ``own_cells`` diagrams: each pass of a split's crack fit asks again for the
+#: cells of the same pieces among the same tets (13 of the 13 rings' 34 asks).
+OWN_CELLS_KEPT = 32
+_OWN_CELLS: OrderedDict = OrderedDict()  # key -> (positions, labels, the union's Mesh64 or None)
 
 
 def own_cells(model, labels, k: int, spacing: float, pool: np.ndarray):
     """The union of piece ``k``'s tet centroids' cells in the Voronoi diagram of the centroids
     ``pool`` (indices, sorted, k's among them) about them (HULL_FACE faces), or None where it
-    is degenerate or k has no tets."""
+    is degenerate or k has no tets. The diagram is kept for the same arrays (``model``'s
+    centroids and ``labels``, the same objects) and pool; the manifold is built anew from it
+    each time, as the boolean library numbers each solid it builds and a cut's bytes follow
+    those numbers."""
     from scipy.spatial import cKDTree
 
-    centroids = model.particle_position
-    mine = np.nonzero(labels == k)[0]
-    if not len(mine):
-        return None
-    # (the diagram about k's centroids only: their cells depend on their neighbours alone)
-    pool = pool[cKDTree(centroids[mine]).query(centroids[pool])[0] <= LOCAL_DIAGRAM_FACTOR * spacing]
-    return voronoi_cells(centroids[pool], spacing).union(np.searchsorted(pool, mine))
+    pool = np.asarray(pool, dtype=np.int64)
+    positions = model.particle_position
+    key = (id(positions), id(labels), int(k), float(spacing), pool.tobytes())
+    found = _OWN_CELLS.get(key)
+    if found is not None and found[0] is positions and found[1] is labels:
+        _OWN_CELLS.move_to_end(key)
+        mesh = found[2]
+    else:
+        mesh = None
+        mine = np.nonzero(labels == k)[0]
+        if len(mine):
+            # (the diagram about k's centroids only: their cells depend on their neighbours alone)
+            pool = pool[cKDTree(positions[mine]).query(positions[pool])[0] <= LOCAL_DIAGRAM_FACTOR * spacing]
+            mesh = voronoi_cells(positions[pool], spacing).union_mesh(np.searchsorted(pool, mine))
+        _OWN_CELLS[key] = (positions, labels, mesh)  # (the arrays kept: their ids are not reused meanwhile)
+        while len(_OWN_CELLS) > OWN_CELLS_KEPT:
+            _OWN_CELLS.popitem(last=False)
+    return None if mesh is None else solid_of(mesh)
