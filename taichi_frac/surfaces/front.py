@@ -172,10 +172,12 @@ class SurfaceFront:
             self._waiting.setdefault(parent_key, []).append(waiting)
 
         def ready(parent_done: Future):
-            if waiting is not None:
-                self._waiting[parent_key].remove(waiting)
-                if not self._waiting[parent_key]:
-                    del self._waiting[parent_key]
+            if waiting is not None:  # (no longer waiting; only an order's hint, so never an error)
+                listed = self._waiting.get(parent_key, [])
+                if waiting in listed:
+                    listed.remove(waiting)
+                if not listed:
+                    self._waiting.pop(parent_key, None)
             if parent_done.exception() is not None:
                 failed(parent_done.exception())
                 return
