@@ -54,12 +54,12 @@ def _content_key(model: BodyModel, surface) -> str:
 class Job:
     """A piece of work for a ``stage.SurfaceStage``: a scene object's start (``kind``
     "add_body", ``payload`` (model, surface, shading key)) or a split's cut ("cut", a
-    CutRequest). ``size`` [tets] orders the queue (with ``SurfaceFront.waiting_work``); ``needs``: the key of
-    the piece's solid it cuts (a stage that does not hold it cuts it again first, see
-    ``SurfaceFront.replay``), else None; ``key``: what names its result in a stage's memos
-    (the shading key, the cut key); ``makes``: the keys of the solids it makes (a cut's
-    pieces'). ``done(result)`` and ``failed(error)`` settle it;
-    ``queued`` and ``started`` [s, monotonic]: when it was queued and started."""
+    CutRequest). ``size`` [tets] orders the queue (with ``SurfaceFront.waiting_work``);
+    ``needs``: the key of the piece's solid it cuts (a stage that does not hold it cuts it
+    again first, see ``SurfaceFront.replay``), else None; ``key``: what names its result in
+    a stage's memos (the shading key, the cut key); ``makes``: the keys of the solids it
+    makes (a cut's pieces'). ``done(result)`` and ``failed(error)`` settle it; ``queued``
+    and ``started`` [s, monotonic]: when it was queued and started."""
 
     def __init__(self, kind: str, payload, size: int, key: str, done, failed, needs=None, makes=()):
         self.kind, self.payload, self.size, self.key = kind, payload, size, key

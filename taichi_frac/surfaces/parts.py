@@ -230,7 +230,8 @@ def carve_lost_pieces(parts, owner, model, fragment_tets, labels, spacing, rough
 
 def _carved(part: m3.Manifold, model, labels, k: int, holders, spacing: float):
     """(carved, rest): the share of ``part`` in piece ``k``'s tets' nearest-centroid cells,
-    and the part less those cells (one boolean makes both: ``Manifold.split``). The cells are drawn against the tets of the pieces whose material the
+    and the part less those cells (one boolean makes both: ``Manifold.split``). The cells
+    are drawn against the tets of the pieces whose material the
     part may hold, ``holders`` (its owner and the lost pieces): another piece is parted from
     ``k`` by a slab already, and cells drawn against it would cut ``k`` again along the
     staircase, a layer short (a 170-tet piece 7 % short). Where the share so carved reaches
