@@ -22,6 +22,7 @@ from pathlib import Path
 
 from . import interrupts
 from .geometry.validate import REPAIR_HINT, MeshError
+from .memo import remember
 
 __all__ = ["PreparedObject", "dynamics_options", "furnish_world", "prepare_objects", "release_world",
            "world_capacity"]
@@ -50,9 +51,7 @@ def prepare_object(obj, *, surface_contact: bool = False):
     (BodyModel, PrepareReport)."""
     key = _prepare_key(obj, surface_contact)
     if key not in _PREPARED:
-        while len(_PREPARED) >= PREPARED_KEPT:
-            del _PREPARED[next(iter(_PREPARED))]
-        _PREPARED[key] = obj.prepare(surface_contact=surface_contact)
+        remember(_PREPARED, key, obj.prepare(surface_contact=surface_contact), PREPARED_KEPT)
     return _PREPARED[key]
 
 

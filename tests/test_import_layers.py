@@ -19,7 +19,7 @@ LAYERS = [
     ("dynamics", 6),
     ("collision", 7),
     ("model", 8), ("geometry", 8),
-    ("kinematics", 9), ("options", 9), ("runtime", 9), ("interrupts", 9), ("blas", 9),
+    ("kinematics", 9), ("options", 9), ("runtime", 9), ("interrupts", 9), ("blas", 9), ("memo", 9),
 ]
 
 

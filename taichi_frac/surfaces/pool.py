@@ -8,9 +8,9 @@ waiting for its pieces). A scene object's first split goes to any idle
 worker (sent the arrays its render solid is built from, ``solid.PortableSolid``); a piece's
 split to the worker that cut the piece, which holds its solid, or, when that one stays busy
 and a core is idle, to another that cuts the piece again first (a cut gives the same bytes
-in any process); a split a worker's memo holds (a repeated run's) to that worker. Workers are forked from this
-process (no imports to wait for) and, after a run, stay idle for the next run in this
-process, which takes their memos; they end with it. :class:`InProcessSurfaces` is the same
+in any process); a split a worker's memo holds (a repeated run's) to that worker. Workers
+are forked from this process (no imports to wait for) and, after a run, stay idle for the
+next run in this process, which takes their memos; they end with it. :class:`InProcessSurfaces` is the same
 interface in this process (futures already done). Both give the same surfaces: the same code
 runs on the same arrays.
 """
@@ -30,8 +30,9 @@ import threading
 import time
 from concurrent.futures import Future
 
+from ..memo import remember
 from .front import Job, SurfaceFront, shading_by_key
-from .stage import SurfaceStage, remember
+from .stage import SurfaceStage
 from .worker import read_frame, write_frame
 
 
@@ -328,11 +329,13 @@ class SurfaceWorkers(SurfaceFront):
             return
         now, wake = time.monotonic(), None
         self._queue.sort(key=self._order)  # (splits asked for since the last pump move their parents up)
+        needed = None  # per idle worker, the queued jobs that need a solid it holds (until a job starts)
         for entry in list(self._queue):
             if not self._idle:
                 break
             job = entry[1]
-            needed = [sum(e[1].needs in w.held for e in self._queue) for w in self._idle]
+            if needed is None:
+                needed = [sum(e[1].needs in w.held for e in self._queue) for w in self._idle]
             costs = [(extra, needed[i], i) for i, w in enumerate(self._idle)
                      if (extra := self._extra(job, w)) is not None]
             if not costs:
@@ -349,6 +352,7 @@ class SurfaceWorkers(SurfaceFront):
                 continue
             self._queue.remove(entry)
             self._start(job, self._idle[i])
+            needed = None
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None

@@ -12,11 +12,13 @@ object's solid rebuilt from the arrays a request brings where it has none
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..memo import remember
 from ..model import BodyModel
 from . import cut as _cut
 from .mesh import fragment_surface, render_surface, root_faces_of, surface_corner_attributes
@@ -46,14 +48,6 @@ def _forget_made() -> None:
     # those still alive then as leaked, and says so on stderr.
     _ROOT_SURFACES.clear()
     _CUTS.clear()
-
-
-def remember(memo: dict, key: str, value, kept: int) -> None:
-    """``memo[key] = value``, as its newest entry, the oldest dropped past ``kept`` entries."""
-    memo.pop(key, None)
-    while len(memo) >= kept:
-        del memo[next(iter(memo))]
-    memo[key] = value
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,8 +158,6 @@ class CutRequest:
         render solid (the request's fields by name; ``roots`` follow from the models): the
         parent's particles, the pieces' tets and origins, the cracks, the peak stresses, the
         options the cut reads and the shading key."""
-        import dataclasses
-
         arrays = [model.particle_position, tet_peak, *fragment_tets, *[m.com_in_source for m in models],
                   *parent_tets]
         for crack in cracks:

@@ -6,10 +6,10 @@ holding two pieces' material, a piece carved out of its neighbour, a piece the c
 
 from __future__ import annotations
 
-from collections import OrderedDict
-
 import manifold3d as m3
 import numpy as np
+
+from ..memo import made_for
 
 #: How far [particle spacings] about the centroids whose cells may go to another piece the
 #: Voronoi diagram that divides a part reads the centroids (a cell depends only on its
@@ -115,7 +115,7 @@ def solid_of(mesh: m3.Mesh64):
 #: The last few ``own_cells`` diagrams: each pass of a split's crack fit asks again for the
 #: cells of the same pieces among the same tets (13 of the 13 rings' 34 asks).
 OWN_CELLS_KEPT = 32
-_OWN_CELLS: OrderedDict = OrderedDict()  # key -> (positions, labels, the union's Mesh64 or None)
+_OWN_CELLS: dict = {}  # (memo.made_for) -> ((positions, labels), the union's Mesh64 or None)
 
 
 def own_cells(model, labels, k: int, spacing: float, pool: np.ndarray):
@@ -129,19 +129,15 @@ def own_cells(model, labels, k: int, spacing: float, pool: np.ndarray):
 
     pool = np.asarray(pool, dtype=np.int64)
     positions = model.particle_position
-    key = (id(positions), id(labels), int(k), float(spacing), pool.tobytes())
-    found = _OWN_CELLS.get(key)
-    if found is not None and found[0] is positions and found[1] is labels:
-        _OWN_CELLS.move_to_end(key)
-        mesh = found[2]
-    else:
-        mesh = None
+
+    def diagram():
         mine = np.nonzero(labels == k)[0]
-        if len(mine):
-            # (the diagram about k's centroids only: their cells depend on their neighbours alone)
-            pool = pool[cKDTree(positions[mine]).query(positions[pool])[0] <= LOCAL_DIAGRAM_FACTOR * spacing]
-            mesh = voronoi_cells(positions[pool], spacing).union_mesh(np.searchsorted(pool, mine))
-        _OWN_CELLS[key] = (positions, labels, mesh)  # (the arrays kept: their ids are not reused meanwhile)
-        while len(_OWN_CELLS) > OWN_CELLS_KEPT:
-            _OWN_CELLS.popitem(last=False)
+        if not len(mine):
+            return None
+        # (the diagram about k's centroids only: their cells depend on their neighbours alone)
+        near = pool[cKDTree(positions[mine]).query(positions[pool])[0] <= LOCAL_DIAGRAM_FACTOR * spacing]
+        return voronoi_cells(positions[near], spacing).union_mesh(np.searchsorted(near, mine))
+
+    mesh = made_for(_OWN_CELLS, (positions, labels), (int(k), float(spacing), pool.tobytes()), diagram,
+                    OWN_CELLS_KEPT)
     return None if mesh is None else solid_of(mesh)

@@ -9,14 +9,14 @@ from (the same array objects, which a split's cut passes everywhere), the most r
 
 from __future__ import annotations
 
-from collections import OrderedDict
-
 import numpy as np
+
+from ..memo import made_for
 
 #: Trees kept: a split of a hundred pieces has a tree per piece and per its complement.
 KEPT = 256
 
-_TREES: OrderedDict = OrderedDict()  # key -> (positions, labels, tree)
+_TREES: dict = {}  # (memo.made_for) -> ((positions, labels), tree)
 
 
 def centroid_tree(model, labels: np.ndarray | None = None, k: int | None = None, *, others: bool = False):
@@ -26,14 +26,8 @@ def centroid_tree(model, labels: np.ndarray | None = None, k: int | None = None,
     from scipy.spatial import cKDTree
 
     positions = model.particle_position
-    key = (id(positions), None if labels is None else id(labels), k, others)
-    found = _TREES.get(key)
-    if found is not None and found[0] is positions and found[1] is labels:
-        _TREES.move_to_end(key)
-        return found[2]
-    points = positions if labels is None else positions[(labels != k) if others else (labels == k)]
-    tree = cKDTree(points)
-    _TREES[key] = (positions, labels, tree)  # (the arrays kept: their ids are not reused meanwhile)
-    while len(_TREES) > KEPT:
-        _TREES.popitem(last=False)
-    return tree
+
+    def build():
+        return cKDTree(positions if labels is None else positions[(labels != k) if others else (labels == k)])
+
+    return made_for(_TREES, (positions, labels), (k, others), build, KEPT)
