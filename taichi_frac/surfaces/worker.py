@@ -55,23 +55,19 @@ def serve(requests, answers) -> None:
     from ..blas import one_blas_thread
     from .stage import SurfaceStage
 
+    stage = SurfaceStage()
     # (the workers share the cores with each other and the frames: see blas.py)
     with one_blas_thread():
-        _answer(requests, answers, SurfaceStage)
-
-
-def _answer(requests, answers, new_stage) -> None:
-    stage = new_stage()
-    while (request := read_frame(requests)) is not None:
-        task, kind, payload = request
-        if kind == "reset":  # (a new run: its body ids are not the last run's; no answer)
-            stage = new_stage()
-            continue
-        try:
-            result = stage.add_body(*payload) if kind == "add_body" else stage.cut(payload)
-            write_frame(answers, (task, True, result))
-        except Exception:  # noqa: BLE001 (the parent raises it, with this traceback)
-            write_frame(answers, (task, False, traceback.format_exc()))
+        while (request := read_frame(requests)) is not None:
+            task, kind, payload = request
+            if kind == "reset":  # (a new run: nothing of the last run's solids; no answer)
+                stage = SurfaceStage()
+                continue
+            try:
+                result = stage.add_body(*payload) if kind == "add_body" else stage.cut(payload)
+                write_frame(answers, (task, True, result))
+            except Exception:  # noqa: BLE001 (the parent raises it, with this traceback)
+                write_frame(answers, (task, False, traceback.format_exc()))
 
 
 if __name__ == "__main__":
