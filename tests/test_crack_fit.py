@@ -378,11 +378,15 @@ def test_rough_stretches_share_one_surface_and_move_their_pieces_volume(box):
 def test_a_whole_plane_fit_that_fails_a_piece_no_move_can_free_stops_cleanly():
     """The whole-plane fit (no ``near``): a cut that fails a piece whose cracks no move row
     names freezes nothing more and gives the kept cut back, rather than failing on the
-    empty set of jumped pieces."""
+    empty set of jumped pieces; nothing reads that cut's pieces, so their shells are never
+    made."""
     from taichi_frac.surfaces.cut import _fit_rounds, _Kept, _Parts
 
+    made = []
+
     def parts(failed):
-        return _Parts(None, (), [None], {"fallback_ids": failed}, np.zeros(0), np.zeros(0))
+        return _Parts((), {"fallback_ids": failed}, np.zeros(0), np.zeros(0),
+                      lambda: made.append(failed) or (None, [None]))
 
     kept = _Kept(parts(np.zeros(0, dtype=np.int64)), 1.0)
     tried = []
@@ -399,6 +403,7 @@ def test_a_whole_plane_fit_that_fails_a_piece_no_move_can_free_stops_cleanly():
         2, kept, np.zeros((1, 3)), np.ones(1), [np.arange(200)], 100,
         fit=lambda solids, sources, moves, frozen: (np.ones((1, 3)), 0.0), cut=cut, freeze=freeze, near=None)
     assert result is kept and np.all(moves == 0.0) and cuts == len(tried) >= 1
+    assert not any(len(failed) for failed in made)  # (the failing cuts' shells: never read, never made)
 
 
 def test_moves_already_cut_are_not_cut_again():
@@ -408,7 +413,7 @@ def test_moves_already_cut_are_not_cut_again():
     from taichi_frac.surfaces.cut import _fit_rounds, _Kept, _Parts
 
     def parts(failed):
-        return _Parts(None, (), [None], {"fallback_ids": failed}, np.zeros(0), np.zeros(0))
+        return _Parts((), {"fallback_ids": failed}, np.zeros(0), np.zeros(0), lambda: (None, [None]))
 
     for proposals, expected in (([1.0, 1.0, 1.0], 1), ([1.0, 2.0, 3.0], 3)):
         kept = _Kept(parts(np.zeros(0, dtype=np.int64)), 1.0)

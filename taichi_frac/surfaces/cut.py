@@ -290,19 +290,19 @@ def _fit_rounds(rounds: int, kept, moves: np.ndarray, targets, fragment_tets, mi
                 parts = made[tried.tobytes()] = cut(tried)
                 cuts += 1
             newly = np.setdiff1d(parts.stats["fallback_ids"], kept.stats["fallback_ids"])
-            solids = parts.solids
-            misfit = volume_misfit(solids, targets, fragment_tets, min_tets)
-            if not len(newly) and misfit < kept.misfit:
-                kept, moves = _Kept(parts, misfit), tried
-                break
-            jumped = (jumped_pieces(kept.solids, solids, targets, fragment_tets, min_tets) if near
+            if not len(newly):
+                misfit = volume_misfit(parts.solids, targets, fragment_tets, min_tets)
+                if misfit < kept.misfit:
+                    kept, moves = _Kept(parts, misfit), tried
+                    break
+            jumped = (jumped_pieces(kept.solids, parts.solids, targets, fragment_tets, min_tets) if near
                       else np.zeros(0, dtype=np.int64))
             if len(newly) or len(jumped):
                 rows = freeze(newly)
                 # (failed pieces whose own moves are frozen already: a neighbour's move opened the gap)
                 stuck = len(newly) and not np.any(rows & ~frozen)
                 if near and (len(jumped) or stuck):
-                    rows |= near(kept.solids, solids, jumped, newly if stuck else newly[:0])
+                    rows |= near(kept.solids, parts.solids, jumped, newly if stuck else newly[:0])
                 frozen |= rows if rows.any() else freeze(jumped)
                 break
         else:
@@ -370,21 +370,35 @@ def _trimmed(pieces, stats, model, labels, piece_origins):
     return pieces, stats
 
 
-class _Parts(NamedTuple):
+class _Parts:
     """One cut's pieces before the bridges that join their stray shells (``_cut_parts``):
     every cut the fit tries is measured, only the one it keeps needs them (``_pieces``).
-    ``plan`` where each piece's shells go (the body's frame [m]), ``cracks`` the pieces'
-    crack surfaces, ``solids`` per piece its shells as ``plan`` gives them out, one manifold
-    (the body's frame) or None: what the fit measures (a bridge adds a gap's volume,
-    CONTACT_GAP_FACTOR spacings deep); ``stats`` the cut's counts (``cut_render_solid``'s),
-    ``index_of`` and ``sources`` as ``_cut_parts`` says."""
+    ``cracks`` the pieces' crack surfaces; ``stats`` the cut's counts (``cut_render_solid``'s);
+    ``index_of`` and ``sources`` as ``_cut_parts`` says. ``plan`` where each piece's shells
+    go (the body's frame [m]) and ``solids`` per piece its shells as ``plan`` gives them out,
+    one manifold (the body's frame) or None (what the fit measures: a bridge adds a gap's
+    volume, CONTACT_GAP_FACTOR spacings deep) are made when first read: a moved cut that
+    fails a piece the kept one did not is never kept, and where the fit does not ask what
+    its pieces' volumes became (a whole crack moved) nothing reads them (the failed pieces'
+    shells, the welds and the plan were a fifth of the 13 rings' cut time)."""
 
-    plan: StrayPlan
-    cracks: tuple
-    solids: list
-    stats: dict
-    index_of: np.ndarray
-    sources: np.ndarray
+    def __init__(self, cracks: tuple, stats: dict, index_of: np.ndarray, sources: np.ndarray, make):
+        self.cracks, self.stats, self.index_of, self.sources = cracks, stats, index_of, sources
+        self._make = make  # () -> (plan, solids); it adds its counts to stats
+        self._made = None
+
+    def _shells(self) -> tuple:
+        if self._made is None:
+            self._made, self._make = self._make(), None
+        return self._made
+
+    @property
+    def plan(self) -> StrayPlan:
+        return self._shells()[0]
+
+    @property
+    def solids(self) -> list:
+        return self._shells()[1]
 
 
 def _cut_parts(render: RenderSolid, model, fragment_tets, labels, cracks, per_crack, frames, roughness,
@@ -430,10 +444,10 @@ def _cut_parts(render: RenderSolid, model, fragment_tets, labels, cracks, per_cr
             planes.append((surface, sites, inside_one, index_of[i]))
     sources = np.concatenate([np.full(len(render.cracks), -1, dtype=np.int64), np.array(sources, dtype=np.int64)])
     stats = dict(slabs=len(slabs), parts=0, unassigned_parts=0, empty_pieces=0, welded_pieces=0, cell_pieces=0)
-    if slabs:
-        cut = m3.Manifold.batch_boolean([render.solid, *slabs], m3.OpType.Subtract)
-    else:
-        cut = render.solid
+    # (in one batch, not solid.difference's one slab at a time: the vote that hands out the
+    # parts samples their faces, and other triangles gave a 3-tet part of the struck glass
+    # wall, a near tie, to the other piece, after which the fit left a piece 3 % off)
+    cut = m3.Manifold.batch_boolean([render.solid, *slabs], m3.OpType.Subtract) if slabs else render.solid
     every_part = cut.decompose()
     parts = [part for part in every_part if part.volume() >= DUST_VOLUME_FACTOR * spacing**3]
     stats["dust_parts"] = len(every_part) - len(parts)
@@ -453,38 +467,40 @@ def _cut_parts(render: RenderSolid, model, fragment_tets, labels, cracks, per_cr
     stats["fallback_pieces"] = len(failed)
     stats["fallback_ids"] = sorted(failed)
     stats["unassigned_parts"] = int(sum(1 for o in owner if o == -1))
-    # Each piece's parts without its crumbs, once: the welds and the pieces read them.
-    kept = {k: without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing) for k in set(owner) if k >= 0}
-    shells = {}  # piece -> its shells, the body's frame
-    for k in range(len(fragment_tets)):
-        if k in failed:
-            # Its share of the solid nearest its own tets (see failed_piece_shells).
-            shells[k] = without_crumbs(failed_piece_shells(render.solid, model, labels, k, failed, parts, owner,
-                                                           spacing), spacing)
-            stats["cell_pieces"] += bool(shells[k])
-        elif not kept.get(k):
-            stats["empty_pieces"] += 1
-        else:
-            shells[k] = kept[k]
-    # A piece whose own parts a crack's slab parted is welded into one shell again.
-    split_up = {k for k, mine in kept.items() if k not in failed and len(mine) > 1}
-    spheres = [surface for surface in new_cracks[len(render.cracks):] if surface.radius is not None]
-    for k, bits in _weld_bits(render.solid, planes, spheres, split_up, spacing, roughness, roughness_scale,
-                              seed).items():
-        shells[k] = without_dust(m3.Manifold.batch_boolean([*shells[k], *bits], m3.OpType.Add), spacing)
-        stats["welded_pieces"] += 1
-    plan = plan_stray_shells({k: mine for k, mine in shells.items() if mine}, spacing)
-    stats["shells_moved"] = plan.moved
-    planned = planned_solids(plan)
-    return _Parts(plan, tuple(new_cracks), [planned.get(k) for k in range(len(fragment_tets))], stats, index_of,
-                  sources)
+    def shells_and_plan():
+        # Each piece's parts without its crumbs, once: the welds and the pieces read them.
+        kept = {k: without_crumbs([p for p, o in zip(parts, owner) if o == k], spacing) for k in set(owner) if k >= 0}
+        shells = {}  # piece -> its shells, the body's frame
+        for k in range(len(fragment_tets)):
+            if k in failed:
+                # Its share of the solid nearest its own tets (see failed_piece_shells).
+                shells[k] = without_crumbs(failed_piece_shells(render.solid, model, labels, k, failed, parts, owner,
+                                                               spacing), spacing)
+                stats["cell_pieces"] += bool(shells[k])
+            elif not kept.get(k):
+                stats["empty_pieces"] += 1
+            else:
+                shells[k] = kept[k]
+        # A piece whose own parts a crack's slab parted is welded into one shell again.
+        split_up = {k for k, mine in kept.items() if k not in failed and len(mine) > 1}
+        spheres = [surface for surface in new_cracks[len(render.cracks):] if surface.radius is not None]
+        for k, bits in _weld_bits(render.solid, planes, spheres, split_up, spacing, roughness, roughness_scale,
+                                  seed).items():
+            shells[k] = without_dust(m3.Manifold.batch_boolean([*shells[k], *bits], m3.OpType.Add), spacing)
+            stats["welded_pieces"] += 1
+        plan = plan_stray_shells({k: mine for k, mine in shells.items() if mine}, spacing)
+        stats["shells_moved"] = plan.moved
+        planned = planned_solids(plan)
+        return plan, [planned.get(k) for k in range(len(fragment_tets))]
+
+    return _Parts(tuple(new_cracks), stats, index_of, sources, shells_and_plan)
 
 
 def _pieces(render: RenderSolid, parts: _Parts, piece_origins, volume_scale) -> tuple[list, dict]:
     """The pieces of a cut's ``parts``, each stray shell joined where the plan sends it
     (``shells.join_planned_shells``), in its frame (origin ``piece_origins[k]`` (3,) [m] in the
     body's). Returns (pieces (RenderSolid or None), the cut's stats)."""
-    solids = join_planned_shells(parts.plan, render.spacing)
+    solids = join_planned_shells(parts.plan, render.spacing)  # (its making completes parts.stats)
     origins = np.asarray(piece_origins, dtype=np.float64).reshape(-1, 3)
     pieces = [RenderSolid(solids[k], parts.cracks, render.spacing, volume_scale).moved(origin) if k in solids else None
               for k, origin in enumerate(origins)]

@@ -10,7 +10,7 @@ from __future__ import annotations
 import manifold3d as m3
 import numpy as np
 
-from .solid import solid_arrays, with_crack_index
+from .solid import difference, solid_arrays, with_crack_index
 from .tet_cells import LOCAL_DIAGRAM_FACTOR, own_cells, voronoi_cells
 from .trees import centroid_tree
 
@@ -517,7 +517,7 @@ def failed_piece_shells(solid: m3.Manifold, model, labels, k: int, failed, parts
     box = np.asarray(share.bounding_box())
     kept = [p for p, o in zip(parts, owner) if o >= 0 and o not in failed
             and np.all(np.asarray(p.bounding_box())[:3] <= box[3:]) and np.all(np.asarray(p.bounding_box())[3:] >= box[:3])]
-    share = m3.Manifold.batch_boolean([share, *kept], m3.OpType.Subtract)
+    share = difference(share, kept)
     tree = centroid_tree(model, labels, k)
     return [shell for shell in without_dust(share, spacing)
             if tree.query(_vertices(shell, {}))[0].min() <= OVERREACH_FACTOR * spacing]

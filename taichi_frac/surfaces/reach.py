@@ -21,7 +21,7 @@ import manifold3d as m3
 import numpy as np
 
 from .layout import HULL_FACE
-from .solid import solid_arrays, with_crack_index
+from .solid import difference, solid_arrays, with_crack_index
 
 #: A piece's render solid keeps what lies within this [particle spacings] of its tets: past the
 #: 1.4 spacings a flat crack face can lie from the staircase of tets it crosses.
@@ -75,12 +75,11 @@ def distance_to_tets(points: np.ndarray, corners: np.ndarray, centroids: np.ndar
     return np.where(inside, 0.0, distance).min(axis=1)
 
 
-def _grown(corners: np.ndarray, reach: float) -> m3.Manifold:
-    """The union of the tets ``corners`` (T,4,3) [m], each grown by ``reach`` [m]."""
+def _grown(corners: np.ndarray, reach: float) -> list:
+    """The tets ``corners`` (T,4,3) [m], each grown by ``reach`` [m]: (T,) convex manifolds."""
     offsets = reach * _ball()
-    hulls = [m3.Manifold.hull_points(np.ascontiguousarray((tet[:, None, :] + offsets[None]).reshape(-1, 3)))
-             for tet in corners]
-    return m3.Manifold.batch_boolean(hulls, m3.OpType.Add) if len(hulls) > 1 else hulls[0]
+    return [m3.Manifold.hull_points(np.ascontiguousarray((tet[:, None, :] + offsets[None]).reshape(-1, 3)))
+            for tet in corners]
 
 
 def trim_overreach(solid: m3.Manifold, model, labels: np.ndarray, k: int, spacing: float) -> tuple[m3.Manifold, float]:
@@ -120,7 +119,7 @@ def trim_overreach(solid: m3.Manifold, model, labels: np.ndarray, k: int, spacin
     own = np.all((own_corners.max(axis=1) >= low - reach) & (own_corners.min(axis=1) <= high + reach), axis=1)
     removed = m3.Manifold.cube(tuple(high - low)).translate(tuple(low))
     if own.any():
-        removed = removed - _grown(own_corners[own], reach)
+        removed = difference(removed, _grown(own_corners[own], reach))
     if removed.is_empty():
         return solid, 0.0
     trimmed = solid - with_crack_index(removed, HULL_FACE)

@@ -211,6 +211,26 @@ def solid_arrays(solid: m3.Manifold) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh.vert_properties, dtype=np.float64), np.asarray(mesh.tri_verts, dtype=np.int64)
 
 
+def difference(solid: m3.Manifold, cutters) -> m3.Manifold:
+    """``solid`` less each of the manifolds ``cutters``. Where the cutters hold more triangles
+    than the solid, they are taken away one at a time, each difference made at once: the
+    library's batch difference first joins the cutters, at a cost that follows all their
+    triangles, while one at a time each costs about the solid's (a piece's tets grown by
+    the trim's reach, dozens of overlapping hulls: 0.40 s against 0.70 s over the 13 rings'
+    trims). A few small cutters go in one batch, which is no slower. The same solid either
+    way, but not the same triangles: a cut whose parts a vote of their faces hands out keeps
+    the batch (``cut._cut_parts``)."""
+    cutters = list(cutters)
+    if not cutters:
+        return solid
+    if sum(cutter.num_tri() for cutter in cutters) <= solid.num_tri():
+        return m3.Manifold.batch_boolean([solid, *cutters], m3.OpType.Subtract)
+    for cutter in cutters:
+        solid = solid - cutter
+        solid.num_tri()  # (made now: the library joins a chain of pending differences into one batch)
+    return solid
+
+
 def without_dust(solid: m3.Manifold, spacing: float) -> list:
     """The shells of ``solid`` but those under DUST_VOLUME_FACTOR ``spacing`` cubed: chips
     where slabs' or cells' faces cross the surface, and the flat slivers of no volume a union
