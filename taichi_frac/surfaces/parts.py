@@ -330,7 +330,7 @@ def divide_joined_parts(parts, owner, model, labels, spacing, corners):
     Returns (parts, owner, the pieces given material cut off another's part); new parts'
     vertices go into ``corners``."""
     limit = OVERREACH_FACTOR * spacing
-    trees, everyone = {}, centroid_tree(model)
+    everyone = centroid_tree(model)
     parts, owner = list(parts), list(owner)
     received = set()
 
@@ -338,7 +338,8 @@ def divide_joined_parts(parts, owner, model, labels, spacing, corners):
         """Divide part j (see _divide_part); True when it changed, and what it cut off and
         the rest are then queued in ``cut_off``."""
         k = owner[j]
-        result = _divide_part(parts[j], k, holding, depth, model, labels, spacing, corners, trees[k])
+        result = _divide_part(parts[j], k, holding, depth, model, labels, spacing, corners,
+                              centroid_tree(model, labels, k))
         if result is None:
             return False
         for index, (bit, vote) in enumerate(zip(*result)):
@@ -359,10 +360,8 @@ def divide_joined_parts(parts, owner, model, labels, spacing, corners):
             k = owner[j]
             if k < 0:
                 continue
-            if k not in trees:
-                trees[k] = centroid_tree(model, labels, k)
             vertices = _vertices(parts[j], corners)
-            reach = trees[k].query(vertices)[0]
+            reach = centroid_tree(model, labels, k).query(vertices)[0]
             if reach.max() <= limit:
                 continue
             # The cells of the other pieces' centroids nearest the corners reaching past.
