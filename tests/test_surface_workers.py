@@ -353,3 +353,86 @@ def test_a_run_keeps_blas_to_one_thread_and_gives_the_threads_back():
     assert 2 in before.values()  # (numpy's and scipy's OpenBLAS; a single-threaded build stays at 1)
     assert len(during) == 2 and all(set(seen) >= set(before) and set(seen.values()) == {1} for seen in during)
     assert after == before
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity") or len(os.sched_getaffinity(0)) < 2
+                    or not os.path.isdir("/proc/self/task"),
+                    reason="needs a platform that sets a process's CPUs and lists its threads, and two CPUs")
+def test_a_workers_booleans_run_on_the_threads_it_is_given_and_cut_the_same():
+    """``worker.start_boolean_threads(1)`` before the first boolean: the boolean library's
+    pool starts with no thread of its own (the process has one thread fewer than one whose
+    pool took the default, a thread per CPU), the process may run on every CPU again after
+    it, and the difference of two spheres is the same to the byte."""
+    code = textwrap.dedent("""
+        import hashlib, os, sys
+        import manifold3d as m3
+        import numpy as np
+        from taichi_frac.surfaces.worker import start_boolean_threads
+        cpus = os.sched_getaffinity(0)
+        if sys.argv[1] == "1":
+            start_boolean_threads(1)
+        left = m3.Manifold.sphere(1.0, 128)
+        mesh = (left - left.translate((0.5, 0.3, 0.1))).to_mesh64()
+        digest = hashlib.sha256(np.asarray(mesh.vert_properties).tobytes() + np.asarray(mesh.tri_verts).tobytes())
+        print(len(os.listdir("/proc/self/task")), os.sched_getaffinity(0) == cpus, digest.hexdigest())
+    """)
+    runs = {}
+    for threads in ("0", "1"):
+        out = subprocess.run([sys.executable, "-c", code, threads], capture_output=True, text=True, check=True)
+        count, restored, digest = out.stdout.split()[-3:]
+        runs[threads] = (int(count), restored, digest)
+    assert runs["1"][0] == runs["0"][0] - 1
+    assert runs["1"][1] == runs["0"][1] == "True"
+    assert runs["1"][2] == runs["0"][2]
+
+
+def test_a_worker_holding_a_queued_splits_solid_takes_that_split_before_one_any_worker_could_take():
+    """The one idle worker holds the piece a queued split cuts: that split starts there, and
+    the larger split ahead of it in the queue (a scene object's, which any worker can cut)
+    waits for a worker holding no queued split's solid. Where the bound split cannot start
+    (another worker's memo holds its result: it waits to go there), the other takes the idle
+    worker after all."""
+    from taichi_frac.surfaces import pool
+    from taichi_frac.surfaces.front import Job
+
+    workers = pool.SurfaceWorkers(2)
+    try:
+        first, second = workers._workers
+        started = []
+
+        def start(job, worker):
+            started.append((job.key, worker))
+            workers._idle.remove(worker)
+
+        workers._start = start
+        workers._waiting = {}
+
+        def queue(*jobs):
+            workers._queue = [(k, job) for k, job in enumerate(jobs)]
+            for job in jobs:
+                job.queued = time.monotonic()
+
+        anywhere = Job("cut", None, 5000, "ring", None, None)
+        bound = Job("cut", None, 1000, "piece", None, None, needs="ring/piece0")
+        first.held, second.held = {"ring/piece0"}, set()
+        workers._idle = [first]
+        queue(anywhere, bound)
+        assert sorted(workers._queue, key=workers._order)[0][1] is anywhere
+        workers._pump()
+        assert started == [("piece", first)] and [job for _, job in workers._queue] == [anywhere]
+        workers._idle = [second]
+        workers._pump()
+        assert started[1] == ("ring", second) and not workers._queue
+
+        started.clear()
+        workers._idle = [first]
+        queue(anywhere, bound)
+        pool._MADE_BY[bound.key] = (second, 60.0)
+        try:
+            workers._pump()
+        finally:
+            pool._MADE_BY.pop(bound.key)
+        assert started == [("ring", first)] and [job for _, job in workers._queue] == [bound]
+    finally:
+        workers._queue = []
+        workers.close(cancel=True)

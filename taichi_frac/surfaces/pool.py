@@ -10,7 +10,8 @@ split to the worker that cut the piece, which holds its solid, or, when that one
 and a core is idle, to another that cuts the piece again first (a cut gives the same bytes
 in any process); a split a worker's memo holds (a repeated run's) to that worker. Workers
 are forked from this process (no imports to wait for) and, after a run, stay idle for the
-next run in this process, which takes their memos; they end with it. :class:`InProcessSurfaces` is the same
+next run in this process, which takes their memos; they end with it. A worker's booleans
+run on its share of the cores (``worker.boolean_threads``). :class:`InProcessSurfaces` is the same
 interface in this process (futures already done). Both give the same surfaces: the same code
 runs on the same arrays.
 """
@@ -33,7 +34,7 @@ from concurrent.futures import Future
 from ..memo import remember
 from .front import Job, SurfaceFront, shading_by_key
 from .stage import SurfaceStage
-from .worker import read_frame, write_frame
+from .worker import boolean_threads, read_frame, write_frame
 
 
 #: Workers are forked from the run's process where the platform forks (Linux: macOS' system
@@ -113,17 +114,17 @@ class _Forked:
         self._process.kill()
 
 
-def _fork_worker(request_read: int, answer_write: int) -> _Forked:
+def _fork_worker(request_read: int, answer_write: int, threads: int) -> _Forked:
     """A worker forked from this process: it starts with this process' modules imported (a
     started interpreter spends about 0.8 s importing them). A daemon: an idle one left at
     exit is ended, not waited for."""
     process = multiprocessing.get_context("fork").Process(
-        target=_serve_forked, args=(request_read, answer_write, os.getpid()), daemon=True)
+        target=_serve_forked, args=(request_read, answer_write, os.getpid(), threads), daemon=True)
     process.start()
     return _Forked(process)
 
 
-def _serve_forked(request_read: int, answer_write: int, parent: int) -> None:
+def _serve_forked(request_read: int, answer_write: int, parent: int, threads: int) -> None:
     """The forked worker's life: it never touches what it inherited of the simulation
     (Taichi's runtime, the other workers' pipes: closed), and leaves without the parent's
     exit handlers (multiprocessing ends a forked child with os._exit)."""
@@ -140,7 +141,7 @@ def _serve_forked(request_read: int, answer_write: int, parent: int) -> None:
     os.closerange(3, keep[0])
     os.closerange(keep[0] + 1, keep[1])
     os.closerange(keep[1] + 1, _max_fd())
-    serve(os.fdopen(request_read, "rb"), os.fdopen(answer_write, "wb"))
+    serve(os.fdopen(request_read, "rb"), os.fdopen(answer_write, "wb"), threads)
 
 
 def _max_fd() -> int:
@@ -151,21 +152,22 @@ def _max_fd() -> int:
 
 
 class _Worker:
-    """One worker process: a writer thread feeds it requests (a large request must not hold
-    up the frame loop while the worker is busy), a reader thread settles their futures."""
+    """One worker process, its booleans on ``threads`` threads: a writer thread feeds it
+    requests (a large request must not hold up the frame loop while the worker is busy), a
+    reader thread settles their futures."""
 
-    def __init__(self):
+    def __init__(self, threads: int):
         # Pipes of their own: what a library prints at import (Taichi's banner) goes to
         # the worker's stdout, which is not the channel.
         request_read, request_write = os.pipe()
         answer_read, answer_write = os.pipe()
         try:
             if FORK:
-                self.process = _fork_worker(request_read, answer_write)
+                self.process = _fork_worker(request_read, answer_write, threads)
             else:
                 self.process = subprocess.Popen(
                     [sys.executable, "-m", "taichi_frac.surfaces.worker", str(os.getpid()), str(request_read),
-                     str(answer_write)], pass_fds=(request_read, answer_write), stdin=subprocess.DEVNULL,
+                     str(answer_write), str(threads)], pass_fds=(request_read, answer_write), stdin=subprocess.DEVNULL,
                     stdout=subprocess.DEVNULL)
         finally:
             os.close(request_read)
@@ -247,7 +249,7 @@ def _take_workers(count: int) -> list:
     taken, spare = alive[:count], alive[count:]
     for worker in spare:
         worker.close()
-    taken += [_Worker() for _ in range(count - len(taken))]
+    taken += [_Worker(boolean_threads(count)) for _ in range(count - len(taken))]
     for worker in taken:
         worker.held = set()
         worker.tell("reset", None)  # (nothing of the last run's solids)
@@ -324,35 +326,42 @@ class SurfaceWorkers(SurfaceFront):
     def _pump(self) -> None:
         """Start queued jobs on idle workers in ``_order``, each where it costs least;
         one that costs more on every idle worker waits for its own as long as that (called
-        with the lock held)."""
+        with the lock held). A worker holding a solid that a queued job needs takes such a
+        job first: another job, which any worker could take, waits for one holding none, or
+        for what the first pass leaves idle (a job bound to a busy worker's solid waited
+        behind a long one that an idle worker could have taken, and the chain of splits
+        after it ended the run)."""
         if self._closed:
             return
         now, wake = time.monotonic(), None
         self._queue.sort(key=self._order)  # (splits asked for since the last pump move their parents up)
-        needed = None  # per idle worker, the queued jobs that need a solid it holds (until a job starts)
-        for entry in list(self._queue):
-            if not self._idle:
-                break
-            job = entry[1]
-            if needed is None:
-                needed = [sum(e[1].needs in w.held for e in self._queue) for w in self._idle]
-            costs = [(extra, needed[i], i) for i, w in enumerate(self._idle)
-                     if (extra := self._extra(job, w)) is not None]
-            if not costs:
-                if all(self._extra(job, w) is None for w in self._workers):
-                    self._queue.remove(entry)  # (no worker holds the solid, or can make it again)
-                    job.failed(SurfaceWorkerError(f"no piece-surface worker can cut the split {job.key}"))
-                continue
-            extra, _, i = min(costs)
-            if extra > 0.0 and len(self._workers) - len(self._idle) >= self._cores:
-                continue  # (no core is idle: what is made again would take one from a split)
-            extra *= STEAL_WAIT_FACTOR
-            if now - job.queued < extra:
-                wake = min(wake if wake is not None else extra, job.queued + extra - now)
-                continue
-            self._queue.remove(entry)
-            self._start(job, self._idle[i])
-            needed = None
+        for bound_first in (True, False):
+            needed = None  # per idle worker, the queued jobs that need a solid it holds (until a job starts)
+            for entry in list(self._queue):
+                if not self._idle:
+                    break
+                job = entry[1]
+                if needed is None:
+                    needed = [sum(e[1].needs in w.held for e in self._queue) for w in self._idle]
+                costs = [(extra, needed[i], i) for i, w in enumerate(self._idle)
+                         if (extra := self._extra(job, w)) is not None]
+                if not costs:
+                    if all(self._extra(job, w) is None for w in self._workers):
+                        self._queue.remove(entry)  # (no worker holds the solid, or can make it again)
+                        job.failed(SurfaceWorkerError(f"no piece-surface worker can cut the split {job.key}"))
+                    continue
+                extra, waiting, i = min(costs)
+                if bound_first and waiting and job.needs not in self._idle[i].held:
+                    continue  # (that worker is another queued job's)
+                if extra > 0.0 and len(self._workers) - len(self._idle) >= self._cores:
+                    continue  # (no core is idle: what is made again would take one from a split)
+                extra *= STEAL_WAIT_FACTOR
+                if now - job.queued < extra:
+                    wake = min(wake if wake is not None else extra, job.queued + extra - now)
+                    continue
+                self._queue.remove(entry)
+                self._start(job, self._idle[i])
+                needed = None
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
