@@ -127,8 +127,14 @@ def _fork_worker(request_read: int, answer_write: int, threads: int) -> _Forked:
 def _serve_forked(request_read: int, answer_write: int, parent: int, threads: int) -> None:
     """The forked worker's life: it never touches what it inherited of the simulation
     (Taichi's runtime, the other workers' pipes: closed), and leaves without the parent's
-    exit handlers (multiprocessing ends a forked child with os._exit)."""
+    exit handlers (multiprocessing ends a forked child with os._exit). The objects it
+    inherited are frozen out of the cyclic garbage collector: a collection would walk them
+    all, copying the pages it touches from the parent's."""
+    import gc
+
     from ..geometry.workers import die_with_parent
+
+    gc.freeze()
     from .worker import serve
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
