@@ -139,3 +139,41 @@ def test_matrix_products_match_taichi_bit_for_bit(data):
     for key, exact in (("mm", a64 @ b64), ("mmt", a64 @ np.swapaxes(b64, 1, 2)), ("mtm", np.swapaxes(a64, 1, 2) @ b64)):
         scale = np.abs(exact).max(axis=(1, 2), keepdims=True) + 1e-30
         assert np.max(np.abs(got[key] - exact) / scale) < 1e-5
+
+
+def test_every_helper_builds_in_a_kernel_without_the_outside_function_warning(data):
+    """The helpers are plain functions the front end calls on expressions, not ``ti.func``:
+    a kernel calling each compiles with no warning (Taichi warns of a call to a function
+    that is not its own unless the function says it is) and gives numpy's values."""
+    import warnings
+
+    a, b, u, w, arrays = data
+    out = ti.field(ti.f32, shape=(N, 9 + 9 + 9 + 3 + 3 + 3 + 3))
+
+    @ti.kernel
+    def every(a: ti.template(), b: ti.template(), u: ti.template(), w: ti.template()):
+        for i in range(N):
+            row = [la.mat_mat(a[i], b[i]), la.mat_mat_t(a[i], b[i]), la.mat_t_mat(a[i], b[i])]
+            for k in ti.static(range(3)):
+                for r, c in ti.static(ti.ndrange(3, 3)):
+                    out[i, 9 * k + 3 * r + c] = row[k][r, c]
+            vectors = [la.mat_vec(a[i], u[i]), la.mat_t_vec(a[i], u[i]), la.cross(u[i], w[i])]
+            for k in ti.static(range(3)):
+                for c in ti.static(range(3)):
+                    out[i, 27 + 3 * k + c] = vectors[k][c]
+            out[i, 36] = la.dot(u[i], w[i])
+            out[i, 37] = la.norm(u[i])
+            out[i, 38] = la.norm_sqr(w[i])
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        every(a, b, u, w)
+    got = out.to_numpy().astype(np.float64)
+    a64, b64, u64, w64 = (arrays[k].astype(np.float64) for k in "abuw")
+    exact = np.concatenate([(a64 @ b64).reshape(N, 9), (a64 @ np.swapaxes(b64, 1, 2)).reshape(N, 9),
+                            (np.swapaxes(a64, 1, 2) @ b64).reshape(N, 9), np.einsum("nij,nj->ni", a64, u64),
+                            np.einsum("nji,nj->ni", a64, u64), np.cross(u64, w64),
+                            np.einsum("ni,ni->n", u64, w64)[:, None], np.linalg.norm(u64, axis=1)[:, None],
+                            np.einsum("ni,ni->n", w64, w64)[:, None]], axis=1)
+    scale = np.abs(exact).max(axis=1, keepdims=True) + 1e-30
+    assert np.max(np.abs(got - exact) / scale) < 1e-5
