@@ -467,6 +467,31 @@ def test_stray_shells_join_the_main_shell_they_touch():
     assert len(joined[1].decompose()) == 1 and joined[1].volume() == pytest.approx(65.0, abs=1e-9)
 
 
+def test_a_bridge_is_the_union_of_a_prism_over_each_face():
+    """``shells._bridge`` against closed forms of the union of a prism per face, from
+    ``gap`` inside to twice it outside: over the top of a box cut into 4,096 triangles
+    (slivers among them), the face's area times 3 gap; over two faces meeting at a
+    right-angled edge, each face's prism less the g x g x edge they share."""
+    from taichi_frac.surfaces.shells import _bridge
+
+    gap = 0.01
+    box = trimesh.creation.box(extents=(1.0, 0.6, 0.4))
+    fine = box
+    for _ in range(5):
+        fine = fine.subdivide()
+    top = np.nonzero(fine.face_normals[:, 2] > 0.99)[0]
+    sliver = trimesh.Trimesh(fine.vertices + np.where(np.abs(fine.vertices[:, :1]) < 0.49, 1e-4, 0.0) * [1, 0, 0],
+                             fine.faces, process=False)  # (inner columns moved: thin triangles beside thick)
+    for mesh in (fine, sliver):
+        bridge = _bridge(mesh, top, gap)
+        assert len(bridge.decompose()) == 1
+        assert bridge.volume() == pytest.approx(1.0 * 0.6 * 3.0 * gap, rel=1e-7)  # (the 2D union rounds to 1e-8)
+    ridge = np.nonzero((fine.face_normals[:, 2] > 0.99) | (fine.face_normals[:, 0] > 0.99))[0]
+    edge = 0.6
+    expected = 3.0 * gap * (1.0 * 0.6 + 0.6 * 0.4) - gap * gap * edge
+    assert _bridge(fine, ridge, gap).volume() == pytest.approx(expected, rel=1e-7)
+
+
 def test_the_faces_touching_a_shell_are_those_a_plain_loop_finds():
     """``piece_shells._touching`` against every face centre measured to every triangle whose
     grown box holds it, one by one: random small triangles, some a hair off the centres, and

@@ -167,27 +167,44 @@ def _touching(mesh, triangles: np.ndarray, gap: float) -> np.ndarray:
     return np.unique(point[distance <= gap])
 
 
+#: A bridge's faces whose normals differ by less than COPLANAR_NORMAL [rad] and whose planes
+#: by less than COPLANAR_OFFSET [gap] share one prism: a crack's faces lie in one plane,
+#: and a prism over their union is the union of theirs (moved by at most that much).
+COPLANAR_NORMAL = 1e-9
+COPLANAR_OFFSET = 1e-3
+
+
 def _bridge(mesh, faces: np.ndarray, gap: float) -> m3.Manifold:
     """Prisms over ``mesh``'s ``faces`` from ``gap`` [m] inside the bit to twice it outside,
     across the gap into the shell it touches. Their faces lie on no crack (HULL_FACE, like a
     carved piece's): in the gap, and where a contact face meets the artist's surface, out of
-    it by at most twice ``gap``."""
-    from .layout import CRACK, HULL_FACE, PROPERTY_COUNT
+    it by at most twice ``gap``. The faces in one plane share one prism over their union (a
+    2D union, then one extrusion): the same solid as a prism per face, whose side walls on
+    side walls are the boolean library's slowest union."""
+    from .layout import CRACK, HULL_FACE
+    from .solid import with_crack_index
 
     faces = faces[mesh.area_faces[faces] > 0.0]  # (a face of no area has no normal to extrude along)
-    normal = mesh.face_normals[faces][:, None, :]
+    normal = mesh.face_normals[faces]
     corners = mesh.triangles[faces]
-    points = np.concatenate([corners - gap * normal, corners + 2.0 * gap * normal], axis=1)  # (P,6,3)
-    props = np.zeros((len(points) * 6, PROPERTY_COUNT))
-    props[:, :3] = points.reshape(-1, 3)
-    props[:, CRACK] = HULL_FACE
-    # Each prism: its inner cap, its outer cap, and two triangles a side (the corners are
-    # counter-clockwise about the outward normal, so each side faces away from the prism).
-    one = np.array([[0, 2, 1], [3, 4, 5], [0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [2, 0, 3], [2, 3, 5]])
-    triangles = (one[None] + 6 * np.arange(len(points))[:, None, None]).reshape(-1, 3)
-    prisms = m3.Manifold(m3.Mesh64(vert_properties=props, tri_verts=np.ascontiguousarray(triangles, dtype=np.uint64)))
-    # (one mesh of overlapping prisms is no valid solid: each is taken apart and they are added)
-    bridge = m3.Manifold.batch_boolean(prisms.decompose(), m3.OpType.Add)
+    offset = np.einsum("ij,ij->i", normal, corners[:, 0])
+    key = np.round(np.c_[normal / COPLANAR_NORMAL, offset / (COPLANAR_OFFSET * gap)]).astype(np.int64)
+    _, plane = np.unique(key, axis=0, return_inverse=True)
+    prisms = []
+    for group in np.split(np.argsort(plane.ravel(), kind="stable"),
+                          np.cumsum(np.bincount(plane.ravel()))[:-1]):
+        n = normal[group[0]]
+        e1 = corners[group[0], 1] - corners[group[0], 0]
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(n, e1)
+        # (counter-clockwise about n in the (e1, e2) frame, as about the outward normal)
+        flat = [np.c_[(tri - corners[group[0], 0]) @ e1, (tri - corners[group[0], 0]) @ e2] for tri in corners[group]]
+        area = m3.CrossSection(flat, m3.FillRule.Positive)
+        if area.is_empty():
+            continue
+        frame = np.c_[e1, e2, n, corners[group[0], 0] - gap * n]  # (3,4): the prism's frame in the body's
+        prisms.append(with_crack_index(m3.Manifold.extrude(area, 3.0 * gap).transform(frame), HULL_FACE))
+    bridge = m3.Manifold.batch_boolean(prisms, m3.OpType.Add) if prisms else m3.Manifold()
     # The union of nearly coplanar prisms can leave a vertex without properties (NaN), which
     # would read as the artist's surface without its UVs: it is a hull face's like the rest.
     mesh = bridge.to_mesh64()
