@@ -436,3 +436,23 @@ def test_a_worker_holding_a_queued_splits_solid_takes_that_split_before_one_any_
     finally:
         workers._queue = []
         workers.close(cancel=True)
+
+
+def test_only_a_processs_first_run_skips_the_full_garbage_collection(monkeypatch):
+    """Before the objects alive are frozen for a run, the first run in a process collects
+    the young generations only (a new process's set-up leaves almost no garbage, and a full
+    collection walks every object); a later run collects everything (the runs before it may
+    have left theirs)."""
+    import gc
+    import types
+
+    from taichi_frac import simulation
+
+    asked = []
+    monkeypatch.setattr(simulation, "_RUNS_STARTED", False)
+    monkeypatch.setattr(simulation, "gc", types.SimpleNamespace(
+        collect=lambda generation=2: asked.append(generation) or 0, freeze=gc.freeze, unfreeze=gc.unfreeze))
+    scene = load_scene(SCENES / "single_ring.toml")
+    for _ in range(2):
+        Simulation(scene, output=False, frames=1).run()
+    assert asked == [1, 2]
