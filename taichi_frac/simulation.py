@@ -180,7 +180,8 @@ class Simulation:
                 with interrupts.deferred():
                     lock.acquire(overwrite=overwrite)
                     self._lock = lock
-            self._build(scene, arch, single_scale, world)
+            with one_blas_thread():  # (as the run: beside the workers' first jobs, see run)
+                self._build(scene, arch, single_scale, world)
             self.setup_seconds = time.perf_counter() - t_build - self.prepare_seconds
         except BaseException:
             self._release()
@@ -367,9 +368,10 @@ class Simulation:
         The objects alive when the run starts (Taichi's, the models', the scene's: ~10^5)
         are frozen out of Python's cyclic garbage collector for the run (``gc.freeze``,
         undone at the end): otherwise each full collection walks them all, a pause of tens
-        of milliseconds inside a frame. BLAS runs one thread in this process for the run
-        (``blas.one_blas_thread``): beside the surface workers a threaded BLAS waits for its
-        helper thread to be scheduled at every small solve."""
+        of milliseconds inside a frame. BLAS runs one thread in this process for the run, as
+        for the set-up (``blas.one_blas_thread``): beside the surface workers a threaded BLAS
+        waits for its helper thread to be scheduled at every small solve (the set-up's 3x3
+        inverses took 3 ms each beside the workers' first jobs)."""
         with one_blas_thread():
             return self._run()
 

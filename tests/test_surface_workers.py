@@ -337,22 +337,32 @@ def test_a_split_that_holds_up_waiting_splits_goes_before_a_larger_one():
 
 
 def test_a_run_keeps_blas_to_one_thread_and_gives_the_threads_back():
-    """During a run every BLAS library loaded runs one thread (see ``taichi_frac.blas``: a
-    threaded BLAS waits for its helper thread at each small solve while the surface workers
-    keep the cores busy); after it, what the process had before."""
+    """During a run and its set-up every BLAS library loaded runs one thread (see
+    ``taichi_frac.blas``: a threaded BLAS waits for its helper thread at each small solve
+    while the surface workers keep the cores busy); between and after them, what the process
+    had before."""
     from threadpoolctl import threadpool_info, threadpool_limits
 
     def blas_threads():
         return {lib["filepath"]: lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
 
+    from taichi_frac.scene_setup import prepare_object
+
+    def prepare(obj, **options):  # (the set-up's preparing, as the run's own)
+        during.append(blas_threads())
+        return prepare_object(obj, **options)
+
     scene = load_scene(SCENES / "single_ring.toml")
     with threadpool_limits(limits=2, user_api="blas"):  # (two where a library can, whatever the cores)
         before, during = blas_threads(), []
-        Simulation(scene, output=False, frames=2, progress=lambda *_: during.append(blas_threads())).run()
+        sim = Simulation(scene, output=False, frames=2, prepare=prepare)
+        between = blas_threads()
+        sim.progress = lambda *_: during.append(blas_threads())
+        sim.run()
         after = blas_threads()
     assert 2 in before.values()  # (numpy's and scipy's OpenBLAS; a single-threaded build stays at 1)
-    assert len(during) == 2 and all(set(seen) >= set(before) and set(seen.values()) == {1} for seen in during)
-    assert after == before
+    assert len(during) == 3 and all(set(seen) >= set(before) and set(seen.values()) == {1} for seen in during)
+    assert between == before and after == before
 
 
 @pytest.mark.skipif(not hasattr(os, "sched_setaffinity") or len(os.sched_getaffinity(0)) < 2
