@@ -120,7 +120,7 @@ def test_a_ctrl_c_as_the_run_starts_gives_the_output_lock_back(tmp_path, monkeyp
 
     class _InterruptedGc:
         @staticmethod
-        def collect():
+        def collect(generation=2):
             raise KeyboardInterrupt
 
         freeze = unfreeze = staticmethod(lambda: None)
