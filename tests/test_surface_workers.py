@@ -372,7 +372,8 @@ def test_a_workers_booleans_run_on_the_threads_it_is_given_and_cut_the_same():
     """``worker.start_boolean_threads(1)`` before the first boolean: the boolean library's
     pool starts with no thread of its own (the process has one thread fewer than one whose
     pool took the default, a thread per CPU), the process may run on every CPU again after
-    it, and the difference of two spheres is the same to the byte."""
+    it, and the difference of two spheres is the same to the byte. A worker asks for it where
+    the workers number twice the cores or more."""
     code = textwrap.dedent("""
         import hashlib, os, sys
         import manifold3d as m3
@@ -394,6 +395,10 @@ def test_a_workers_booleans_run_on_the_threads_it_is_given_and_cut_the_same():
     assert runs["1"][0] == runs["0"][0] - 1
     assert runs["1"][1] == runs["0"][1] == "True"
     assert runs["1"][2] == runs["0"][2]
+    from taichi_frac.surfaces.worker import boolean_threads
+
+    cores = len(os.sched_getaffinity(0))
+    assert boolean_threads(2 * cores) == 1 and boolean_threads(2 * cores - 1) == 0
 
 
 def test_a_worker_holding_a_queued_splits_solid_takes_that_split_before_one_any_worker_could_take():

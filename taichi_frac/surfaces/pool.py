@@ -11,7 +11,7 @@ and a core is idle, to another that cuts the piece again first (a cut gives the 
 in any process); a split a worker's memo holds (a repeated run's) to that worker. Workers
 are forked from this process (no imports to wait for) and, after a run, stay idle for the
 next run in this process, which takes their memos; they end with it. A worker's booleans
-run on its share of the cores (``worker.boolean_threads``). :class:`InProcessSurfaces` is the same
+run one thread where the workers outnumber the cores two to one (``worker.boolean_threads``). :class:`InProcessSurfaces` is the same
 interface in this process (futures already done). Both give the same surfaces: the same code
 runs on the same arrays.
 """

@@ -1,6 +1,7 @@
 """A piece-surface worker process: forked from the run's process (``pool.py``), or
 ``python -m taichi_frac.surfaces.worker PARENT_PID REQUESTS_FD ANSWERS_FD THREADS`` where
-there is no fork. ``THREADS``: how many threads its booleans run (``start_boolean_threads``).
+there is no fork. ``THREADS``: how many threads its booleans run (``start_boolean_threads``;
+0: the library's default).
 
 It holds a :class:`~taichi_frac.surfaces.stage.SurfaceStage` and answers the requests read
 from one pipe with results written to another, one pickled frame each way (an 8-byte
@@ -51,21 +52,23 @@ def main(parent_pid: int, requests_fd: int, answers_fd: int, threads: int) -> in
 
 
 def boolean_threads(workers: int) -> int:
-    """How many threads each of ``workers`` workers' booleans run: its share of the cores this
-    process may run on, at least one."""
+    """How many threads each of ``workers`` workers' booleans run: one where the workers
+    outnumber the cores this process may run on two to one or more (the default on up to
+    two cores), else 0, the library's own pool (a thread per core: where a few large cuts
+    run on many cores, they use them)."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return max(1, cores // max(1, workers))
+    return 1 if workers >= 2 * cores else 0
 
 
 def start_boolean_threads(threads: int) -> None:
     """Start manifold3d's thread pool (oneTBB's) in this process with ``threads`` threads, before
     its first boolean. oneTBB sizes the pool once, by the CPUs the process may then run on: the
     process runs on ``threads`` of them while a first boolean starts the pool, then on all
-    again. Where the workers outnumber the cores, a pool per worker as large as the machine
-    spends more CPU than it saves: the 13 rings' cuts took 6.3 s of the workers' CPU with a
-    thread per core each, 5.8 s with one. Not on a platform that cannot set a process's CPUs
-    (the pool is then the library's default)."""
-    if not hasattr(os, "sched_setaffinity"):
+    again. Four workers on two cores with a pool as large as the machine each spend the
+    cores' time spinning between small booleans: the 13 rings' cuts took 6.3 s of the
+    workers' CPU so, 5.8 s with one thread each, and the run 2 % longer. Nothing for 0 (the
+    library's default), nor on a platform that cannot set a process's CPUs."""
+    if threads <= 0 or not hasattr(os, "sched_setaffinity"):
         return
     cpus = os.sched_getaffinity(0)
     if threads >= len(cpus):
@@ -80,14 +83,13 @@ def start_boolean_threads(threads: int) -> None:
         os.sched_setaffinity(0, cpus)
 
 
-def serve(requests, answers, threads: int | None = None) -> None:
+def serve(requests, answers, threads: int = 0) -> None:
     """Answer the requests read from ``requests`` on ``answers`` until the input ends, the
-    booleans on ``threads`` threads (None: the library's default)."""
+    booleans on ``threads`` threads (0: the library's default)."""
     from ..blas import one_blas_thread
     from .stage import SurfaceStage
 
-    if threads is not None:
-        start_boolean_threads(threads)
+    start_boolean_threads(threads)
     stage = SurfaceStage()
     # (the workers share the cores with each other and the frames: see blas.py)
     with one_blas_thread():
