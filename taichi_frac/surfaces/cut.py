@@ -380,7 +380,7 @@ class _Parts:
     volume, CONTACT_GAP_FACTOR spacings deep) are made when first read: a moved cut that
     fails a piece the kept one did not is never kept, and where the fit does not ask what
     its pieces' volumes became (a whole crack moved) nothing reads them (the failed pieces'
-    shells, the welds and the plan were a fifth of the 13 rings' cut time)."""
+    shells, the welds and the plan are a fifth of the 13 rings' cut time)."""
 
     def __init__(self, cracks: tuple, stats: dict, index_of: np.ndarray, sources: np.ndarray, make):
         self.cracks, self.stats, self.index_of, self.sources = cracks, stats, index_of, sources

@@ -133,10 +133,9 @@ def _serve_forked(request_read: int, answer_write: int, parent: int, threads: in
     import gc
 
     from ..geometry.workers import die_with_parent
-
-    gc.freeze()
     from .worker import serve
 
+    gc.freeze()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     die_with_parent(parent)

@@ -190,9 +190,10 @@ def _bridge(mesh, faces: np.ndarray, gap: float) -> m3.Manifold:
     offset = np.einsum("ij,ij->i", normal, corners[:, 0])
     key = np.round(np.c_[normal / COPLANAR_NORMAL, offset / (COPLANAR_OFFSET * gap)]).astype(np.int64)
     _, plane = np.unique(key, axis=0, return_inverse=True)
+    plane = plane.ravel()
     prisms = []
-    for group in np.split(np.argsort(plane.ravel(), kind="stable"),
-                          np.cumsum(np.bincount(plane.ravel()))[:-1]):
+    for p in range(plane.max(initial=-1) + 1):
+        group = np.nonzero(plane == p)[0]
         n = normal[group[0]]
         e1 = corners[group[0], 1] - corners[group[0], 0]
         e1 /= np.linalg.norm(e1)
